@@ -1,0 +1,119 @@
+"""Self-collision (and, through ``obstacles``, scene collision) with pinocchio and coal.
+
+Pairs are pruned as MoveIt's setup assistant does: pairs the SRDF disables, pairs whose
+relative pose the planning group cannot change, and, when the SRDF disables fewer than
+``MIN_SRDF_PAIRS`` (centauro's disables none), pairs found never or always colliding
+over random configurations. That matrix is cached on disk, keyed by robot and group.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from manifoldgen.io import atomic_write_text
+from manifoldgen.robot import Robot, as_batch
+
+MIN_SRDF_PAIRS = 1
+MATRIX_SAMPLES = 2000
+
+
+def cache_dir() -> Path:
+    """Where computed collision matrices live (``$MANIFOLDGEN_CACHE`` or ~/.cache/manifoldgen)."""
+    return Path(os.environ.get("MANIFOLDGEN_CACHE", Path.home() / ".cache" / "manifoldgen"))
+
+
+class CollisionChecker:
+    """Checks configurations ``q (B, n)`` of a robot's planning group for collisions.
+
+    obstacles: extra ``pin.GeometryObject`` attached to the universe (parent joint 0),
+    checked against every robot geometry that the planning group moves.
+    """
+
+    def __init__(self, robot: Robot, obstacles: list[pin.GeometryObject] | None = None):
+        self.robot = robot
+        self.geom = robot.collision_model.copy()
+        self.geom.removeAllCollisionPairs()
+        self.self_pairs = _self_pairs(robot)
+        for a, b in self.self_pairs:
+            self.geom.addCollisionPair(pin.CollisionPair(a, b))
+        moving = [i for i, g in enumerate(self.geom.geometryObjects) if _moving(robot, g.parentJoint)]
+        self.obstacle_ids = []
+        for obstacle in obstacles or []:
+            oid = self.geom.addGeometryObject(obstacle)
+            self.obstacle_ids.append(oid)
+            for i in moving:
+                self.geom.addCollisionPair(pin.CollisionPair(i, oid))
+        self.data = robot.model.createData()
+        self.geom_data = pin.GeometryData(self.geom)
+
+    def in_collision(self, q: np.ndarray) -> np.ndarray:
+        """(B,) bool: True where some checked pair collides."""
+        full = self.robot.to_pinocchio(as_batch(q, self.robot.n))
+        return np.array([pin.computeCollisions(self.robot.model, self.data, self.geom, self.geom_data,
+                                               row, True) for row in full], dtype=bool)
+
+    def collisions(self, q: np.ndarray) -> list[tuple[str, str]]:
+        """Names of the colliding geometry pairs at one configuration ``q (n,)``."""
+        full = self.robot.to_pinocchio(as_batch(q, self.robot.n))[0]
+        pin.computeCollisions(self.robot.model, self.data, self.geom, self.geom_data, full, False)
+        names = [g.name for g in self.geom.geometryObjects]
+        return [(names[p.first], names[p.second]) for p, r in
+                zip(self.geom.collisionPairs, self.geom_data.collisionResults) if r.isCollision()]
+
+
+def _moving(robot: Robot, joint: int) -> frozenset[int]:
+    """The active coordinates that move a body attached to ``joint``."""
+    return frozenset(m.index for a in robot._ancestors(joint) for m in robot._links[a].motions)
+
+
+def _self_pairs(robot: Robot) -> list[tuple[int, int]]:
+    """Geometry index pairs worth checking for self-collision."""
+    geom = robot.collision_model.copy()
+    geom.addAllCollisionPairs()
+    if robot.srdf is not None:
+        pin.removeCollisionPairs(robot.model, geom, str(robot.srdf))
+    objects = geom.geometryObjects
+    srdf_disabled = len(objects) * (len(objects) - 1) // 2 - len(geom.collisionPairs)
+    pairs = []
+    for k in range(len(geom.collisionPairs)):
+        p = geom.collisionPairs[k]
+        a, b = int(p.first), int(p.second)
+        ja, jb = objects[a].parentJoint, objects[b].parentJoint
+        adjacent = ja == jb or robot.model.parents[ja] == jb or robot.model.parents[jb] == ja
+        if not adjacent and _moving(robot, ja) != _moving(robot, jb):
+            pairs.append((a, b))
+    if srdf_disabled < MIN_SRDF_PAIRS * len(objects):
+        pairs = _sampled_matrix(robot, pairs)
+    return pairs
+
+
+def _sampled_matrix(robot: Robot, pairs: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """Drop pairs never or always in collision over random configurations (cached)."""
+    key = hashlib.sha256(json.dumps([robot.name, robot.joints, robot.reference.tolist(), pairs,
+                                     MATRIX_SAMPLES]).encode()).hexdigest()[:16]
+    path = cache_dir() / "collision" / f"{Path(robot.name).stem}-{key}.json"
+    if path.exists():
+        try:
+            return [tuple(p) for p in json.loads(path.read_text())["pairs"]]
+        except (ValueError, KeyError):
+            pass  # a damaged cache is recomputed below
+    geom = robot.collision_model.copy()
+    geom.removeAllCollisionPairs()
+    for a, b in pairs:
+        geom.addCollisionPair(pin.CollisionPair(a, b))
+    data, gdata = robot.model.createData(), pin.GeometryData(geom)
+    hits = np.zeros(len(pairs), int)
+    rng = np.random.default_rng(0)
+    for row in robot.to_pinocchio(robot.sample_uniform(MATRIX_SAMPLES, rng)):
+        pin.computeCollisions(robot.model, data, geom, gdata, row, False)
+        hits += [r.isCollision() for r in gdata.collisionResults]
+    kept = [p for p, h in zip(pairs, hits) if 0 < h < MATRIX_SAMPLES]
+    atomic_write_text(path, json.dumps({"robot": robot.name, "joints": robot.joints, "pairs": kept,
+                                        "samples": MATRIX_SAMPLES}))
+    return kept

@@ -1,0 +1,46 @@
+"""Batched SO(3) helpers: log map and its Jacobian."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def hat(w: np.ndarray) -> np.ndarray:
+    """(B, 3) -> (B, 3, 3) skew-symmetric matrices."""
+    S = np.zeros((*w.shape[:-1], 3, 3))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = w[..., 2], -w[..., 1], w[..., 0]
+    return S
+
+
+def log3(R: np.ndarray) -> np.ndarray:
+    """(B, 3, 3) rotations -> (B, 3) rotation vectors (angle in [0, pi])."""
+    cos = np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    theta = np.arccos(cos)
+    vee = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    small = theta < 1e-6
+    near_pi = theta > np.pi - 1e-4
+    scale = np.where(small, 0.5 + theta**2 / 12, theta / (2 * np.sin(np.where(small | near_pi, 1.0, theta))))
+    w = scale[:, None] * vee
+    if near_pi.any():  # axis from the symmetric part, sign from the antisymmetric part
+        Rp = R[near_pi]
+        diag = np.clip((np.diagonal(Rp, axis1=1, axis2=2) - cos[near_pi, None]) / (1 - cos[near_pi, None]), 0, None)
+        axis = np.sqrt(diag)
+        k = np.argmax(axis, axis=1)
+        sym = (Rp + np.transpose(Rp, (0, 2, 1))) / 2
+        rows = sym[np.arange(len(k)), k]
+        axis = rows / np.linalg.norm(rows, axis=1, keepdims=True)
+        sign = np.sign(np.sum(axis * vee[near_pi], axis=1))
+        sign[sign == 0] = 1.0
+        w[near_pi] = axis * (theta[near_pi] * sign)[:, None]
+    return w
+
+
+def jlog3(w: np.ndarray) -> np.ndarray:
+    """(B, 3) rotation vectors -> (B, 3, 3) Jacobian of log3 w.r.t. a right perturbation."""
+    theta = np.linalg.norm(w, axis=1)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    coef = np.where(small, 1 / 12 + theta**2 / 720, 1 / t**2 - (1 + np.cos(t)) / (2 * t * np.sin(t)))
+    W = hat(w)
+    return np.eye(3) + 0.5 * W + coef[:, None, None] * (W @ W)
