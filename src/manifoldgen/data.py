@@ -75,9 +75,10 @@ def valid_rows(task: Task, q: np.ndarray, y: np.ndarray, checker: CollisionCheck
 
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
-            progress: bool = True) -> Dataset:
+            give_up: int = 20, progress: bool = True) -> Dataset:
     """Collect ``per_condition`` valid rows at each condition value (default: the task's).
 
+    A condition that yields no valid row in its first ``give_up`` batches is an error.
     With ``out``, batches are saved as they finish and the dataset is written atomically
     at the end; rerunning the same command after an interruption resumes.
     """
@@ -108,11 +109,14 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
                     if partial is not None:
                         save_npz(partial / f"c{c}-b{b}.npz", {}, q=rows)
                 got.append(rows)
+                if b + 1 >= give_up and not sum(len(g) for g in got):
+                    break
                 bar.advance(min(len(rows), per_condition - sum(len(g) for g in got[:-1])))
             q = np.concatenate(got)[:per_condition]
             if len(q) < per_condition:
                 raise ManifoldgenError(f"only {len(q)} valid rows at condition {y.tolist()} after "
-                                       f"{max_batches} batches; the condition may be unreachable")
+                                       f"{len(got)} batches of {batch}; the condition is probably unreachable: "
+                                       f"choose values inside {task.condition.describe()}")
             qs.append(q)
             ys.append(np.broadcast_to(y, (per_condition, len(y))))
     dataset = Dataset(np.concatenate(qs), np.concatenate(ys).copy(), meta)

@@ -7,6 +7,7 @@ A new constraint subclasses :class:`Constraint`, implements ``residual`` and
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -112,7 +113,10 @@ class Constraint(ABC):
 
 
 class ConstraintSet(Constraint):
-    """Several constraints on one robot, holding together; y is their conditions concatenated."""
+    """Several constraints on one robot, holding together.
+
+    y is the parts' conditions concatenated; the training values are their grid (product).
+    """
 
     def __init__(self, constraints: list[Constraint]):
         if not constraints:
@@ -122,8 +126,8 @@ class ConstraintSet(Constraint):
         self.condition = Condition(
             sum((c.condition.names for c in constraints), ()),
             sum((c.condition.units for c in constraints), ()),
-            np.concatenate([np.asarray(c.condition.values, float).reshape(-1, c.condition.k)
-                            for c in constraints], axis=1))
+            np.array([np.concatenate(rows) for rows in itertools.product(
+                *[np.asarray(c.condition.values, float).reshape(-1, c.condition.k) for c in constraints])]))
         self.tolerance = np.concatenate([c.tolerance for c in constraints])
 
     def _split(self, y: np.ndarray) -> list[np.ndarray]:

@@ -24,11 +24,9 @@ def log3(R: np.ndarray) -> np.ndarray:
     w = scale[:, None] * vee
     if near_pi.any():  # axis from the symmetric part, sign from the antisymmetric part
         Rp = R[near_pi]
-        diag = np.clip((np.diagonal(Rp, axis1=1, axis2=2) - cos[near_pi, None]) / (1 - cos[near_pi, None]), 0, None)
-        axis = np.sqrt(diag)
-        k = np.argmax(axis, axis=1)
+        k = np.argmax(np.diagonal(Rp, axis1=1, axis2=2), axis=1)  # the largest |a_k|
         sym = (Rp + np.transpose(Rp, (0, 2, 1))) / 2
-        rows = sym[np.arange(len(k)), k]
+        rows = sym[np.arange(len(k)), k] - cos[near_pi, None] * np.eye(3)[k]  # (1 - cos) a_k a
         axis = rows / np.linalg.norm(rows, axis=1, keepdims=True)
         sign = np.sign(np.sum(axis * vee[near_pi], axis=1))
         sign[sign == 0] = 1.0

@@ -46,8 +46,12 @@ def pr2_pose() -> Task:
 
 @register("pose", "centauro")
 def centauro_pose() -> Task:
-    """Centauro torso yaw + left arm (7 joints), hand upright, height -0.3-0.2 m above the pelvis."""
-    robot = Robot.load("centauro", CENTAURO_GROUP)
+    """Centauro torso yaw + left arm (7 joints), hand upright, height -0.2-0.3 m above the pelvis.
+
+    The right arm is locked abducted with the elbow bent, clear of the pelvis.
+    """
+    robot = Robot.load("centauro", CENTAURO_GROUP,
+                       reference={"j_arm2_1": 0.3, "j_arm2_2": -0.6, "j_arm2_4": -2.0})
     guess = np.array([0.0, -0.5, 0.3, 0.0, -1.2, 0.0, 0.0])
-    return _pose_task(robot, "arm1_8", np.eye(3), np.round(np.arange(-0.3, 0.25, 0.1), 2),
+    return _pose_task(robot, "arm1_8", np.eye(3), np.round(np.arange(-0.2, 0.35, 0.1), 2),
                       guess, -0.05, "hand upright (the paper's drink can); heights relative to the pelvis")

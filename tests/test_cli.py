@@ -1,0 +1,50 @@
+"""The collect command and its one-line errors."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.data import Dataset
+
+runner = CliRunner()
+
+
+def test_collect_writes_a_valid_dataset(tmp_path, panda_task):
+    out = tmp_path / "pose.npz"
+    result = runner.invoke(app, ["collect", "pose", "--robot", "panda", "--per-condition", "20", "--seed", "0",
+                                 "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "120 rows" in result.output
+    d = Dataset.load(out)
+    assert panda_task.constraint.satisfied(d.q, d.y).all()
+
+
+def test_collect_at_chosen_conditions_and_strict_range(tmp_path):
+    out = tmp_path / "c.npz"
+    ok = runner.invoke(app, ["collect", "pose", "--per-condition", "10", "--condition", "0.45", "-o", str(out)])
+    assert ok.exit_code == 0, ok.output
+    np.testing.assert_allclose(Dataset.load(out).y, 0.45)
+    warn = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "--condition", "0.72", "-o", str(out)])
+    assert warn.exit_code == 0 and "outside the trained range" in warn.output
+    strict = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "--condition", "0.72", "--strict",
+                                 "-o", str(out)])
+    assert strict.exit_code == 2 and "outside the trained range" in strict.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["collect", "pose", "--robot", "ur99"], "unknown robot 'ur99'"),
+    (["collect", "poze"], "unknown task 'poze'"),
+    (["collect", "pose", "--robot", "baxter"], "not defined for robot 'baxter'"),
+    (["collect", "pose", "--per-condition", "0"], "must be positive"),
+    (["collect", "pose", "--per-condition", "-3"], "must be positive"),
+])
+def test_bad_input_is_one_clear_line(args, message, tmp_path):
+    result = runner.invoke(app, [*args, "-o", str(tmp_path / "x.npz")])
+    assert result.exit_code == 2
+    assert message in result.output and "Traceback" not in result.output
+
+
+def test_missing_output_directory(tmp_path):
+    result = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(tmp_path / "no" / "x.npz")])
+    assert result.exit_code == 2 and "does not exist" in result.output
