@@ -104,3 +104,55 @@ def test_pose_constraint_rejects_bad_specification(panda_task):
         PoseConstraint(panda_task.robot, "panda_hand_tcp", np.ones((3, 3)), [[0.3]])
     with pytest.raises(ManifoldgenError, match="unknown frame"):
         PoseConstraint(panda_task.robot, "gripper", np.eye(3), [[0.3]])
+
+
+def _fd_check(constraint, q, y, eps=1e-6, atol=1e-5):
+    F, J = constraint.jacobian(q, y)
+    for i in range(q.shape[1]):
+        dq = np.zeros(q.shape[1])
+        dq[i] = eps
+        fd = (constraint.residual(q + dq, y) - constraint.residual(q - dq, y)) / (2 * eps)
+        np.testing.assert_allclose(J[:, :, i], fd, atol=atol)
+
+
+def test_closed_chain_between_pr2_grippers(rng):
+    from manifoldgen.constraints import project
+    from manifoldgen.constraints.closed_chain import ClosedChainConstraint
+    from manifoldgen.robot import Robot
+    from manifoldgen.tasks.pose import PR2_GROUP
+
+    joints = PR2_GROUP + [j.replace("r_", "l_", 1) for j in PR2_GROUP[1:]]
+    robot = Robot.load("pr2", joints)
+    facing = np.diag([-1.0, -1.0, 1.0])  # the grippers face each other across a tray
+    c = ClosedChainConstraint(robot, "r_gripper_tool_frame", "l_gripper_tool_frame", facing, [[0.3], [0.5]])
+    _fd_check(c, robot.sample_uniform(3, rng), np.full((3, 1), 0.4))
+    res = project(c, robot.sample_uniform(200, rng), [0.4])
+    ok = res.q[res.converged]
+    assert len(ok) > 50 and c.satisfied(ok, [0.4]).all()
+    pa, Ra = robot.frame_pose(ok, "r_gripper_tool_frame")
+    pb, Rb = robot.frame_pose(ok, "l_gripper_tool_frame")
+    np.testing.assert_allclose(np.linalg.norm(pb - pa, axis=1), 0.4, atol=1e-5)
+    np.testing.assert_allclose(np.transpose(Ra, (0, 2, 1)) @ Rb, np.broadcast_to(facing, Ra.shape), atol=1e-5)
+
+
+def test_balance_on_centauro_with_floating_base(rng):
+    from manifoldgen.constraints import project
+    from manifoldgen.constraints.balance import BalanceConstraint
+    from manifoldgen.robot import Robot
+
+    robot = Robot.load("centauro", floating_base=True)
+    feet = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
+    stance = np.clip(np.zeros(robot.n), robot.lower, robot.upper)
+    stance[2] = 0.7
+    c = BalanceConstraint(robot, feet, np.stack([robot.frame_pose(stance, f)[0][0] for f in feet]),
+                          "pelvis", [[0.6], [0.7]])
+    assert c.satisfied(stance, [0.7])[0] and np.all(c.inequality(stance, [0.7]) < 0)
+    _fd_check(c, stance + 0.05 * rng.normal(size=(2, robot.n)), np.full((2, 1), 0.65))
+    res = project(c, np.clip(stance + 0.2 * rng.normal(size=(100, robot.n)), robot.lower, robot.upper), [0.65])
+    assert res.converged.mean() > 0.9
+    moved = res.q[res.converged]
+    shifted = moved.copy()
+    shifted[:, 0] += 1.0  # slide the base 1 m forward with the legs unchanged: feet leave their spots
+    assert not c.satisfied(shifted, [0.65]).any()
+    G = c.inequality(moved, [0.65])
+    assert np.array_equal(c.satisfied(moved, [0.65]), np.all(G <= 0, axis=1) & robot.within_limits(moved))

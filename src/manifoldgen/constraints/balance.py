@@ -1,0 +1,72 @@
+"""Static balance (paper Section V-D): feet fixed on the ground, centre of mass over the support polygon.
+
+Equalities (B, 3 * feet + 1): each foot frame at its fixed world position, and the
+base height = y. Inequalities (B, edges): the signed distance of the CoM's ground
+projection outside each edge of the feet's convex hull, plus a margin, must be <= 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from manifoldgen.constraints.base import Condition, Constraint
+from manifoldgen.robot import Robot
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """(P, 2) -> (H, 2) hull vertices in counter-clockwise order (monotone chain)."""
+    pts = sorted(map(tuple, np.asarray(points, float)))
+
+    def turn(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    def half(seq):
+        out = []
+        for p in seq:
+            while len(out) >= 2 and turn(out[-2], out[-1], p) <= 0:
+                out.pop()
+            out.append(p)
+        return out[:-1]
+    return np.array(half(pts) + half(pts[::-1]))
+
+
+class BalanceConstraint(Constraint):
+    """Feet at ``foot_positions`` (F, 3); the base frame's height is y; CoM inside the feet's hull."""
+
+    def __init__(self, robot: Robot, feet: list[str], foot_positions: np.ndarray, base_frame: str,
+                 values: np.ndarray, margin: float = 0.02, tolerance: float = 0.01):
+        for f in (*feet, base_frame):
+            robot.frame_id(f)
+        self.robot, self.feet, self.base_frame, self.margin = robot, list(feet), base_frame, margin
+        self.foot_positions = np.asarray(foot_positions, float).reshape(len(feet), 3)
+        hull = convex_hull(self.foot_positions[:, :2])
+        edges = np.roll(hull, -1, axis=0) - hull
+        self._normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) / np.linalg.norm(edges, axis=1)[:, None]
+        self._offsets = np.einsum("ij,ij->i", self._normals, hull)
+        self.condition = Condition(("base height",), ("m",), np.asarray(values, float))
+        self.tolerance = np.full(3 * len(feet) + 1, tolerance)
+
+    def jacobian(self, q, y):
+        q, y = self.batch(q, y)
+        F, J = [], []
+        for foot, target in zip(self.feet, self.foot_positions):
+            p, _, Jf = self.robot.frame_jacobian(q, foot)
+            F.append(p - target)
+            J.append(Jf[:, :3])
+        p, _, Jb = self.robot.frame_jacobian(q, self.base_frame)
+        F.append(p[:, 2:] - y)
+        J.append(Jb[:, 2:3])
+        return np.concatenate(F, axis=1), np.concatenate(J, axis=1)
+
+    def residual(self, q, y):
+        return self.jacobian(q, y)[0]
+
+    def inequality(self, q, y):
+        q, _ = self.batch(q, y)
+        com = self.robot.com(q)[:, :2]
+        return com @ self._normals.T - self._offsets + self.margin
+
+    def spec(self) -> dict:
+        return {"type": "balance", "feet": self.feet, "foot_positions": self.foot_positions.tolist(),
+                "base_frame": self.base_frame, "margin": self.margin,
+                "tolerance": {"position": float(self.tolerance[0])}}
