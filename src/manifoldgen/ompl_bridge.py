@@ -1,0 +1,339 @@
+"""OMPL baselines: our constraint and collision checker inside OMPL's constrained planning.
+
+:class:`OmplPlanner` has the :class:`~manifoldgen.planning.base.Planner` contract
+(``solve(start, goal, time_limit) -> PlanResult``) and plans with OMPL 2's own planners
+(RRTConnect, RRT, KPIECE1, PRM, PRMstar, BKPIECE1) in one of four spaces:
+
+- ``projected``, ``atlas``, ``tangent``: OMPL's ProjectedStateSpace, AtlasStateSpace and
+  TangentBundleStateSpace over the joint box, with :class:`OmplConstraint` (our residual
+  and Jacobian at a fixed ``y``). OMPL samples, projects and walks the manifold itself.
+- ``joint``: the plain joint box; validity includes the constraint and motions are
+  straight segments checked every ``resolution`` rad, as MoveIt does with path
+  constraints (the paper's setting). Only useful with a sampler that lands on the manifold.
+
+A :class:`~manifoldgen.sampling.Sampler` (learned model, PG, projection, uniform) enters
+OMPL *unmodified* planners through ``si.setValidStateSamplerAllocator``: OMPL's PRM,
+PRMstar and BKPIECE1 then draw their states from it (:class:`SamplerBridge`); the tree
+planners RRT, RRTConnect and KPIECE1 have no Python state-sampler hook in OMPL 2.0.1's
+bindings, so they refuse a sampler.
+
+The returned path is OMPL's solution densified by OMPL's ``interpolate`` and then checked
+by :func:`~manifoldgen.planning.validate.validate_path` at ``validation_resolution``:
+OMPL guarantees only its own states (to its tolerance, ``delta`` apart on the manifold),
+not the straight segments between them. ``solved`` requires OMPL's exact solution *and* a
+valid path; ``extras`` keeps both verdicts, the worst violation and the reason.
+Constraint evaluations are our batched numpy code called one state at a time, so OMPL
+pays Python overhead on every Newton step (``extras`` counts them).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from typing import ClassVar
+
+import numpy as np
+import ompl.base as ob
+import ompl.geometric as og
+import ompl.util as ou
+
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.constraints import Constraint
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.planning.validate import state_problem, validate_path
+from manifoldgen.sampling import Sampler
+
+SPACES = ("projected", "atlas", "tangent", "joint")
+PLANNERS = {"rrtconnect": og.RRTConnect, "rrt": og.RRT, "kpiece": og.KPIECE1, "prm": og.PRM,
+            "prmstar": og.PRMstar, "bkpiece": og.BKPIECE1}
+SAMPLER_PLANNERS = ("prm", "prmstar", "bkpiece")  # call a Python ValidStateSampler
+
+
+@dataclass
+class OmplSettings:
+    """OMPL knobs.
+
+    margin: OMPL's scalar tolerance is ``1 - margin`` on the tolerance-scaled residual (see
+    :class:`OmplConstraint`), the margin our own planners keep for intermediate states;
+    max_iterations: Newton iterations per projection (OMPL's default 50); lambda_: OMPL's
+    limit on manifold-walk length / chord length; range: planner range in rad (0: OMPL's
+    default, 20% of the space extent); sample_attempts: draws from our sampler per OMPL
+    request before giving up; validation_resolution: the final dense check (rad).
+    """
+
+    margin: float = 0.05
+    max_iterations: int = 50
+    lambda_: float = 2.0
+    range: float = 0.0
+    sample_attempts: int = 10
+    validation_resolution: float = 0.005
+
+    def check(self) -> None:
+        if not 0 <= self.margin < 1 or self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 \
+                or self.sample_attempts < 1 or self.validation_resolution <= 0:
+            raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need 0 <= margin < 1, max_iterations "
+                                   ">= 1, lambda_ > 1, range >= 0, sample_attempts >= 1, validation_resolution > 0")
+
+
+class OmplConstraint(ob.Constraint):
+    """Our ``constraint`` at a fixed ``y`` as an OMPL constraint on ``R^n``.
+
+    OMPL has one scalar tolerance, compared with the Euclidean norm of F. We hand OMPL the
+    residual scaled component-wise by our tolerances, ``F_i / tol_i``, and give OMPL the
+    tolerance ``t = 1 - margin``. OMPL's test ``||F / tol||_2 <= t`` then implies ours
+    (``max_i |F_i| / tol_i <= 1``): it is never looser, in every component proportionally
+    (metres and radians weighted by their own tolerance), and at most ``sqrt(m)`` stricter
+    along a diagonal. Using the strictest component's tolerance instead would tighten every
+    other component by the ratio of tolerances. Newton steps are unchanged by the row
+    scaling (for a full-rank Jacobian), so OMPL's projection behaves as on the raw residual.
+    """
+
+    def __init__(self, constraint: Constraint, y: np.ndarray, tolerance: float = 1.0, max_iterations: int = 50):
+        super().__init__(constraint.robot.n, constraint.m, tolerance)
+        self.setMaxIterations(max_iterations)
+        self.constraint = constraint
+        self.y = np.asarray(y, dtype=float).reshape(1, constraint.condition.k)
+        self.scale = 1.0 / constraint.tolerance
+        self.function_evals = 0
+        self.jacobian_evals = 0
+
+    def function(self, x, out) -> None:
+        """out (m,) = F(x, y) / tol."""
+        self.function_evals += 1
+        out[:] = self.constraint.residual(np.asarray(x)[None], self.y)[0] * self.scale
+
+    def jacobian(self, x, out) -> None:
+        """out (m, n) = dF/dq (x, y) / tol (row-scaled)."""
+        self.jacobian_evals += 1
+        out[:] = self.constraint.jacobian(np.asarray(x)[None], self.y)[1][0] * self.scale[:, None]
+
+
+def read_state(state, n: int) -> np.ndarray:
+    """An OMPL state (real vector or constrained) as a (n,) array."""
+    return np.fromiter((state[i] for i in range(n)), float, n)
+
+
+def write_state(state, q: np.ndarray, constrained: bool) -> None:
+    """Set an OMPL state from ``q (n,)`` (constrained states take ``copy``; real vectors, items)."""
+    if constrained:
+        state.copy(q.tolist())
+    else:
+        for i, value in enumerate(q.tolist()):
+            state[i] = value
+
+
+class SamplerBridge(ob.ValidStateSampler):
+    """OMPL ValidStateSampler drawing from one of our Samplers (the paper's Algorithm 1 buffer).
+
+    ``sample`` copies the next configuration into OMPL's state; in a constrained space a
+    state outside OMPL's (slightly stricter) tolerance is first projected by OMPL. ``sampleNear``
+    draws a configuration and moves from ``near`` toward it by at most ``distance`` with the
+    space's own interpolation (on the manifold for constrained spaces). ``calls`` and
+    ``drawn`` count OMPL's requests and our samples.
+    """
+
+    def __init__(self, si: ob.SpaceInformation, sampler: Sampler, n: int,
+                 constraint: OmplConstraint | None, attempts: int):
+        super().__init__(si)
+        self.setName("manifoldgen")
+        self.si, self.sampler, self.n, self.constraint, self.attempts = si, sampler, n, constraint, attempts
+        self.scratch = si.allocState()
+        self.calls = self.drawn = 0
+
+    def _draw(self, state) -> bool:
+        """Copy one sampler configuration into ``state``; False when the sampler gave up."""
+        try:
+            q = self.sampler.sample()
+        except ManifoldgenError:
+            return False
+        self.drawn += 1
+        write_state(state, q, self.constraint is not None)
+        if self.constraint is None:
+            return True
+        return self.constraint.isSatisfied(state) or (self.constraint.project(state) and self.si.isValid(state))
+
+    def sample(self, state) -> bool:
+        self.calls += 1
+        return any(self._draw(state) for _ in range(self.attempts))
+
+    def sampleNear(self, state, near, distance) -> bool:
+        self.calls += 1
+        space = self.si.getStateSpace()
+        for _ in range(self.attempts):
+            if not self._draw(self.scratch):
+                continue
+            gap = self.si.distance(near, self.scratch)
+            space.interpolate(near, self.scratch, min(1.0, distance / max(gap, 1e-12)), state)
+            if self.si.isValid(state):
+                return True
+        return False
+
+
+class OmplPlanner:
+    """OMPL ``planner`` in OMPL ``space`` for our ``constraint`` at ``y``; see the module docstring.
+
+    sampler: our Sampler for PRM / PRMstar / BKPIECE1 (None: OMPL's own sampling);
+    resolution: OMPL's manifold step ``delta`` (constrained spaces) or the straight-segment
+    check resolution (``joint``), in rad; seed: OMPL's global RNG seed, set before each
+    solve (OMPL is reproducible only when this process builds the same OMPL objects in the
+    same order, as a fresh worker per run does).
+    """
+
+    settings_type: ClassVar[type[OmplSettings]] = OmplSettings
+
+    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
+                 sampler: Sampler | None = None, *, space: str = "projected", planner: str = "rrtconnect",
+                 resolution: float = 0.05, seed: int = 0, settings: OmplSettings | None = None):
+        if space not in SPACES:
+            raise ManifoldgenError(f"unknown OMPL space '{space}'; known: {', '.join(SPACES)}")
+        if planner not in PLANNERS:
+            raise ManifoldgenError(f"unknown OMPL planner '{planner}'; known: {', '.join(PLANNERS)}")
+        if sampler is not None and planner not in SAMPLER_PLANNERS:
+            raise ManifoldgenError(f"OMPL's {planner} cannot use a Python sampler (no state-sampler binding); "
+                                   f"use one of {', '.join(SAMPLER_PLANNERS)} or no sampler")
+        if sampler is None and space == "joint":
+            raise ManifoldgenError("the 'joint' space needs a sampler that lands on the manifold (uniform "
+                                   "joint samples almost never satisfy the constraint); pass one or use "
+                                   "a constrained space")
+        if resolution <= 0:
+            raise ManifoldgenError(f"resolution must be positive, got {resolution}")
+        self.settings = OmplSettings() if settings is None else settings
+        self.settings.check()
+        self.constraint, self.checker, self.sampler = constraint, checker, sampler
+        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
+        self.space, self.planner_name, self.resolution, self.seed = space, planner, resolution, seed
+        self.name = f"ompl-{space}-{planner}"
+        self._inequalities = constraint.inequality(constraint.robot.lower, self.y).shape[1] > 0
+
+    # ---------------------------------------------------------------- building blocks
+    def _valid(self, q: np.ndarray) -> bool:
+        """Joint limits, inequalities (and, in the joint space, the constraint) and collisions."""
+        robot = self.constraint.robot
+        if self.space == "joint":
+            ok = bool(self.constraint.satisfied(q, self.y)[0])
+        else:
+            ok = bool(robot.within_limits(q[None])[0])
+            if ok and self._inequalities:
+                ok = bool(np.all(self.constraint.inequality(q, self.y) <= 0))
+        return ok and (self.checker is None or not self.checker.in_collision(q[None])[0])
+
+    def _ambient(self) -> ob.RealVectorStateSpace:
+        robot = self.constraint.robot
+        box = ob.RealVectorStateSpace(robot.n)
+        bounds = ob.RealVectorBounds(robot.n)
+        for i in range(robot.n):
+            bounds.setLow(i, float(robot.lower[i]))
+            bounds.setHigh(i, float(robot.upper[i]))
+        box.setBounds(bounds)
+        return box
+
+    def _spaces(self, ompl_constraint: OmplConstraint | None):
+        """(state space, space information) for ``self.space``."""
+        box = self._ambient()
+        if self.space == "joint":
+            si = ob.SpaceInformation(box)
+            si.setStateValidityCheckingResolution(self.resolution / box.getMaximumExtent())
+            return box, si
+        kind = {"projected": ob.ProjectedStateSpace, "atlas": ob.AtlasStateSpace,
+                "tangent": ob.TangentBundleStateSpace}[self.space]
+        space = kind(box, ompl_constraint)
+        si = (ob.TangentBundleSpaceInformation if self.space == "tangent" else ob.ConstrainedSpaceInformation)(space)
+        space.setDelta(self.resolution)
+        space.setLambda(self.settings.lambda_)
+        return space, si
+
+    def _state(self, space, q: np.ndarray):
+        state = space.allocState()
+        write_state(state, q, self.space != "joint")
+        return state
+
+    # ---------------------------------------------------------------- the contract
+    def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
+        """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
+        if not np.isfinite(time_limit) or time_limit <= 0:
+            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        n = self.constraint.robot.n
+        start, goal = (self._query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
+        _seed_ompl(self.seed)
+        began = time.perf_counter()
+        ompl_constraint = None if self.space == "joint" else OmplConstraint(
+            self.constraint, self.y, 1.0 - self.settings.margin, self.settings.max_iterations)
+        space, si = self._spaces(ompl_constraint)
+        si.setStateValidityChecker(lambda state: self._valid(read_state(state, n)))
+        bridge = []
+        if self.sampler is not None:
+            def allocate(info):
+                bridge.append(SamplerBridge(info, self.sampler, n, ompl_constraint, self.settings.sample_attempts))
+                return bridge[-1]
+            si.setValidStateSamplerAllocator(allocate)
+        setup = og.SimpleSetup(si)
+        states = [self._state(space, q) for q in (start, goal)]
+        if ompl_constraint is not None:
+            for state, what in zip(states, ("start", "goal")):
+                if not ompl_constraint.isSatisfied(state):
+                    raise ManifoldgenError(f"{what} is within our tolerance but not within OMPL's stricter one "
+                                           f"(norm of the tolerance-scaled residual <= {1 - self.settings.margin:g}); "
+                                           f"project it onto the constraint more tightly")
+        if self.space in ("atlas", "tangent"):
+            for state in states:
+                space.anchorChart(state)
+        setup.setStartAndGoalStates(*states)
+        planner = PLANNERS[self.planner_name](si)
+        if self.settings.range and hasattr(planner, "setRange"):
+            planner.setRange(self.settings.range)
+        setup.setPlanner(planner)
+        setup.setup()
+        status = setup.solve(float(time_limit) - (time.perf_counter() - began))
+        elapsed = time.perf_counter() - began
+        exact = bool(setup.haveExactSolutionPath())
+        data = ob.PlannerData(si)
+        setup.getPlannerData(data)
+        extras = {"space": self.space, "ompl_planner": self.planner_name, "ompl_status": str(status),
+                  "ompl_solved": exact, "vertices": int(data.numVertices()), "resolution": self.resolution,
+                  "ompl_tolerance": 1.0 - self.settings.margin}
+        path = np.zeros((0, n))
+        if exact:
+            solution = setup.getSolutionPath()
+            extras["ompl_states"] = int(solution.getStateCount())
+            densify_began = time.perf_counter()
+            solution.interpolate()
+            path = np.array([read_state(s, n) for s in solution.getStates()])
+            extras["interpolate_s"] = time.perf_counter() - densify_began
+            report = validate_path(path, self.constraint, self.y, self.checker, self.settings.validation_resolution)
+            extras.update(valid=report.valid, worst_violation=report.worst_violation, reason=report.reason)
+        if ompl_constraint is not None:
+            extras.update(function_evals=ompl_constraint.function_evals,
+                          jacobian_evals=ompl_constraint.jacobian_evals)
+        drawn = sum(b.drawn for b in bridge)
+        if bridge:
+            extras["sampler_calls"] = sum(b.calls for b in bridge)
+            extras["sampler"] = self.sampler.stats.to_dict()
+        if self.space in ("atlas", "tangent"):
+            extras["charts"] = int(space.getChartCount())
+        solved = exact and bool(extras["valid"])
+        projections = ompl_constraint.jacobian_evals if ompl_constraint is not None else 0
+        return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, int(data.numVertices()), drawn,
+                          projections, self.name, path_length(path) if solved else 0.0, extras)
+
+    def _query_state(self, q: np.ndarray, what: str) -> np.ndarray:
+        n = self.constraint.robot.n
+        q = np.asarray(q, dtype=float)
+        if q.shape != (n,) or not np.all(np.isfinite(q)):
+            raise ManifoldgenError(f"{what} must be {n} finite joint values, got shape {q.shape}")
+        problem = state_problem(q, self.constraint, self.y, self.checker)
+        if problem:
+            raise ManifoldgenError(f"{what} configuration {problem}; choose a valid {what} (for example by "
+                                   "projecting it onto the constraint)")
+        return q
+
+
+def _seed_ompl(seed: int) -> None:
+    """Seed OMPL's global RNG and keep OMPL's log to warnings and errors.
+
+    OMPL rejects seed 0 (we add 1) and logs an error, harmless here, when reseeded after
+    its first random numbers: later OMPL objects are still seeded from the new seed.
+    """
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)
+    ou.setLogLevel(ou.LOG_WARN)
