@@ -1,0 +1,321 @@
+"""Planning experiments (the paper's Tables II and III): every method, same query, same seeds.
+
+A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
+
+- ``PLANNER``: one of :data:`manifoldgen.planning.PLANNERS` (``rrtconnect``, ``cbirrt``, ...)
+  with a ``LOCAL`` planner (``interpolate`` by default, or ``project``), or an OMPL baseline
+  ``ompl-SPACE-PLANNER`` (e.g. ``ompl-projected-rrtconnect``, ``ompl-atlas-prm``; see
+  :mod:`manifoldgen.ompl_bridge`);
+- ``SAMPLER``: a sampler spec for :func:`manifoldgen.specs.make_sampler` (``cvae:DIR``,
+  ``pg:DATASET.npz``, ``project``, ``uniform``); ``pg`` alone means a PG dataset of
+  ``pg_rows`` configurations at the scene's condition, collected once into the output folder.
+  Our planners default to ``uniform``; OMPL's tree planners take no sampler.
+
+Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Runs execute in
+worker processes (each builds its own robot, checker, sampler and planner, with one torch
+thread); each finished run is appended to ``runs.jsonl`` at once, so an interrupted benchmark
+keeps its runs and ``resume=True`` skips them. Every solved path is re-validated here,
+independently of the planner, every 0.005 rad; a run counts as solved only when that check
+passes. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.bench.report import MethodSummary, write_report
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_text
+from manifoldgen.progress import progress_bar
+
+RUNS_FILE = "runs.jsonl"
+CONFIG_FILE = "config.json"
+VALIDATION_RESOLUTION = 0.005
+PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
+OMPL_PREFIX = "ompl-"
+
+
+@dataclass(frozen=True)
+class Method:
+    """A parsed method: ``label`` names it in tables; ``spec`` is the text it came from."""
+
+    label: str
+    planner: str
+    local: str
+    sampler: str | None
+    spec: str
+
+    @property
+    def is_ompl(self) -> bool:
+        return self.planner.startswith(OMPL_PREFIX)
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        text = text.strip()
+        label, _, body = text.partition("=") if "=" in text.split("@")[0] else ("", "", text)
+        head, _, sampler = body.partition("@")
+        planner, _, local = head.partition(":")
+        if not planner:
+            raise ManifoldgenError(f"method '{text}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
+                                   "e.g. rrtconnect:interpolate@cvae:models/cvae or ompl-projected-rrtconnect")
+        if planner.startswith(OMPL_PREFIX):
+            from manifoldgen.ompl_bridge import PLANNERS as OMPL_PLANNERS, SPACES
+            parts = planner[len(OMPL_PREFIX):].split("-")
+            if len(parts) != 2 or parts[0] not in SPACES or parts[1] not in OMPL_PLANNERS:
+                raise ManifoldgenError(f"method '{text}': OMPL methods are ompl-SPACE-PLANNER with SPACE in "
+                                       f"{', '.join(SPACES)} and PLANNER in {', '.join(OMPL_PLANNERS)}")
+            if local:
+                raise ManifoldgenError(f"method '{text}': OMPL methods take no local planner (drop ':{local}')")
+            local = ""
+        else:
+            from manifoldgen.planning import PLANNERS
+            from manifoldgen.planning.local import LOCAL_PLANNERS
+            if planner not in PLANNERS:
+                raise ManifoldgenError(f"method '{text}': unknown planner '{planner}'; known: "
+                                       f"{', '.join(PLANNERS)}, or ompl-SPACE-PLANNER")
+            local = local or "interpolate"
+            if local not in LOCAL_PLANNERS:
+                raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
+                                       f"{', '.join(LOCAL_PLANNERS)}")
+            sampler = sampler or "uniform"
+        return cls(label or _default_label(planner, local, sampler or None), planner, local, sampler or None, text)
+
+    def resolved(self, sampler: str | None) -> Method:
+        """The same method with another sampler spec (e.g. ``pg`` given its dataset path)."""
+        return Method(self.label, self.planner, self.local, sampler, self.spec)
+
+
+def _default_label(planner: str, local: str, sampler: str | None) -> str:
+    label = planner + (f":{local}" if local and local != "interpolate" else "")
+    if sampler:
+        kind, _, path = sampler.partition(":")
+        label += f"@{kind}" + (f":{Path(path).name}" if path else "")
+    return label
+
+
+def default_methods() -> list[str]:
+    """The shipped learned model (when present) with each local planner, PG, CBiRRT, OMPL's three
+    constrained spaces with RRTConnect, and uniform rejection sampling."""
+    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.planning import PLANNERS
+    methods = []
+    try:
+        model = pretrained_model_dir()
+        kind = json.loads((model / "model.json").read_text())["model"]
+        methods += [f"{kind}=rrtconnect:interpolate@{kind}:{model}",
+                    f"{kind}-project=rrtconnect:project@{kind}:{model}"]
+    except ManifoldgenError:
+        pass
+    methods += ["pg=rrtconnect:interpolate@pg"]
+    if "cbirrt" in PLANNERS:
+        methods += ["cbirrt=cbirrt:project@uniform"]
+    methods += ["ompl-projected=ompl-projected-rrtconnect", "ompl-atlas=ompl-atlas-rrtconnect",
+                "ompl-tangent=ompl-tangent-rrtconnect", "uniform=rrtconnect:interpolate@uniform"]
+    return methods
+
+
+def default_baseline(methods: list[str]) -> str | None:
+    """The label of the first OMPL ProjectedStateSpace + RRTConnect method, the speed-up reference."""
+    return next((m.label for m in map(Method.parse, methods) if m.planner == "ompl-projected-rrtconnect"), None)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """What every run shares: the task, the scene (named or a JSON file) and the limits."""
+
+    scene: str
+    task: str = "pose"
+    robot: str = "panda"
+    time_limit: float = 200.0
+    seed: int = 0
+    resolution: float = 0.05
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def build(experiment: Experiment, method: Method, seed: int):
+    """(planner, task, scene, checker) for one run, built from scratch."""
+    from manifoldgen.scene import get_scene
+    from manifoldgen.specs import make_sampler
+    from manifoldgen.tasks import get_task
+
+    task = get_task(experiment.task, experiment.robot)
+    scene = get_scene(task, experiment.scene)
+    checker = scene.checker(task.robot)
+    y = scene.condition
+    sampler = None if method.sampler is None else make_sampler(method.sampler, task, y, checker, seed)
+    if method.is_ompl:
+        from manifoldgen.ompl_bridge import OmplPlanner
+        space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
+        planner = OmplPlanner(task.constraint, y, checker, sampler, space=space, planner=planner_name,
+                              resolution=experiment.resolution, seed=seed)
+    else:
+        from manifoldgen.planning import PLANNERS
+        planner = PLANNERS[method.planner](task.constraint, y, checker, sampler, local=method.local,
+                                           resolution=experiment.resolution, seed=seed)
+    return planner, task, scene, checker
+
+
+def run_once(experiment: Experiment, method: Method, run: int) -> dict:
+    """One run of ``method`` (seed ``experiment.seed + run``) as a JSON-ready record."""
+    from manifoldgen.planning.validate import validate_path
+
+    seed = experiment.seed + run
+    record = {"method": method.label, "spec": method.spec, "run": run, "seed": seed, "scene": experiment.scene,
+              "time_limit": experiment.time_limit}
+    began = time.perf_counter()
+    try:
+        planner, task, scene, checker = build(experiment, method, seed)
+        record["build_s"] = time.perf_counter() - began
+        result = planner.solve(scene.start, scene.goal, experiment.time_limit)
+    except ManifoldgenError as exc:
+        return {**record, "solved": False, "planner_solved": False, "time_s": experiment.time_limit,
+                "iterations": 0, "samples_drawn": 0, "projections": 0, "length": 0.0, "waypoints": 0,
+                "valid": False, "worst_violation": float("nan"), "reason": "", "error": str(exc)}
+    report = validate_path(result.path, task.constraint, scene.condition, checker, VALIDATION_RESOLUTION) \
+        if result.solved else None
+    summary = result.to_dict()
+    return {**record, "solved": bool(result.solved and report.valid), "planner_solved": bool(result.solved),
+            "time_s": summary["time_s"], "iterations": summary["iterations"],
+            "samples_drawn": summary["samples_drawn"], "projections": summary["projections"],
+            "length": summary["length"], "waypoints": summary["waypoints"], "planner": summary["planner"],
+            "valid": bool(report.valid) if report else False,
+            "worst_violation": report.worst_violation if report else float("nan"),
+            "reason": report.reason if report else "", "extras": summary["extras"]}
+
+
+def _init_worker() -> None:
+    """One torch thread per worker process (the workers already share the cores)."""
+    import torch
+    torch.set_num_threads(1)
+
+
+def read_records(path: Path) -> list[dict]:
+    """Records of a ``runs.jsonl``; a truncated last line (an interrupted write) is ignored."""
+    if not path.is_file():
+        return []
+    records = []
+    lines = path.read_text().splitlines()
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            records.append(json.loads(line))
+        except ValueError as exc:
+            if i == len(lines) - 1:
+                break
+            raise ManifoldgenError(f"{path} line {i + 1} is not JSON ({exc}); remove that line or rerun into "
+                                   "another folder") from exc
+    return records
+
+
+def drop_truncated_line(path: Path) -> None:
+    """Cut an unfinished last line (a run interrupted while being written) before appending."""
+    if path.is_file():
+        text = path.read_text()
+        if text and not text.endswith("\n"):
+            atomic_write_text(path, text[:text.rfind("\n") + 1])
+
+
+def _append(path: Path, record: dict) -> None:
+    with path.open("a") as f:
+        f.write(json.dumps(record) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _prepare_pg(experiment: Experiment, methods: list[Method], out_dir: Path, rows: int) -> list[Method]:
+    """Give ``@pg`` methods a dataset: ``rows`` configurations at the scene's condition (collected once)."""
+    if not any(m.sampler == "pg" for m in methods):
+        return methods
+    from manifoldgen.data import collect
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import get_task
+
+    task = get_task(experiment.task, experiment.robot)
+    y = get_scene(task, experiment.scene).condition
+    path = out_dir / f"pg-{Path(experiment.scene).stem}-{rows}.npz"
+    if not path.is_file():
+        collect(task, rows, experiment.seed, path, conditions=y[None], progress=False)
+    return [m.resolved(f"pg:{path}") if m.sampler == "pg" else m for m in methods]
+
+
+def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
+    path = out_dir / CONFIG_FILE
+    if done and not resume:
+        raise ManifoldgenError(f"{out_dir} already holds {done} runs; pass --resume to continue them or choose "
+                               "another output folder")
+    if resume and path.is_file():
+        old = json.loads(path.read_text())
+        changed = [k for k in ("experiment",) if old.get(k) != config[k]]
+        if changed:
+            raise ManifoldgenError(f"{out_dir} was run with {old['experiment']}, not {config['experiment']}; "
+                                   "resume with the same scene, time limit and seed, or choose another folder")
+
+
+def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *, runs: int, workers: int = 1,
+              resume: bool = False, pg_rows: int = 10_000, baseline: str | None = None,
+              progress: bool = True) -> tuple[str, list[MethodSummary]]:
+    """Run ``runs`` runs of every method (skipping finished ones with ``resume``); write
+    ``runs.jsonl``, ``config.json``, ``results.md``, ``time.png``, ``length.png`` in ``out_dir``;
+    return the Markdown table and the summaries."""
+    if runs <= 0 or workers <= 0:
+        raise ManifoldgenError(f"--runs and --workers must be positive, got {runs} and {workers}")
+    if not np.isfinite(experiment.time_limit) or experiment.time_limit <= 0:
+        raise ManifoldgenError(f"--time must be a positive number of seconds, got {experiment.time_limit}")
+    parsed = [Method.parse(m) for m in methods]
+    if not parsed:
+        raise ManifoldgenError("no methods given; pass --methods (see `manifoldgen bench wall --help`)")
+    labels = [m.label for m in parsed]
+    duplicates = sorted({label for label in labels if labels.count(label) > 1})
+    if duplicates:
+        raise ManifoldgenError(f"methods share the labels {duplicates}; name them with LABEL=... ")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    runs_path = out_dir / RUNS_FILE
+    records = read_records(runs_path)
+    config = {"experiment": experiment.to_dict(), "methods": [m.spec for m in parsed]}
+    _check_config(out_dir, config, resume, len(records))
+    for record in records:
+        match = next((m for m in parsed if m.label == record["method"]), None)
+        if match is not None and match.spec != record["spec"]:
+            raise ManifoldgenError(f"{runs_path} has runs of '{match.label}' made with '{record['spec']}', not "
+                                   f"'{match.spec}'; give that method another label or use another folder")
+    atomic_write_text(out_dir / CONFIG_FILE, json.dumps(config, indent=1))
+    drop_truncated_line(runs_path)
+    parsed = _prepare_pg(experiment, parsed, out_dir, pg_rows)
+    for method in parsed:  # fail fast on a bad model path, dataset or planner option
+        build(experiment, method, experiment.seed)
+    done = {(r["method"], r["run"]) for r in records}
+    todo = [(m, r) for r in range(runs) for m in parsed if (m.label, r) not in done]
+    context = multiprocessing.get_context("spawn")
+    with progress_bar(f"{experiment.scene}: runs", total=len(todo), enabled=progress) as bar, \
+            ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker) as pool:
+        pending = {pool.submit(run_once, experiment, m, r) for m, r in todo}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    record = future.result()
+                    _append(runs_path, record)
+                    records.append(record)
+                    bar.advance(1)
+        except BaseException:  # an interrupt or a crashed run: finished runs are already on disk
+            for future in pending:
+                future.cancel()
+            raise
+    kept = [r for r in records if r["method"] in labels and r["run"] < runs]
+    notes = (f"Scene `{experiment.scene}` ({experiment.task} task, {experiment.robot}), {runs} runs per method "
+             f"(seeds {experiment.seed}..{experiment.seed + runs - 1}), {workers} worker process(es). Methods:\n\n"
+             + "\n".join(f"- `{m.label}`: `{m.spec}`" for m in parsed))
+    return write_report(kept, out_dir, f"{experiment.scene} benchmark", methods=labels, baseline=baseline,
+                        notes=notes)

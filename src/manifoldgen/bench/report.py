@@ -1,0 +1,136 @@
+"""Planning benchmark reports: per-method summaries, Markdown tables and box plots.
+
+Input is the list of run records a benchmark wrote (one JSON object per run, see
+:mod:`manifoldgen.bench.planning`). An unsolved run counts as a failure whose time is the
+run's time limit, as in the paper's tables.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.io import atomic_write_bytes, atomic_write_text
+
+
+@dataclass
+class MethodSummary:
+    """One method's runs: success rate (%), times (s, failures at the limit), means over solved runs."""
+
+    method: str
+    runs: int
+    solved: int
+    errors: int
+    success: float
+    time_mean: float
+    time_min: float
+    time_max: float
+    time_median: float
+    length_mean: float
+    samples_mean: float
+    projections_mean: float
+    worst_violation: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def run_time(record: dict) -> float:
+    """The time a run counts for: its solve time when solved, else its time limit."""
+    return float(record["time_s"]) if record["solved"] else float(record["time_limit"])
+
+
+def summarize(records: list[dict], methods: list[str] | None = None) -> list[MethodSummary]:
+    """Summaries in the order of ``methods`` (default: first appearance in ``records``)."""
+    order = methods if methods is not None else list(dict.fromkeys(r["method"] for r in records))
+    out = []
+    for method in order:
+        runs = [r for r in records if r["method"] == method]
+        if not runs:
+            continue
+        solved = [r for r in runs if r["solved"]]
+        times = np.array([run_time(r) for r in runs])
+        mean = (lambda key: float(np.mean([r[key] for r in solved])) if solved else float("nan"))
+        worst = max((float(r["worst_violation"]) for r in solved), default=float("nan"))
+        out.append(MethodSummary(method, len(runs), len(solved), sum(bool(r.get("error")) for r in runs),
+                                 100.0 * len(solved) / len(runs), float(times.mean()), float(times.min()),
+                                 float(times.max()), float(np.median(times)), mean("length"),
+                                 mean("samples_drawn"), mean("projections"), worst))
+    return out
+
+
+def _num(value: float, digits: int = 3) -> str:
+    return "-" if not np.isfinite(value) else f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:,.0f}"
+
+
+def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) -> str:
+    """The paper's table (average / min / max time, success) plus median, path length, samples,
+    projections and the worst constraint violation (x tolerance) along solved paths; with
+    ``baseline`` a column of median speed-ups over that method."""
+    reference = next((s.time_median for s in summaries if s.method == baseline), None)
+    header = ["Method", "Runs", "Success (%)", "Mean time (s)", "Min (s)", "Max (s)", "Median (s)",
+              "Path length (rad)", "Samples drawn", "Projections", "Worst violation (x tol)"]
+    if reference is not None:
+        header.append(f"Median speed-up vs {baseline}")
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for s in summaries:
+        row = [s.method, str(s.runs), f"{s.success:.1f}", _num(s.time_mean), _num(s.time_min), _num(s.time_max),
+               _num(s.time_median), _num(s.length_mean), _num(s.samples_mean), _num(s.projections_mean),
+               _num(s.worst_violation)]
+        if reference is not None:
+            row.append(f"{reference / s.time_median:.1f}x" if s.time_median > 0 else "-")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylabel: str, *,
+             solved_only: bool = False, log: bool = True) -> bytes:
+    """PNG bytes: one box per method of ``key`` (``time`` counts failures at the limit)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    values, labels = [], []
+    for method in methods:
+        runs = [r for r in records if r["method"] == method and (r["solved"] or not solved_only)]
+        data = [run_time(r) if key == "time" else float(r[key]) for r in runs]
+        if data:
+            values.append(data)
+            labels.append(method)
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(labels) + 2), 4.5))
+    if values:
+        ax.boxplot(values)
+        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=30, ha="right")
+    if log and values and min(min(v) for v in values) > 0:
+        ax.set_yscale("log")
+    ax.set_title(title)
+    ax.set_ylabel(ylabel)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def write_report(records: list[dict], out_dir: str | Path, title: str, *, methods: list[str] | None = None,
+                 baseline: str | None = None, notes: str = "") -> tuple[str, list[MethodSummary]]:
+    """Write ``results.md``, ``time.png`` and ``length.png`` to ``out_dir``; return the table and summaries."""
+    out_dir = Path(out_dir)
+    summaries = summarize(records, methods)
+    order = [s.method for s in summaries]
+    table = markdown_table(summaries, baseline)
+    limits = sorted({float(r["time_limit"]) for r in records})
+    text = (f"# {title}\n\n{notes}\n\nTime limit per run: {', '.join(f'{t:g}' for t in limits)} s; an unsolved "
+            "run counts as a failure with time = limit. Path length, samples and projections are means over "
+            "solved runs; the worst violation is max |F_i| / tol_i over every state of every solved path, "
+            "checked every 0.005 rad.\n\n" + table + "\n![time](time.png)\n\n![length](length.png)\n")
+    atomic_write_text(out_dir / "results.md", text)
+    atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",
+                                                      "time (s, failures at the limit)"))
+    atomic_write_bytes(out_dir / "length.png", box_plot(records, "length", order, f"{title}: path length",
+                                                        "joint-space length (rad)", solved_only=True, log=False))
+    return table, summaries

@@ -1,0 +1,98 @@
+"""The planning benchmark harness: same seeds for every method, JSONL records, reports, resume."""
+
+import json
+
+import numpy as np
+import pytest
+
+from manifoldgen.bench.planning import (Experiment, Method, default_baseline, drop_truncated_line, read_records,
+                                        run_bench, run_once)
+from manifoldgen.bench.report import summarize
+from manifoldgen.constraints import project
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.scene import Scene
+
+METHODS = ["atlas=ompl-atlas-rrtconnect", "pg=rrtconnect@pg"]
+
+
+@pytest.fixture(scope="module")
+def easy_scene(tmp_path_factory):
+    """No obstacles, a goal 0.4 rad from the panda's home configuration."""
+    from manifoldgen.tasks import get_task
+    task = get_task("pose", "panda")
+    y = task.home_condition
+    goal = project(task.constraint, task.home + np.array([0.4, 0.3, 0, 0.3, 0, 0, 0]), y, tol=1e-8).q[0]
+    path = tmp_path_factory.mktemp("scene") / "easy.json"
+    Scene("easy", [], None, task.home, goal, y, "panda").save(path)
+    return str(path)
+
+
+def test_method_parsing():
+    m = Method.parse("cvae=rrtconnect:project@cvae:runs/cvae,refine=2")
+    assert (m.label, m.planner, m.local, m.sampler) == ("cvae", "rrtconnect", "project", "cvae:runs/cvae,refine=2")
+    m = Method.parse("rrtconnect")
+    assert (m.label, m.local, m.sampler) == ("rrtconnect@uniform", "interpolate", "uniform")
+    m = Method.parse("ompl-atlas-prm@pg:data/pg.npz")
+    assert m.is_ompl and m.label == "ompl-atlas-prm@pg:pg.npz" and m.sampler == "pg:data/pg.npz"
+    assert default_baseline(["x=rrtconnect", "ref=ompl-projected-rrtconnect"]) == "ref"
+    for bad, message in [("ompl-curved-rrt", "OMPL methods"), ("rrtconect", "unknown planner"),
+                         ("rrtconnect:walk", "unknown local"), ("ompl-atlas-rrt:project", "no local planner")]:
+        with pytest.raises(ManifoldgenError, match=message):
+            Method.parse(bad)
+
+
+def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
+    out = tmp_path / "bench"
+    experiment = Experiment(easy_scene, time_limit=20.0, seed=5)
+    table, summaries = run_bench(experiment, METHODS, out, runs=2, workers=2, pg_rows=300, progress=False)
+    records = read_records(out / "runs.jsonl")
+    assert sorted((r["method"], r["run"], r["seed"]) for r in records) == [
+        ("atlas", 0, 5), ("atlas", 1, 6), ("pg", 0, 5), ("pg", 1, 6)]
+    for r in records:  # solved means an independently valid path
+        assert r["solved"] and r["valid"] and r["planner_solved"]
+        assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"]
+    # the same seed gives the same run (OMPL reseeded in every worker, our samplers seeded)
+    rerun = run_once(experiment, Method.parse(METHODS[0]), 1)
+    first = next(r for r in records if (r["method"], r["run"]) == ("atlas", 1))
+    assert (rerun["length"], rerun["iterations"]) == (first["length"], first["iterations"])
+    assert [(s.method, s.runs, s.solved) for s in summaries] == [("atlas", 2, 2), ("pg", 2, 2)]
+    text = (out / "results.md").read_text()
+    assert "| atlas | 2 | 100.0 |" in text and "| pg | 2 | 100.0 |" in text and table in text
+    assert (out / "time.png").read_bytes()[:4] == b"\x89PNG" and (out / "length.png").stat().st_size > 0
+    assert json.loads((out / "config.json").read_text())["methods"] == METHODS
+    assert (out / "pg-easy-300.npz").is_file()
+
+    with pytest.raises(ManifoldgenError, match="--resume"):
+        run_bench(experiment, METHODS, out, runs=2, progress=False)
+    # resume: nothing left for 2 runs; one more run per method for 3
+    run_bench(experiment, METHODS, out, runs=2, resume=True, pg_rows=300, progress=False)
+    assert len(read_records(out / "runs.jsonl")) == 4
+    _, summaries = run_bench(experiment, METHODS, out, runs=3, resume=True, pg_rows=300, progress=False)
+    records = read_records(out / "runs.jsonl")
+    assert len(records) == 6 and sorted(r["run"] for r in records if r["method"] == "pg") == [0, 1, 2]
+    assert [s.runs for s in summaries] == [3, 3]
+    with pytest.raises(ManifoldgenError, match="same scene, time limit"):
+        run_bench(Experiment(easy_scene, time_limit=5.0, seed=5), METHODS, out, runs=3, resume=True,
+                  progress=False)
+
+
+def test_summary_counts_failures_at_the_limit():
+    records = [{"method": "a", "solved": True, "time_s": 1.0, "time_limit": 10.0, "length": 2.0,
+                "samples_drawn": 5, "projections": 0, "worst_violation": 0.5},
+               {"method": "a", "solved": False, "time_s": 3.0, "time_limit": 10.0, "length": 0.0,
+                "samples_drawn": 9, "projections": 0, "worst_violation": float("nan"), "error": "x"}]
+    (s,) = summarize(records)
+    assert (s.runs, s.solved, s.errors, s.success) == (2, 1, 1, 50.0)
+    assert (s.time_mean, s.time_min, s.time_max, s.time_median) == (5.5, 1.0, 10.0, 5.5)
+    assert (s.length_mean, s.samples_mean, s.worst_violation) == (2.0, 5.0, 0.5)
+
+
+def test_truncated_last_line_is_ignored(tmp_path):
+    path = tmp_path / "runs.jsonl"
+    path.write_text('{"method": "a", "run": 0}\n{"method": "a", "ru')
+    assert read_records(path) == [{"method": "a", "run": 0}]
+    drop_truncated_line(path)
+    assert path.read_text() == '{"method": "a", "run": 0}\n'
+    path.write_text('{"method": "a", "ru\n{"method": "a", "run": 0}\n')
+    with pytest.raises(ManifoldgenError, match="line 1"):
+        read_records(path)
