@@ -8,6 +8,7 @@ buffer, as in the paper's Algorithm 1; ``stats`` counts what it cost.
 
 from __future__ import annotations
 
+import json
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass
 
@@ -106,3 +107,74 @@ class DatasetSampler(Sampler):
 
     def candidates(self, count):
         return self.rows[self.rng.integers(0, len(self.rows), size=count)]
+
+
+def check_model_matches(model, constraint: Constraint) -> None:
+    """Refuse a model trained for another robot, joint set or constraint than ``constraint``'s."""
+    robot = constraint.robot
+    meta = model.meta
+    if meta.get("robot") != robot.name or list(meta.get("joints", [])) != list(robot.joints):
+        raise ManifoldgenError(
+            f"the model was trained for robot '{meta.get('robot')}' with joints {meta.get('joints')}, but the "
+            f"task uses robot '{robot.name}' with joints {robot.joints}; train a model on this task's data")
+    spec = constraint.spec()
+    trained = meta.get("constraint")
+    if trained is not None and json.loads(json.dumps(trained)) != json.loads(json.dumps(spec)):
+        raise ManifoldgenError(f"the model was trained for constraint {trained}, but the task's constraint "
+                               f"is {spec}; train a model on this task's data")
+
+
+class ModelSampler(Sampler):
+    """Algorithm 1 with a learned model: batches of model samples at ``y``, optionally refined by at
+    most ``refine`` projection (Levenberg-Marquardt) iterations, checked before they are returned."""
+
+    def __init__(self, constraint: Constraint, y: np.ndarray, model, *, refine: int = 0,
+                 checker: CollisionChecker | None = None, batch: int = 1024,
+                 seed: int | np.random.Generator = 0, max_batches: int = 10_000):
+        super().__init__(constraint, y, checker=checker, batch=batch, seed=seed, max_batches=max_batches)
+        if refine < 0:
+            raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
+        check_model_matches(model, constraint)
+        model.check_condition(self.y)
+        import torch
+
+        self.model, self.refine = model, int(refine)
+        self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
+
+    def candidates(self, count):
+        q = generate(self.model, self.constraint, self.y, count, self.generator, self.refine)[1]
+        self.stats.refined += count if self.refine else 0
+        return q
+
+
+def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = 0,
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Raw model rows (count, n) at ``y (k,)`` and the same rows after at most ``refine`` LM iterations."""
+    raw = model.sample(y, count, generator)
+    return raw, (project(constraint, raw, y, max_iters=refine).q if refine else raw)
+
+
+def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out, *, seed: int = 0,
+                   refine: int = 0, source: str = "") -> dict:
+    """Generate ``count`` rows at ``y``, write them in the dataset format (raw rows when refine=0,
+    refined rows otherwise, as ``meta['rows']`` says) and return the raw and refined valid rates."""
+    import torch
+
+    from manifoldgen.io import check_output_path, save_npz
+
+    if count <= 0:
+        raise ManifoldgenError(f"-n must be a positive number of samples, got {count}")
+    if refine < 0:
+        raise ManifoldgenError(f"--refine must be >= 0 projection iterations, got {refine}")
+    out = check_output_path(out)
+    check_model_matches(model, constraint)
+    y = np.asarray(y, float).reshape(constraint.condition.k)
+    raw, refined = generate(model, constraint, y, count, torch.Generator().manual_seed(seed), refine)
+    y_rows = np.broadcast_to(y, (count, len(y))).copy()
+    rates = {"raw_valid_rate": float(constraint.satisfied(raw, y_rows).mean()),
+             "refined_valid_rate": float(constraint.satisfied(refined, y_rows).mean())}
+    meta = {**model.meta, "dataset_seed": model.meta.get("seed"), "seed": seed,
+            "rows": "refined" if refine else "raw", "refine": refine,
+            "generated_by": {"model": model.name, "source": source}, **rates}
+    save_npz(out, meta, q=refined if refine else raw, y=y_rows)
+    return {**rates, "rows": meta["rows"], "count": count}

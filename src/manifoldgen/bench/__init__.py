@@ -1,0 +1,1 @@
+"""Experiments behind the paper's tables and the metrics they report."""

@@ -1,0 +1,165 @@
+"""Table I and beyond: sampling time, accuracy and coverage of trained models.
+
+``run_sampling_bench(model_dirs, out)`` times ``model.sample`` for 100 ... 100k rows (warm,
+median of repeats), measures the raw and refined within-tolerance rates and the k-NN
+precision/recall/density/coverage and MMD against a dense reference set (fresh projection
+samples) at training conditions and at unseen ones between and beyond them, and writes
+``results.json``, ``table.md``, ``fig2_samples.png`` (paper Fig. 2), ``residuals.png`` and
+``coverage.png`` into ``out``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from manifoldgen.bench.metrics import accuracy, coverage_metrics
+from manifoldgen.data import collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_text
+from manifoldgen.models import ConditionalSampler, load_model
+from manifoldgen.progress import progress_bar
+from manifoldgen.sampling import check_model_matches
+from manifoldgen.tasks import get_task
+
+COUNTS = (100, 1_000, 10_000, 100_000)
+
+
+def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, ...] = COUNTS, repeats: int = 7,
+                  seed: int = 0) -> dict[int, float]:
+    """Median wall time (ms) of ``model.sample(y, n)`` per n, after one warm-up call."""
+    generator = torch.Generator().manual_seed(seed)
+    result = {}
+    for n in counts:
+        model.sample(y, n, generator)
+        times = []
+        for _ in range(repeats):
+            tic = time.perf_counter()
+            model.sample(y, n, generator)
+            times.append(time.perf_counter() - tic)
+        result[n] = 1e3 * float(np.median(times))
+    return result
+
+
+def default_conditions(values: np.ndarray) -> tuple[list[float], list[float]]:
+    """Seen conditions (the training values) and unseen ones: midpoints between the first
+    three and the last pair, and one step beyond the top (panda: 0.25, 0.45, 0.65, 0.75)."""
+    v = np.unique(np.asarray(values, float).ravel())
+    step = float(np.min(np.diff(v))) if len(v) > 1 else 0.1
+    mids = (v[:-1] + v[1:]) / 2
+    picks = sorted({float(mids[0]), float(mids[len(mids) // 2]), float(mids[-1])})
+    return [float(x) for x in v], [round(x, 6) for x in picks] + [round(float(v[-1] + step / 2), 6)]
+
+
+def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples: int = 3000, refine: int = 3,
+                       reference_rows: int = 3000, repeats: int = 7, counts: tuple[int, ...] = COUNTS,
+                       seen: list[float] | None = None, unseen: list[float] | None = None, seed: int = 0,
+                       progress: bool = True) -> dict:
+    """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
+    if not model_dirs:
+        raise ManifoldgenError("give at least one model directory to benchmark")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    models = {str(d): load_model(d) for d in model_dirs}
+    first = next(iter(models.values()))
+    task = get_task(first.meta.get("task", "pose"), first.meta["robot"])
+    for model in models.values():
+        check_model_matches(model, task.constraint)
+    if task.condition.k != 1:
+        raise ManifoldgenError("the sampling benchmark handles one-dimensional conditions only")
+    default_seen, default_unseen = default_conditions(task.condition.values)
+    seen, unseen = seen or default_seen, unseen or default_unseen
+    conditions = [*seen, *unseen]
+    robot, constraint = task.robot, task.constraint
+
+    reference = {}
+    with progress_bar("reference sets", total=len(conditions), enabled=progress) as bar:
+        for i, y in enumerate(conditions):
+            reference[y] = collect(task, reference_rows, seed + 1000 + i, conditions=[[y]], progress=False).q
+            bar.advance(1)
+
+    results: dict = {"task": task.name, "robot": robot.name, "samples": samples, "refine": refine,
+                     "reference_rows": reference_rows, "seen": seen, "unseen": unseen,
+                     "threads": torch.get_num_threads(), "models": {}}
+    valid_rows: dict[str, np.ndarray] = {}
+    violations: dict[str, np.ndarray] = {}
+    with progress_bar("models", total=len(models) * (len(conditions) + 1), enabled=progress) as bar:
+        for label, model in models.items():
+            name = _label(model, label, models)
+            entry = {"dir": label, "model": model.name, "per_condition": {}}
+            entry["time_ms"] = {str(n): t for n, t in
+                                time_sampling(model, np.array([seen[len(seen) // 2]]), counts, repeats, seed).items()}
+            bar.advance(1)
+            generator = torch.Generator().manual_seed(seed)
+            valid, viol = [], []
+            for y in conditions:
+                q = model.sample([y], samples, generator)
+                acc, _ = accuracy(constraint, q, np.full((samples, 1), y), refine)
+                cov = coverage_metrics(reference[y], q, robot.lower, robot.upper)
+                entry["per_condition"][str(y)] = {**acc.to_dict(), **cov, "seen": y in seen}
+                if y in seen:
+                    ok = constraint.satisfied(q, np.full((samples, 1), y))
+                    valid.append(q[ok])
+                    viol.append(acc.residual)
+                bar.advance(1)
+            entry["seen"] = _average(entry["per_condition"], seen)
+            entry["unseen"] = _average(entry["per_condition"], unseen)
+            results["models"][name] = entry
+            valid_rows[name] = np.concatenate(valid)
+            violations[name] = np.concatenate(viol)
+
+    atomic_write_text(out / "results.json", json.dumps(results, indent=1))
+    atomic_write_text(out / "table.md", markdown_table(results))
+    from manifoldgen.viz.samples import plot_coverage, plot_end_effector, plot_residuals
+    frame = task.constraint.spec().get("frame")
+    if frame is not None:
+        plot_end_effector({k: robot.frame_pose(v, frame)[0] for k, v in valid_rows.items()},
+                          out / "fig2_samples.png", title=f"{robot.name} {task.name}: end-effector positions "
+                                                         "of valid raw samples (training heights)")
+    plot_residuals(violations, out / "residuals.png")
+    plot_coverage(results, out / "coverage.png")
+    return results
+
+
+def _label(model: ConditionalSampler, label: str, models: dict) -> str:
+    same = [k for k, m in models.items() if m.name == model.name]
+    return model.name if len(same) == 1 else f"{model.name} ({Path(label).name})"
+
+
+def _average(per_condition: dict, ys: list[float]) -> dict:
+    keys = ("raw", "refined", "precision", "recall", "density", "coverage", "mmd")
+    rows = [per_condition[str(y)] for y in ys]
+    return {k: float(np.mean([r[k] for r in rows])) for k in keys}
+
+
+def markdown_table(results: dict) -> str:
+    """Table I (sampling time) and the accuracy/coverage table, as Markdown."""
+    names = list(results["models"])
+    counts = list(next(iter(results["models"].values()))["time_ms"])
+    lines = [f"## Sampling time (ms, median of warm repeats, {results['threads']} CPU threads)", "",
+             "| samples | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for n in counts:
+        lines.append(f"| {int(n):,} | " + " | ".join(f"{results['models'][m]['time_ms'][n]:.1f}" for m in names)
+                     + " |")
+    lines += ["", f"## Accuracy and coverage ({results['samples']} samples per condition, "
+              f"refine = {results['refine']} LM iterations, reference {results['reference_rows']} projection "
+              "samples per condition)", "",
+              "| model | conditions | raw valid | valid after refine | precision | recall | density | coverage | MMD |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for m in names:
+        for part, ys in (("seen", results["seen"]), ("unseen", results["unseen"])):
+            a = results["models"][m][part]
+            lines.append(f"| {m} | {part} {', '.join(f'{y:g}' for y in ys)} | {a['raw']:.1%} | {a['refined']:.2%} | "
+                         f"{a['precision']:.3f} | {a['recall']:.3f} | {a['density']:.3f} | {a['coverage']:.3f} | "
+                         f"{a['mmd']:.4f} |")
+    lines += ["", "## Per condition", "", "| model | y | raw valid | refined | recall | coverage |",
+              "|---|---|---|---|---|---|"]
+    for m in names:
+        for y, r in results["models"][m]["per_condition"].items():
+            lines.append(f"| {m} | {y}{'' if r['seen'] else ' (unseen)'} | {r['raw']:.1%} | {r['refined']:.2%} | "
+                         f"{r['recall']:.3f} | {r['coverage']:.3f} |")
+    return "\n".join(lines) + "\n"

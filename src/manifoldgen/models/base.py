@@ -1,0 +1,276 @@
+"""The ConditionalSampler interface every generative model implements, and its file format.
+
+A model learns ``p(q | y)``. Inputs and outputs are normalised inside the model with the
+training split's statistics (saved with it); generated rows are clamped to the joint limits
+of the training robot. Files: a directory with ``model.safetensors`` (weights) and
+``model.json`` (model name, hyper-parameters, dimensions, normalisation, dataset ``meta``,
+SHA-256 of the weights). Loading validates everything and never unpickles.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from abc import ABC, abstractmethod
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+import safetensors.torch
+import torch
+
+from manifoldgen.constraints import Condition
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_bytes, atomic_write_text
+
+if TYPE_CHECKING:
+    from manifoldgen.data import Dataset
+    from manifoldgen.training import TrainingLog
+
+MODEL_FORMAT_VERSION = 1
+WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
+CHUNK = 10_000  # rows per forward pass when sampling (fastest on 2 CPU cores)
+
+
+def mlp(inputs: int, hidden: list[int], outputs: int, activation: type[torch.nn.Module] = torch.nn.SiLU,
+        ) -> torch.nn.Sequential:
+    """A plain MLP ``inputs -> hidden... -> outputs`` (no activation on the output)."""
+    layers: list[torch.nn.Module] = []
+    width = inputs
+    for h in hidden:
+        layers += [torch.nn.Linear(width, h), activation()]
+        width = h
+    layers.append(torch.nn.Linear(width, outputs))
+    return torch.nn.Sequential(*layers)
+
+
+def pseudo_huber(r2: torch.Tensor) -> torch.Tensor:
+    """sqrt(1 + r^2) - 1 for squared normalised residuals: quadratic inside tolerance, linear outside."""
+    return torch.sqrt(1.0 + r2) - 1.0
+
+
+class ConditionalSampler(ABC):
+    """A conditional generative model of configurations ``q (d,)`` given conditions ``y (k,)``.
+
+    Subclasses set ``name`` and ``defaults`` (hyper-parameters, all JSON scalars or lists),
+    and implement ``_build``, ``_generate``, ``_optimizers``, ``_train_step`` and
+    ``_validation_loss`` on normalised tensors.
+    """
+
+    name: ClassVar[str]
+    defaults: ClassVar[dict]
+
+    def __init__(self, **hyper):
+        unknown = sorted(set(hyper) - set(self.defaults))
+        if unknown:
+            raise ManifoldgenError(f"unknown hyper-parameter(s) {unknown} for model '{self.name}'; "
+                                   f"known: {', '.join(sorted(self.defaults))}")
+        self.config: dict = {**self.defaults, **hyper}
+        self.meta: dict = {}
+        self.d = self.k = 0
+        self.norm: dict[str, list[float]] = {}
+        self.nets = torch.nn.ModuleDict()
+        self.residual_fn: torch.nn.Module | None = None  # set by training when residual_weight > 0
+
+    # ------------------------------------------------------------------ subclass hooks
+    @abstractmethod
+    def _build(self) -> None:
+        """Create ``self.nets`` for dimensions ``self.d`` and ``self.k``."""
+
+    @abstractmethod
+    def _generate(self, y: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+        """Normalised conditions (B, k) -> normalised configurations (B, d) (differentiable)."""
+
+    @abstractmethod
+    def _optimizers(self) -> list[torch.optim.Optimizer]:
+        """The optimisers, in a fixed order (their state is checkpointed)."""
+
+    @abstractmethod
+    def _train_step(self, q: torch.Tensor, y: torch.Tensor, y_free: torch.Tensor,
+                    optimizers: list[torch.optim.Optimizer], generator: torch.Generator) -> dict[str, float]:
+        """One update on a normalised batch; ``y_free`` (B, k) are conditions drawn across the
+        trained range for the residual penalty. Returns the losses to log."""
+
+    @abstractmethod
+    def _validation_loss(self, q: torch.Tensor, y: torch.Tensor, generator: torch.Generator) -> float:
+        """A scalar to early-stop on (lower is better), on the normalised validation split."""
+
+    # ------------------------------------------------------------------ setup
+    def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Record the dataset meta and normalisation (from training rows ``q (N, d)``, ``y (N, k)``)
+        and build fresh networks (initialised from the current torch RNG)."""
+        self.meta = dict(meta)
+        self.d, self.k = q.shape[1], y.shape[1]
+        self.norm = {"q_mean": q.mean(0).tolist(), "q_std": np.maximum(q.std(0), 1e-6).tolist(),
+                     "y_mean": y.mean(0).tolist(), "y_std": np.maximum(y.std(0), 1e-6).tolist(),
+                     "y_low": y.min(0).tolist(), "y_high": y.max(0).tolist(),
+                     "lower": np.asarray(lower, float).tolist(), "upper": np.asarray(upper, float).tolist()}
+        self._set_tensors()
+        self.nets = torch.nn.ModuleDict()
+        self._build()
+
+    def _set_tensors(self) -> None:
+        t = {key: torch.tensor(v, dtype=torch.float32) for key, v in self.norm.items()
+             if key not in ("y_low", "y_high")}
+        self._q_mean, self._q_std, self._y_mean, self._y_std = t["q_mean"], t["q_std"], t["y_mean"], t["y_std"]
+        self._lower, self._upper = t["lower"], t["upper"]
+
+    def normalise_q(self, q: torch.Tensor) -> torch.Tensor:
+        return (q - self._q_mean) / self._q_std
+
+    def normalise_y(self, y: torch.Tensor) -> torch.Tensor:
+        return (y - self._y_mean) / self._y_std
+
+    def denormalise_q(self, q: torch.Tensor) -> torch.Tensor:
+        """Normalised (B, d) -> configurations clamped to the joint limits."""
+        return torch.clamp(q * self._q_std + self._q_mean, self._lower, self._upper)
+
+    def penalty(self, q: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q`` at ``y``."""
+        if self.residual_fn is None or self.config.get("residual_weight", 0.0) <= 0:
+            return torch.zeros(())
+        return pseudo_huber(self.residual_fn(self.denormalise_q(q), y * self._y_std + self._y_mean)).mean()
+
+    @property
+    def condition(self) -> Condition:
+        """The conditions the model was trained on: names and units from meta, range from the data."""
+        info = self.meta.get("condition", {})
+        names = tuple(info.get("names", [f"y{i}" for i in range(self.k)]))
+        units = tuple(info.get("units", [""] * self.k))
+        return Condition(names, units, np.array([self.norm["y_low"], self.norm["y_high"]], float))
+
+    def check_condition(self, y: np.ndarray, strict: bool = False) -> np.ndarray:
+        """y as (B, k); outside the trained range: warn naming the range, or raise when strict."""
+        return self.condition.check(y, strict=strict)
+
+    # ------------------------------------------------------------------ public API
+    def fit(self, dataset: Dataset, *, epochs: int | None = None, seed: int = 0, progress: bool = True,
+            out: str | Path | None = None, resume: bool = False) -> TrainingLog:
+        """Train on ``dataset`` (see :func:`manifoldgen.training.train`); with ``out``, checkpoints
+        are written there every epoch and the final model is saved there."""
+        from manifoldgen.training import train
+        return train(self, dataset, epochs=epochs, seed=seed, progress=progress, out=out, resume=resume)
+
+    def sample(self, y: np.ndarray, n: int, generator: torch.Generator | None = None) -> np.ndarray:
+        """(n, d) float64 configurations for condition ``y`` ((k,), (1, k) or (n, k))."""
+        if not self.nets:
+            raise ManifoldgenError(f"model '{self.name}' is not trained; call fit() or load one")
+        if n < 0:
+            raise ManifoldgenError(f"number of samples must be >= 0, got {n}")
+        y = np.asarray(y, dtype=np.float32).reshape(-1, self.k)
+        if len(y) not in (1, n):
+            raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(y)}")
+        out = np.empty((n, self.d), dtype=np.float64)
+        yt = self.normalise_y(torch.from_numpy(y))
+        self.nets.eval()
+        with torch.inference_mode():
+            for start in range(0, n, CHUNK):
+                stop = min(n, start + CHUNK)
+                yc = yt.expand(stop - start, self.k) if len(yt) == 1 else yt[start:stop]
+                out[start:stop] = (self._generate(yc, generator) * self._q_std + self._q_mean).numpy()
+        return np.clip(out, self.norm["lower"], self.norm["upper"], out=out)
+
+    def state_tensors(self) -> dict[str, torch.Tensor]:
+        return {k: v.detach().contiguous().clone() for k, v in self.nets.state_dict().items()}
+
+    def describe(self) -> dict:
+        """The JSON document saved as model.json (without the weights' hash)."""
+        return {"format_version": MODEL_FORMAT_VERSION, "model": self.name, "config": self.config,
+                "dims": {"d": self.d, "k": self.k}, "normalisation": self.norm, "meta": self.meta}
+
+    def save(self, path: str | Path) -> None:
+        """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first)."""
+        if not self.nets:
+            raise ManifoldgenError(f"model '{self.name}' is not trained; nothing to save")
+        path = Path(path)
+        path.mkdir(parents=True, exist_ok=True)
+        blob = safetensors.torch.save(self.state_tensors())
+        atomic_write_bytes(path / WEIGHTS_FILE, blob)
+        doc = {**self.describe(), "weights_sha256": hashlib.sha256(blob).hexdigest()}
+        atomic_write_text(path / CONFIG_FILE, json.dumps(doc, indent=1))
+
+    @classmethod
+    def load(cls, path: str | Path) -> ConditionalSampler:
+        """Load a model directory written by :meth:`save` (validated; clear errors)."""
+        doc, tensors = read_model_dir(path)
+        if doc["model"] != cls.name:
+            raise ManifoldgenError(f"{path} holds a '{doc['model']}' model, not '{cls.name}'; "
+                                   "use manifoldgen.models.load_model")
+        return cls.from_files(path, doc, tensors)
+
+    @classmethod
+    def from_files(cls, path: str | Path, doc: dict, tensors: dict[str, torch.Tensor]) -> ConditionalSampler:
+        """Build from a validated model.json document and its weights."""
+        try:
+            model = cls(**doc["config"])
+        except (ManifoldgenError, TypeError) as exc:
+            raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid config ({exc}); "
+                                   "the file was edited or is damaged: retrain or restore it") from exc
+        model.meta, model.norm = doc["meta"], doc["normalisation"]
+        model.d, model.k = doc["dims"]["d"], doc["dims"]["k"]
+        model._set_tensors()
+        try:
+            model._build()
+            model.nets.load_state_dict(tensors, strict=True)
+        except (RuntimeError, ValueError, TypeError) as exc:
+            first = str(exc).strip().splitlines()[0][:200]
+            raise ManifoldgenError(f"{path}: weights do not match the architecture in {CONFIG_FILE} ({first}); "
+                                   "the config was edited or the files come from different models") from exc
+        return model
+
+
+def read_model_dir(path: str | Path) -> tuple[dict, dict[str, torch.Tensor]]:
+    """Read and validate ``model.json`` and ``model.safetensors`` of a model directory."""
+    path = Path(path)
+    if not path.is_dir():
+        raise ManifoldgenError(f"model directory not found: {path}; train one with `manifoldgen train`")
+    for name in (CONFIG_FILE, WEIGHTS_FILE):
+        if not (path / name).is_file():
+            raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "
+                                   "(retrain, or copy both model.json and model.safetensors)")
+    try:
+        doc = json.loads((path / CONFIG_FILE).read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from exc
+    _validate_doc(path, doc)
+    blob = (path / WEIGHTS_FILE).read_bytes()
+    if hashlib.sha256(blob).hexdigest() != doc["weights_sha256"]:
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} does not match the checksum in {CONFIG_FILE}; "
+                               "one of the files was modified or comes from another model")
+    try:
+        tensors = safetensors.torch.load(blob)
+    except Exception as exc:  # safetensors raises its own error types for damaged files
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} is not a readable safetensors file ({exc})") from exc
+    return doc, tensors
+
+
+def _validate_doc(path: Path, doc: object) -> None:
+    def bad(why: str) -> ManifoldgenError:
+        return ManifoldgenError(f"{path}/{CONFIG_FILE}: {why}; the file was edited or is damaged: "
+                                "restore it or retrain the model")
+
+    if not isinstance(doc, dict):
+        raise bad("not a JSON object")
+    for key, kind in (("format_version", int), ("model", str), ("config", dict), ("dims", dict),
+                      ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
+        if not isinstance(doc.get(key), kind):
+            raise bad(f"field '{key}' is missing or not a {kind.__name__}")
+    if doc["format_version"] != MODEL_FORMAT_VERSION:
+        raise bad(f"format_version {doc['format_version']} is not supported (expected {MODEL_FORMAT_VERSION})")
+    d, k = doc["dims"].get("d"), doc["dims"].get("k")
+    if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):
+        raise bad("dims must hold positive integers d and k")
+    sizes = {"q_mean": d, "q_std": d, "y_mean": k, "y_std": k, "y_low": k, "y_high": k, "lower": d, "upper": d}
+    for key, size in sizes.items():
+        values = doc["normalisation"].get(key)
+        if not (isinstance(values, list) and len(values) == size
+                and all(isinstance(v, (int, float)) and np.isfinite(v) for v in values)):
+            raise bad(f"normalisation '{key}' must be {size} finite numbers")
+    norm = doc["normalisation"]
+    if min(norm["q_std"] + norm["y_std"]) <= 0:
+        raise bad("normalisation standard deviations must be positive")
+    if any(lo > hi for lo, hi in zip(norm["lower"] + norm["y_low"], norm["upper"] + norm["y_high"])):
+        raise bad("a lower bound (joint limit or condition range) exceeds its upper bound")
+    joints = doc["meta"].get("joints")
+    if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
+        raise bad(f"meta must name the robot and its {d} joints")

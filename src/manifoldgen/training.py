@@ -1,0 +1,237 @@
+"""Training loop for every ConditionalSampler: split, early stopping, checkpoints, resume.
+
+``train(model, dataset, seed=s)`` is deterministic for a seed: the split, the initial
+weights, the batch order and every noise draw come from generators seeded with ``s``.
+With ``out``, a checkpoint (weights, optimiser state, generator state, history, best
+weights) is written atomically after every epoch, so an interrupted run continued with
+``resume=True`` ends exactly where the uninterrupted run would have. When training ends the
+best-validation weights are saved to ``out`` with ``loss.png`` and ``training.json``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import safetensors.torch
+import torch
+
+from manifoldgen.data import Dataset
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.models.base import ConditionalSampler
+from manifoldgen.progress import progress_bar
+
+CHECKPOINT_WEIGHTS, CHECKPOINT_STATE = "checkpoint.safetensors", "checkpoint.json"
+MIN_ROWS = 10
+
+
+@dataclass
+class TrainingLog:
+    """What happened: per-epoch mean training losses and validation score."""
+
+    model: str
+    seed: int
+    epochs: int  # the requested maximum
+    history: list[dict] = field(default_factory=list)  # {"epoch", "train": {name: mean}, "val", "seconds"}
+    best_epoch: int = 0
+    best_val: float = float("inf")
+    stopped_early: bool = False
+    resumed_at: int | None = None
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(h["seconds"] for h in self.history))
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "seconds": self.seconds}
+
+
+def check_dataset(dataset: Dataset) -> None:
+    """Refuse datasets a conditional model cannot learn from."""
+    q, y = np.asarray(dataset.q), np.asarray(dataset.y)
+    if q.ndim != 2 or y.ndim != 2 or len(q) != len(y):
+        raise ManifoldgenError(f"dataset has inconsistent shapes q {q.shape}, y {y.shape}")
+    if not (np.isfinite(q).all() and np.isfinite(y).all()):
+        raise ManifoldgenError("dataset contains NaN or infinite values; recollect it or drop those rows")
+    if len(q) < MIN_ROWS:
+        raise ManifoldgenError(f"dataset has only {len(q)} rows; a model needs at least {MIN_ROWS}")
+    if len(np.unique(y, axis=0)) < 2:
+        raise ManifoldgenError(f"dataset has a single condition value {y[0].tolist()}; a conditional model "
+                               "needs rows at two or more values (collect with several --condition values)")
+
+
+def _fingerprint(dataset: Dataset) -> str:
+    digest = hashlib.sha256(np.ascontiguousarray(dataset.q, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(dataset.y, dtype=np.float64).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def _residual_module(model: ConditionalSampler, dataset: Dataset):
+    task = dataset.task()
+    if model.config.get("residual_weight", 0.0) <= 0:
+        return task, None
+    from manifoldgen.models.kinematics_torch import TorchResidual
+    return task, TorchResidual(task.constraint)
+
+
+def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
+          progress: bool = True, out: str | Path | None = None, resume: bool = False,
+          validation: float = 0.1) -> TrainingLog:
+    """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping."""
+    check_dataset(dataset)
+    epochs = int(model.config["epochs"] if epochs is None else epochs)
+    if epochs <= 0:
+        raise ManifoldgenError(f"--epochs must be positive, got {epochs}")
+    out = Path(out) if out is not None else None
+    if out is not None:
+        if out.exists() and not out.is_dir():
+            raise ManifoldgenError(f"{out} exists and is not a directory; choose a model directory path")
+        if not out.parent.exists():
+            raise ManifoldgenError(f"output directory {out.parent} does not exist; create it first")
+        has_checkpoint = (out / CHECKPOINT_STATE).exists()
+        if resume and not has_checkpoint:
+            raise ManifoldgenError(f"no checkpoint in {out} to resume (training finished or never started); "
+                                   "run without --resume")
+        if has_checkpoint and not resume:
+            raise ManifoldgenError(f"{out} holds a checkpoint of an interrupted run; pass --resume to continue "
+                                   "it, or choose another directory")
+    elif resume:
+        raise ManifoldgenError("resume needs the output directory of the interrupted run")
+
+    q_all = torch.as_tensor(dataset.q, dtype=torch.float32)
+    y_all = torch.as_tensor(dataset.y, dtype=torch.float32)
+    gen = torch.Generator().manual_seed(seed)
+    perm = torch.randperm(len(q_all), generator=gen)
+    n_val = max(1, int(round(validation * len(q_all))))
+    val_idx, train_idx = perm[:n_val], perm[n_val:]
+    task, residual = _residual_module(model, dataset)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        model.setup(dataset.meta, dataset.q[train_idx.numpy()], dataset.y[train_idx.numpy()],
+                    task.robot.lower, task.robot.upper)
+    model.residual_fn = residual
+    q_train, y_train = model.normalise_q(q_all[train_idx]), model.normalise_y(y_all[train_idx])
+    q_val, y_val = model.normalise_q(q_all[val_idx]), model.normalise_y(y_all[val_idx])
+    y_low, y_high = y_train.min(0).values, y_train.max(0).values
+    optimizers = model._optimizers()
+    log = TrainingLog(model.name, seed, epochs)
+    best_state, bad = model.state_tensors(), 0
+    identity = {"model": model.name, "config": model.config, "seed": seed, "epochs": epochs,
+                "dataset": _fingerprint(dataset), "validation": validation}
+    if resume:
+        best_state, bad = _load_checkpoint(out, identity, model, optimizers, gen, log)
+
+    batch = int(model.config["batch"])
+    steps = max(1, len(q_train) // batch)
+    start_epoch = len(log.history)
+    try:
+        with progress_bar(f"{model.name}", total=(epochs - start_epoch) * steps, enabled=progress) as bar:
+            for epoch in range(start_epoch, epochs):
+                if bad >= int(model.config["patience"]):
+                    log.stopped_early = True
+                    break
+                tic = time.perf_counter()
+                order = torch.randperm(len(q_train), generator=gen)
+                sums: dict[str, float] = {}
+                for s in range(steps):
+                    idx = order[s * batch:(s + 1) * batch]
+                    y_free = y_low + (y_high - y_low) * torch.rand(len(idx), model.k, generator=gen)
+                    losses = model._train_step(q_train[idx], y_train[idx], y_free, optimizers, gen)
+                    for key, value in losses.items():
+                        sums[key] = sums.get(key, 0.0) + value
+                    bar.advance(1)
+                    if s % 20 == 0:
+                        bar.describe(f"{model.name} epoch {epoch + 1}/{epochs} "
+                                     + " ".join(f"{k} {v:.3g}" for k, v in losses.items())
+                                     + f" | val {log.best_val:.4g}")
+                val = model._validation_loss(q_val, y_val, torch.Generator().manual_seed(seed + epoch))
+                if not np.isfinite(val):
+                    raise ManifoldgenError(f"training diverged at epoch {epoch + 1} (validation loss {val}); "
+                                           "lower the learning rate or try another seed")
+                log.history.append({"epoch": epoch + 1, "train": {k: v / steps for k, v in sums.items()},
+                                    "val": val, "seconds": time.perf_counter() - tic})
+                if val < log.best_val:
+                    log.best_val, log.best_epoch, best_state, bad = val, epoch + 1, model.state_tensors(), 0
+                else:
+                    bad += 1
+                if out is not None:
+                    _save_checkpoint(out, identity, model, optimizers, gen, log, best_state, bad)
+            else:
+                log.stopped_early = bad >= int(model.config["patience"])
+    except KeyboardInterrupt:
+        if out is None:
+            raise
+        raise ManifoldgenError(f"training interrupted after epoch {len(log.history)}; the checkpoint is in "
+                               f"{out}: rerun the same command with --resume to continue") from None
+
+    model.nets.load_state_dict(best_state)
+    if out is not None:
+        model.save(out)
+        atomic_write_text(out / "training.json", json.dumps(log.to_dict(), indent=1))
+        from manifoldgen.viz.losses import plot_training
+        plot_training(log, out / "loss.png")
+        (out / CHECKPOINT_STATE).unlink(missing_ok=True)
+        (out / CHECKPOINT_WEIGHTS).unlink(missing_ok=True)
+    return log
+
+
+# ---------------------------------------------------------------------- checkpoints
+def _save_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optimizers: list,
+                     gen: torch.Generator, log: TrainingLog, best_state: dict, bad: int) -> None:
+    tensors = {f"model.{k}": v for k, v in model.state_tensors().items()}
+    tensors |= {f"best.{k}": v for k, v in best_state.items()}
+    tensors["rng"] = gen.get_state()
+    optim_doc = []
+    for j, opt in enumerate(optimizers):
+        sd = opt.state_dict()
+        scalars: dict[str, dict] = {}
+        for pid, state in sd["state"].items():
+            for key, value in state.items():
+                if torch.is_tensor(value):
+                    tensors[f"opt{j}.{pid}.{key}"] = value.detach().contiguous().clone()
+                else:
+                    scalars.setdefault(str(pid), {})[key] = value
+        optim_doc.append({"param_groups": sd["param_groups"], "scalars": scalars,
+                          "tensor_keys": {str(pid): [k for k, v in st.items() if torch.is_tensor(v)]
+                                          for pid, st in sd["state"].items()}})
+    blob = safetensors.torch.save(tensors)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / CHECKPOINT_WEIGHTS, blob)
+    doc = {"identity": identity, "log": asdict(log), "bad": bad, "optimizers": optim_doc,
+           "sha256": hashlib.sha256(blob).hexdigest()}
+    atomic_write_text(out / CHECKPOINT_STATE, json.dumps(doc))
+
+
+def _load_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optimizers: list,
+                     gen: torch.Generator, log: TrainingLog) -> tuple[dict, int]:
+    try:
+        doc = json.loads((out / CHECKPOINT_STATE).read_text())
+        blob = (out / CHECKPOINT_WEIGHTS).read_bytes()
+    except (OSError, ValueError) as exc:
+        raise ManifoldgenError(f"cannot read the checkpoint in {out} ({exc}); delete {CHECKPOINT_STATE} "
+                               "there and train from scratch") from exc
+    if hashlib.sha256(blob).hexdigest() != doc.get("sha256"):
+        raise ManifoldgenError(f"the checkpoint in {out} is damaged (weights do not match its checksum); "
+                               f"delete {CHECKPOINT_STATE} there and train from scratch")
+    if json.loads(json.dumps(identity)) != doc.get("identity"):
+        raise ManifoldgenError(f"the checkpoint in {out} was made with another dataset, model, seed or "
+                               "settings; resume with the same command, or choose another directory")
+    tensors = safetensors.torch.load(blob)
+    model.nets.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
+    best = {k[5:]: v for k, v in tensors.items() if k.startswith("best.")}
+    for j, (opt, od) in enumerate(zip(optimizers, doc["optimizers"])):
+        state = {}
+        for pid, keys in od["tensor_keys"].items():
+            state[int(pid)] = {key: tensors[f"opt{j}.{pid}.{key}"] for key in keys}
+            state[int(pid)].update(od["scalars"].get(pid, {}))
+        opt.load_state_dict({"state": state, "param_groups": od["param_groups"]})
+    gen.set_state(tensors["rng"])
+    saved = doc["log"]
+    log.history, log.best_epoch, log.best_val = saved["history"], saved["best_epoch"], saved["best_val"]
+    log.resumed_at = len(log.history)
+    return best, int(doc["bad"])

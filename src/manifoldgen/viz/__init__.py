@@ -1,0 +1,1 @@
+"""Plots: training curves, generated samples (paper Fig. 2), residual histograms."""

@@ -1,0 +1,107 @@
+"""ModelSampler (Algorithm 1 with a model) and the sample command, checked by pinocchio alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.data import Dataset, collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.models import CVAE, load_model
+from manifoldgen.robot import resolve_robot
+from manifoldgen.sampling import ModelSampler
+from manifoldgen.tasks import get_task
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def model_dir(panda_task, tmp_path_factory):
+    data = collect(panda_task, 150, seed=4, conditions=[[0.3], [0.5]], progress=False)
+    path = tmp_path_factory.mktemp("model")
+    CVAE(hidden=[32, 32], batch=64).fit(data, epochs=8, seed=0, progress=False, out=path)
+    return path
+
+
+def test_model_sampler_returns_only_valid_samples(model_dir, panda_task):
+    model = load_model(model_dir)
+    checker = CollisionChecker(panda_task.robot)
+    sampler = ModelSampler(panda_task.constraint, [0.4], model, refine=5, checker=checker, batch=128, seed=1)
+    q = sampler.sample_many(40)
+    assert q.shape == (40, 7)
+    assert panda_task.constraint.satisfied(q, [0.4]).all()
+    assert not checker.in_collision(q).any()
+    assert sampler.stats.accepted == 40 and sampler.stats.refined == sampler.stats.generated
+    again = ModelSampler(panda_task.constraint, [0.4], model, refine=5, checker=checker, batch=128, seed=1)
+    np.testing.assert_array_equal(again.sample_many(40), q)
+
+
+def test_model_sampler_refuses_another_robot(model_dir):
+    model = load_model(model_dir)
+    pr2 = get_task("pose", "pr2")
+    with pytest.raises(ManifoldgenError, match="trained for robot 'panda'.*uses robot 'pr2'"):
+        ModelSampler(pr2.constraint, [0.8], model)
+
+
+def _pinocchio_valid(meta: dict, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Independent checker: pinocchio FK and log3 from the file's meta only."""
+    urdf, _ = resolve_robot(meta["robot"])
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    spec = meta["constraint"]
+    frame = model.getFrameId(spec["frame"])
+    target = np.array(spec["rotation"])
+    axes = ["xyz".index(a) for a in spec["position_axes"]]
+    ok = np.zeros(len(q), bool)
+    base = pin.neutral(model)
+    for name, value in meta["locked"].items():
+        base[model.joints[model.getJointId(name)].idx_q] = value
+    for b in range(len(q)):
+        full = base.copy()
+        for j, name in enumerate(meta["joints"]):
+            full[model.joints[model.getJointId(name)].idx_q] = q[b, j]
+        pin.framesForwardKinematics(model, data, full)
+        M = data.oMf[frame]
+        pos = np.abs(M.translation[axes] - y[b])
+        rot = np.abs(pin.log3(target.T @ M.rotation))
+        limits = np.all(full >= model.lowerPositionLimit - 1e-9) and np.all(full <= model.upperPositionLimit + 1e-9)
+        ok[b] = (pos.max() <= spec["tolerance"]["position"] and rot.max() <= spec["tolerance"]["orientation"]
+                 and limits)
+    return ok
+
+
+@pytest.mark.parametrize("refine", [0, 3])
+def test_sample_command_rates_match_an_independent_checker(model_dir, tmp_path, refine):
+    out = tmp_path / "s.npz"
+    result = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.4", "-n", "300", "--seed", "2",
+                                 "--refine", str(refine), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    data = Dataset.load(out)
+    assert data.meta["rows"] == ("refined" if refine else "raw")
+    assert data.q.shape == (300, 7) and np.all(data.y == 0.4)
+    rate = _pinocchio_valid(data.meta, data.q, data.y).mean()
+    key = "refined_valid_rate" if refine else "raw_valid_rate"
+    assert data.meta[key] == pytest.approx(rate, abs=1 / 300)
+    shown = f"{rate:.2%}"
+    assert shown in result.output
+    if refine:
+        assert rate > 0.9
+
+
+def test_sample_command_errors(model_dir, tmp_path):
+    out = str(tmp_path / "s.npz")
+    zero = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.4", "-n", "0", "-o", out])
+    assert zero.exit_code == 2 and "positive" in zero.output
+    warn = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.65", "-n", "10", "-o", out])
+    assert warn.exit_code == 0 and "outside the trained range" in warn.output and "0.3, 0.5" in warn.output
+    strict = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.65", "-n", "10", "--strict", "-o", out])
+    assert strict.exit_code == 2 and "outside the trained range" in strict.output
+    other = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.8", "--robot", "pr2", "-n", "10",
+                                "-o", out])
+    assert other.exit_code == 2 and "'panda'" in other.output and "'pr2'" in other.output
+    missing = runner.invoke(app, ["sample", str(tmp_path), "--condition", "0.4", "-n", "10", "-o", out])
+    assert missing.exit_code == 2 and "missing model.json" in missing.output

@@ -1,0 +1,133 @@
+"""Contract test over every registered model, plus model files and the torch kinematics."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from manifoldgen.data import Dataset, collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.models import MODELS, load_model
+from manifoldgen.models.kinematics_torch import TorchFrameKinematics, TorchResidual
+from manifoldgen.tasks import get_task
+
+TINY = {"hidden": [32, 32], "batch": 64}
+
+
+@pytest.fixture(scope="module")
+def task():
+    return get_task("pose", "panda")
+
+
+@pytest.fixture(scope="module")
+def tiny(task) -> Dataset:
+    """200 valid panda rows at heights 0.3 and 0.5 m."""
+    return collect(task, 100, seed=3, conditions=[[0.3], [0.5]], progress=False)
+
+
+def _hyper(name: str) -> dict:
+    extra = {"critic_hidden": [32, 32]} if name in ("cgan", "wgan") else {}
+    if name == "flow":
+        extra = {"transforms": 2, "bins": 4}
+    return {**TINY, **extra}
+
+
+@pytest.fixture(scope="module")
+def trained(tiny, tmp_path_factory):
+    """Each model trained for a few epochs on the tiny set, saved to a directory."""
+    out = {}
+    for name, cls in MODELS.items():
+        model = cls(**_hyper(name))
+        log = model.fit(tiny, epochs=6, seed=1, progress=False)
+        path = tmp_path_factory.mktemp(name)
+        model.save(path)
+        out[name] = (model, log, path)
+    return out
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_model_contract(name, trained, tiny, task):
+    model, log, path = trained[name]
+    # shapes, dtype, limits
+    q = model.sample([0.3], 50, torch.Generator().manual_seed(0))
+    assert q.shape == (50, 7) and q.dtype == np.float64
+    assert task.robot.within_limits(q).all()
+    assert model.sample(np.array([[0.3], [0.5], [0.4]]), 3).shape == (3, 7)
+    # determinism for a generator seed
+    again = model.sample([0.3], 50, torch.Generator().manual_seed(0))
+    np.testing.assert_array_equal(q, again)
+    # save/load round trip gives identical samples
+    loaded = load_model(path)
+    assert type(loaded) is type(model) and loaded.meta == model.meta
+    np.testing.assert_array_equal(loaded.sample([0.3], 50, torch.Generator().manual_seed(0)), q)
+    # conditioning changes the output
+    other = model.sample([0.5], 50, torch.Generator().manual_seed(0))
+    assert np.abs(other - q).max() > 1e-3
+    # the validation score went down during training
+    vals = [h["val"] for h in log.history]
+    assert min(vals[1:]) < vals[0]
+    # training is deterministic for a seed
+    twin = MODELS[name](**_hyper(name))
+    twin.fit(tiny, epochs=2, seed=1, progress=False)
+    first = MODELS[name](**_hyper(name))
+    first.fit(tiny, epochs=2, seed=1, progress=False)
+    for key, value in first.state_tensors().items():
+        torch.testing.assert_close(twin.state_tensors()[key], value, rtol=0, atol=0)
+
+
+def test_penalty_is_constraint_residual(task):
+    """The torch residual is sum (F_i / tol_i)^2 near the manifold (orientation term smooth)."""
+    rng = np.random.default_rng(0)
+    q = task.robot.sample_uniform(64, rng)
+    p, R = task.robot.frame_pose(q, "panda_hand_tcp")
+    pt, Rt = TorchFrameKinematics(task.robot, "panda_hand_tcp")(torch.as_tensor(q))
+    np.testing.assert_allclose(pt.numpy(), p, atol=1e-6)
+    np.testing.assert_allclose(Rt.numpy(), R, atol=1e-6)
+    data = collect(task, 20, seed=1, conditions=[[0.4]], progress=False)
+    near = data.q + rng.normal(0, 2e-3, data.q.shape)
+    y = data.y
+    expected = np.sum((task.constraint.residual(near, y) / task.constraint.tolerance) ** 2, axis=1)
+    got = TorchResidual(task.constraint)(torch.as_tensor(near), torch.as_tensor(y)).numpy()
+    np.testing.assert_allclose(got, expected, rtol=1e-2, atol=1e-3)
+
+
+def test_unknown_hyper_parameter_and_untrained():
+    with pytest.raises(ManifoldgenError, match="unknown hyper-parameter"):
+        MODELS["cvae"](width=3)
+    with pytest.raises(ManifoldgenError, match="not trained"):
+        MODELS["cvae"]().sample([0.3], 2)
+
+
+def test_model_dir_errors(trained, tmp_path):
+    _, _, path = trained["cvae"]
+    with pytest.raises(ManifoldgenError, match="not found"):
+        load_model(tmp_path / "nowhere")
+    missing = tmp_path / "missing"
+    shutil.copytree(path, missing)
+    (missing / "model.safetensors").unlink()
+    with pytest.raises(ManifoldgenError, match="missing model.safetensors"):
+        load_model(missing)
+    tampered = tmp_path / "tampered"
+    shutil.copytree(path, tampered)
+    doc = json.loads((tampered / "model.json").read_text())
+    doc["config"]["hidden"] = [64, 64]
+    (tampered / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifoldgenError, match="do not match the architecture"):
+        load_model(tampered)
+    doc["config"]["hidden"] = [32, 32]
+    doc["normalisation"]["q_std"][0] = -1.0
+    (tampered / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifoldgenError, match="standard deviations must be positive"):
+        load_model(tampered)
+    (tampered / "model.json").write_text("{not json")
+    with pytest.raises(ManifoldgenError, match="not valid JSON"):
+        load_model(tampered)
+    swapped = tmp_path / "swapped"
+    shutil.copytree(path, swapped)
+    shutil.copy(trained["cgan"][2] / "model.safetensors", swapped / "model.safetensors")
+    with pytest.raises(ManifoldgenError, match="checksum"):
+        load_model(swapped)

@@ -1,0 +1,95 @@
+"""Training loop: bad datasets, checkpoints and exact resume, the train command."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.data import Dataset, collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.models import CVAE, load_model
+from manifoldgen.training import check_dataset, train
+
+TINY = {"hidden": [16, 16], "batch": 16, "patience": 100}
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def tiny(panda_task) -> Dataset:
+    return collect(panda_task, 60, seed=5, conditions=[[0.3], [0.5]], progress=False)
+
+
+def test_bad_datasets_are_refused(tiny):
+    nan = Dataset(tiny.q.copy(), tiny.y.copy(), tiny.meta)
+    nan.q[3, 2] = np.nan
+    with pytest.raises(ManifoldgenError, match="NaN"):
+        check_dataset(nan)
+    single = Dataset(tiny.q, np.full_like(tiny.y, 0.3), tiny.meta)
+    with pytest.raises(ManifoldgenError, match="single condition value"):
+        CVAE(**TINY).fit(single, epochs=1, progress=False)
+    with pytest.raises(ManifoldgenError, match="at least"):
+        check_dataset(Dataset(tiny.q[:3], tiny.y[:3], tiny.meta))
+    with pytest.raises(ManifoldgenError, match="epochs must be positive"):
+        CVAE(**TINY).fit(tiny, epochs=0, progress=False)
+
+
+def test_outputs_and_early_stopping(tiny, tmp_path):
+    out = tmp_path / "m"
+    log = CVAE(**{**TINY, "patience": 1, "lr": 0.5}).fit(tiny, epochs=30, seed=0, progress=False, out=out)
+    assert log.stopped_early and len(log.history) < 30
+    assert log.best_val == min(h["val"] for h in log.history)
+    assert {"model.json", "model.safetensors", "loss.png", "training.json"} <= {p.name for p in out.iterdir()}
+    assert not (out / "checkpoint.json").exists()
+    assert json.loads((out / "training.json").read_text())["best_epoch"] == log.best_epoch
+    assert (out / "loss.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_interrupted_run_resumes_to_the_same_model(tiny, tmp_path, monkeypatch):
+    whole = CVAE(**TINY)
+    whole.fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "whole")
+
+    calls = {"n": 0}
+    original = CVAE._train_step
+
+    def interrupted(self, *args):
+        calls["n"] += 1
+        if calls["n"] == 15:  # inside epoch 3 (6 steps per epoch)
+            raise KeyboardInterrupt
+        return original(self, *args)
+
+    monkeypatch.setattr(CVAE, "_train_step", interrupted)
+    with pytest.raises(ManifoldgenError, match="--resume"):
+        CVAE(**TINY).fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut")
+    monkeypatch.setattr(CVAE, "_train_step", original)
+    assert (tmp_path / "cut" / "checkpoint.json").exists()
+    with pytest.raises(ManifoldgenError, match="pass --resume"):
+        CVAE(**TINY).fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut")
+    with pytest.raises(ManifoldgenError, match="another dataset, model, seed"):
+        CVAE(**TINY).fit(tiny, epochs=4, seed=3, progress=False, out=tmp_path / "cut", resume=True)
+    log = CVAE(**TINY).fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut", resume=True)
+    assert log.resumed_at == 2 and len(log.history) == 4
+    a, b = load_model(tmp_path / "whole"), load_model(tmp_path / "cut")
+    for key, value in a.state_tensors().items():
+        torch.testing.assert_close(b.state_tensors()[key], value, rtol=0, atol=0)
+    with pytest.raises(ManifoldgenError, match="no checkpoint"):
+        train(CVAE(**TINY), tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut", resume=True)
+
+
+def test_train_command(tiny, tmp_path):
+    data = tmp_path / "tiny.npz"
+    tiny.save(data)
+    out = tmp_path / "model"
+    result = runner.invoke(app, ["train", str(data), "--model", "cvae", "--seed", "0", "-o", str(out),
+                                 "--epochs", "2"])
+    assert result.exit_code == 0, result.output
+    assert "trained cvae" in result.output
+    assert load_model(out).meta["joints"] == tiny.meta["joints"]
+    bad = runner.invoke(app, ["train", str(data), "--model", "cvea", "-o", str(out)])
+    assert bad.exit_code == 2 and "did you mean cvae" in bad.output
+    resume = runner.invoke(app, ["train", str(data), "-o", str(tmp_path / "new"), "--resume"])
+    assert resume.exit_code == 2 and "no checkpoint" in resume.output
