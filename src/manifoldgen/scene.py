@@ -1,0 +1,344 @@
+"""Scenes: obstacles, a tool held by the robot, and one planning query (start, goal, y).
+
+An obstacle is a box (full extents), sphere, cylinder (along its local z) or mesh, placed
+by a pose (position + quaternion ``[x, y, z, w]``) in the world. A scene is written to
+and read from JSON; :meth:`Scene.to_meta` gives the obstacle list stored in path files,
+enough for an outside checker with pinocchio and coal alone. Named scenes (``wall``,
+``maze``) live in :data:`SCENES` with start and goal configurations computed once by
+projection and stored as numbers.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from manifoldgen.collision import CollisionChecker, touch_links
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_text
+from manifoldgen.robot import Robot
+from manifoldgen.tasks import Task
+
+OBSTACLE_TYPES = ("box", "sphere", "cylinder", "mesh")
+FORMAT_VERSION = 1
+
+
+def _vector(value, size: int, what: str) -> np.ndarray:
+    try:
+        out = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ManifoldgenError(f"{what} must be {size} numbers, got {value!r}") from exc
+    if out.shape != (size,) or not np.all(np.isfinite(out)):
+        raise ManifoldgenError(f"{what} must be {size} finite numbers, got {value!r}")
+    return out
+
+
+def _floats(value, what: str) -> np.ndarray:
+    if not isinstance(value, list) or not value:
+        raise ManifoldgenError(f"{what} must be a non-empty list of numbers, got {value!r}")
+    return _vector(value, len(value), what)
+
+
+def _positive(value, what: str) -> float:
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value) or value <= 0:
+        raise ManifoldgenError(f"{what} must be a positive number of metres, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A rigid placement: position (3,) in metres and unit quaternion (4,) ``[x, y, z, w]``."""
+
+    position: np.ndarray
+    quaternion: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vector(self.position, 3, "pose position"))
+        quat = _vector(self.quaternion, 4, "pose quaternion [x, y, z, w]")
+        norm = np.linalg.norm(quat)
+        if abs(norm - 1.0) > 1e-3:
+            raise ManifoldgenError(f"pose quaternion {quat.tolist()} has norm {norm:.4f}; give a unit "
+                                   "quaternion [x, y, z, w]")
+        object.__setattr__(self, "quaternion", quat / norm)
+
+    def se3(self) -> pin.SE3:
+        x, y, z, w = self.quaternion
+        return pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), self.position.copy())
+
+    def to_dict(self) -> dict:
+        return {"position": self.position.tolist(), "quaternion": self.quaternion.tolist()}
+
+    @classmethod
+    def from_dict(cls, data, what: str) -> Pose:
+        if not isinstance(data, dict) or "position" not in data:
+            raise ManifoldgenError(f"{what}: pose needs 'position' [x, y, z] (and 'quaternion' [x, y, z, w])")
+        return cls(data["position"], data.get("quaternion", [0.0, 0.0, 0.0, 1.0]))
+
+
+@dataclass
+class Obstacle:
+    """One collision shape; ``size`` = full extents (box), ``radius`` (sphere, cylinder),
+    ``length`` (cylinder, along its z), ``mesh`` file and ``scale`` (mesh)."""
+
+    name: str
+    type: str
+    pose: Pose
+    size: np.ndarray | None = None
+    radius: float | None = None
+    length: float | None = None
+    mesh: str | None = None
+    scale: np.ndarray | None = None
+
+    def __post_init__(self):
+        what = f"obstacle '{self.name}'"
+        if self.type not in OBSTACLE_TYPES:
+            close = difflib.get_close_matches(str(self.type), OBSTACLE_TYPES, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ManifoldgenError(f"{what} has unknown type '{self.type}'{hint}; known types: "
+                                   f"{', '.join(OBSTACLE_TYPES)}")
+        if self.type == "box":
+            self.size = _vector(self.size, 3, f"{what} size (full extents x, y, z)")
+            if np.any(self.size <= 0):
+                raise ManifoldgenError(f"{what} size {self.size.tolist()} must be three positive extents in metres")
+        if self.type in ("sphere", "cylinder"):
+            self.radius = _positive(self.radius, f"{what} radius")
+        if self.type == "cylinder":
+            self.length = _positive(self.length, f"{what} length")
+        if self.type == "mesh":
+            if not self.mesh or not Path(self.mesh).is_file():
+                raise ManifoldgenError(f"{what}: mesh file {self.mesh!r} not found; give the path of an "
+                                       ".stl, .obj or .dae file")
+            scale = 1.0 if self.scale is None else self.scale
+            self.scale = _vector(np.broadcast_to(scale, 3) if np.ndim(scale) == 0 else scale, 3, f"{what} scale")
+            if np.any(self.scale <= 0):
+                raise ManifoldgenError(f"{what} scale {self.scale.tolist()} must be positive")
+
+    def geometry(self) -> coal.CollisionGeometry:
+        if self.type == "box":
+            return coal.Box(*self.size)
+        if self.type == "sphere":
+            return coal.Sphere(self.radius)
+        if self.type == "cylinder":
+            return coal.Cylinder(self.radius, self.length)
+        return coal.MeshLoader().load(str(self.mesh), self.scale)
+
+    def geometry_object(self, joint: int = 0, frame: int = 0, placement: pin.SE3 | None = None) -> pin.GeometryObject:
+        """The pinocchio object; by default fixed in the world (joint 0) at ``pose``."""
+        placement = self.pose.se3() if placement is None else placement
+        return pin.GeometryObject(self.name, joint, frame, placement, self.geometry())
+
+    def local_points(self) -> np.ndarray:
+        """(P, 3) points whose convex hull is the shape, in its own frame (for drawing)."""
+        if self.type == "box":
+            corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+            return corners * self.size / 2
+        angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        ring = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+        if self.type == "sphere":
+            return self.radius * np.concatenate([ring, ring[:, [0, 2, 1]], ring[:, [2, 0, 1]]])
+        if self.type == "cylinder":
+            return np.concatenate([self.radius * ring + [0, 0, s * self.length / 2] for s in (-1, 1)])
+        shape = self.geometry()
+        return np.array([shape.vertices(i) for i in range(shape.num_vertices)])
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "type": self.type, "pose": self.pose.to_dict()}
+        if self.type == "box":
+            out["size"] = self.size.tolist()
+        if self.type in ("sphere", "cylinder"):
+            out["radius"] = self.radius
+        if self.type == "cylinder":
+            out["length"] = self.length
+        if self.type == "mesh":
+            out["mesh"] = str(Path(self.mesh).resolve())
+            out["scale"] = self.scale.tolist()
+        return out
+
+    @classmethod
+    def from_dict(cls, data, index: int = 0) -> Obstacle:
+        if not isinstance(data, dict):
+            raise ManifoldgenError(f"obstacle {index} must be a JSON object with 'type' and 'pose'")
+        name = str(data.get("name", f"obstacle{index}"))
+        if "type" not in data:
+            raise ManifoldgenError(f"obstacle '{name}' has no 'type'; known types: {', '.join(OBSTACLE_TYPES)}")
+        return cls(name, data["type"], Pose.from_dict(data.get("pose"), f"obstacle '{name}'"),
+                   size=data.get("size"), radius=data.get("radius"), length=data.get("length"),
+                   mesh=data.get("mesh"), scale=data.get("scale"))
+
+
+@dataclass
+class Attached:
+    """A tool held by the robot: ``shape`` placed by ``shape.pose`` relative to ``frame``;
+    it may touch ``touch_links`` (the hand and fingers), nothing else."""
+
+    shape: Obstacle
+    frame: str
+    touch_links: list[str] | None = None
+
+    def geometry_object(self, robot: Robot) -> pin.GeometryObject:
+        frame = robot.model.frames[robot.frame_id(self.frame)]
+        return self.shape.geometry_object(frame.parentJoint, robot.frame_id(self.frame),
+                                          frame.placement * self.shape.pose.se3())
+
+    def resolved_touch_links(self, robot: Robot) -> list[str]:
+        if self.touch_links is not None:
+            links = {robot.model.frames[g.parentFrame].name for g in robot.collision_model.geometryObjects}
+            unknown = sorted(set(self.touch_links) - links)
+            if unknown:
+                raise ManifoldgenError(f"attached tool touch links {unknown} are not links of robot "
+                                       f"{robot.name}; known: {', '.join(sorted(links))}")
+            return list(self.touch_links)
+        return touch_links(robot, robot.model.frames[robot.frame_id(self.frame)].parentJoint)
+
+    def to_dict(self) -> dict:
+        out = self.shape.to_dict()
+        out["attached_to"] = self.frame
+        if self.touch_links is not None:
+            out["touch_links"] = list(self.touch_links)
+        return out
+
+    @classmethod
+    def from_dict(cls, data) -> Attached:
+        if not isinstance(data, dict) or "attached_to" not in data:
+            raise ManifoldgenError("the attached tool needs 'attached_to' (a robot frame), 'type' and 'pose' "
+                                   "(its placement in that frame)")
+        shape = Obstacle.from_dict({k: v for k, v in data.items() if k not in ("attached_to", "touch_links")})
+        links = data.get("touch_links")
+        return cls(shape, str(data["attached_to"]), None if links is None else [str(x) for x in links])
+
+
+@dataclass
+class Scene:
+    """Obstacles (world poses), an optional held tool, and a query: start, goal (n,) at condition y (k,)."""
+
+    name: str
+    obstacles: list[Obstacle]
+    attached: Attached | None
+    start: np.ndarray
+    goal: np.ndarray
+    condition: np.ndarray
+    robot: str = ""
+
+    def checker(self, robot: Robot) -> CollisionChecker:
+        """Self, robot-scene and tool collisions for ``robot``."""
+        if self.attached is None:
+            return CollisionChecker(robot, obstacles=[o.geometry_object() for o in self.obstacles])
+        return CollisionChecker(robot, obstacles=[o.geometry_object() for o in self.obstacles],
+                                attached=[self.attached.geometry_object(robot)],
+                                touch=[self.attached.resolved_touch_links(robot)])
+
+    def to_meta(self, robot: Robot | None = None) -> list[dict]:
+        """JSON-ready objects: obstacles with world ``pose``; the tool last, with ``attached_to``
+        (its frame), ``pose`` relative to that frame and ``touch_links`` (given ``robot``)."""
+        out = [o.to_dict() for o in self.obstacles]
+        if self.attached is not None:
+            tool = self.attached.to_dict()
+            if robot is not None:
+                tool["touch_links"] = self.attached.resolved_touch_links(robot)
+            out.append(tool)
+        return out
+
+    def to_json(self) -> str:
+        return json.dumps({"format_version": FORMAT_VERSION, "name": self.name, "robot": self.robot,
+                           "obstacles": [o.to_dict() for o in self.obstacles],
+                           "attached": None if self.attached is None else self.attached.to_dict(),
+                           "start": self.start.tolist(), "goal": self.goal.tolist(),
+                           "condition": self.condition.tolist()}, indent=1)
+
+    def save(self, path: str | Path) -> None:
+        atomic_write_text(Path(path), self.to_json())
+
+    @classmethod
+    def from_json(cls, text: str, source: str = "scene") -> Scene:
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise ManifoldgenError(f"{source} is not valid JSON ({exc}); fix the file") from exc
+        if not isinstance(data, dict):
+            raise ManifoldgenError(f"{source} must be a JSON object with 'obstacles', 'start', 'goal', 'condition'")
+        missing = [k for k in ("obstacles", "start", "goal", "condition") if k not in data]
+        if missing:
+            raise ManifoldgenError(f"{source} lacks {', '.join(missing)}; a scene needs obstacles, start, goal "
+                                   "and condition")
+        if not isinstance(data["obstacles"], list):
+            raise ManifoldgenError(f"{source}: 'obstacles' must be a list")
+        obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(data["obstacles"])]
+        attached = Attached.from_dict(data["attached"]) if data.get("attached") else None
+        start, goal, condition = (_floats(data[k], f"{source} {k}") for k in ("start", "goal", "condition"))
+        return cls(str(data.get("name", Path(source).stem)), obstacles, attached, start, goal, condition,
+                   str(data.get("robot", "")))
+
+    @classmethod
+    def load(cls, path: str | Path) -> Scene:
+        path = Path(path)
+        if not path.is_file():
+            raise ManifoldgenError(f"scene file not found: {path}")
+        return cls.from_json(path.read_text(), str(path))
+
+
+def _box(name: str, center, size) -> Obstacle:
+    return Obstacle(name, "box", Pose(center), size=size)
+
+
+def _down_tool() -> Attached:
+    """A 3 x 3 x 18 cm bar held in the panda gripper, reaching 15 cm below the tool centre point."""
+    return Attached(_box("tool", [0.0, 0.0, 0.06], [0.03, 0.03, 0.18]), "panda_hand_tcp")
+
+
+def panda_wall() -> Scene:
+    """Two 60 cm high walls 50 cm apart; the goal is between them, the start outside the left
+    one (the paper's Fig. 3): the hand has to go round the near end of the wall at 0.5 m."""
+    obstacles = [_box("wall_left", [0.55, 0.25, 0.30], [0.40, 0.04, 0.60]),
+                 _box("wall_right", [0.55, -0.25, 0.30], [0.40, 0.04, 0.60])]
+    start = np.array([0.57916306, 0.29238586, 0.26161449, -1.24711759, -0.07461302, 1.53013675, 1.61250839])
+    goal = np.array([0.00615506, -0.02758752, -0.00604456, -1.6585705, -0.00016702, 1.63089149, 0.78552085])
+    return Scene("wall", obstacles, None, start, goal, np.array([0.5]), "panda")
+
+
+def panda_maze() -> Scene:
+    """A serpentine maze of 43 cm high walls below the hand (the paper's Fig. 4): the held tool,
+    reaching down to 0.35 m, winds through three lanes from the left lane to the right one."""
+    z, h, t = 0.215, 0.43, 0.02
+    obstacles = [_box("outer_near", [0.24, 0.0, z], [t, 0.62, h]),
+                 _box("outer_far", [0.66, 0.0, z], [t, 0.62, h]),
+                 _box("outer_left", [0.45, 0.30, z], [0.44, t, h]),
+                 _box("outer_right", [0.45, -0.30, z], [0.44, t, h]),
+                 _box("inner_left", [0.40, 0.10, z], [0.32, t, h]),
+                 _box("inner_right", [0.50, -0.10, z], [0.32, t, h])]
+    start = np.array([0.11038429, -0.56972495, 0.315987, -2.15011965, 0.16853671, 1.60266251, 1.15899266])
+    goal = np.array([-0.21743064, 0.15937322, -0.1350226, -1.42350497, 0.02133416, 1.58136292, 0.43440827])
+    return Scene("maze", obstacles, _down_tool(), start, goal, np.array([0.5]), "panda")
+
+
+SCENES: dict[tuple[str, str], dict[str, Callable[[], Scene]]] = {
+    ("pose", "panda"): {"wall": panda_wall, "maze": panda_maze},
+}
+
+
+def get_scene(task: Task, name: str) -> Scene:
+    """A named scene of ``task`` (``wall``, ``maze``) or a scene JSON file for its robot."""
+    named = SCENES.get((task.name, task.robot.name), {})
+    if name in named:
+        return named[name]()
+    if not (name.endswith(".json") or Path(name).is_file()):
+        known = ", ".join(named) or "none"
+        raise ManifoldgenError(f"unknown scene '{name}' for task {task.name} on {task.robot.name}; named scenes: "
+                               f"{known}; or give a path to a scene .json file")
+    scene = Scene.load(name)
+    n, k = task.robot.n, task.condition.k
+    if scene.robot and scene.robot != task.robot.name:
+        raise ManifoldgenError(f"scene {name} is for robot '{scene.robot}', not {task.robot.name}")
+    if scene.start.shape != (n,) or scene.goal.shape != (n,):
+        raise ManifoldgenError(f"scene {name}: start and goal need {n} joint values ({', '.join(task.robot.joints)}), "
+                               f"got {len(scene.start)} and {len(scene.goal)}")
+    if scene.condition.shape != (k,):
+        raise ManifoldgenError(f"scene {name}: condition needs {k} value(s) ({', '.join(task.condition.names)}), "
+                               f"got {len(scene.condition)}")
+    return scene
