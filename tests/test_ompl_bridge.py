@@ -68,12 +68,12 @@ def test_same_seed_same_path(setup):
     np.testing.assert_array_equal(paths[0], paths[1])
 
 
-@pytest.mark.parametrize("space", ["joint", "atlas"])
-def test_python_sampler_feeds_ompl_prm(setup, space):
+@pytest.mark.parametrize("space,planner", [("joint", "prm"), ("atlas", "bkpiece")])
+def test_python_sampler_feeds_ompl_planners(setup, space, planner):
     task, constraint, y, checker = setup
     goal = _goal(task, [1.2, 0.3, 0, 0.5, 0, 0, 0])
     sampler = RecordingSampler(constraint, y, checker=checker, seed=0)
-    result = OmplPlanner(constraint, y, checker, sampler, space=space, planner="prm", seed=0).solve(
+    result = OmplPlanner(constraint, y, checker, sampler, space=space, planner=planner, seed=0).solve(
         task.home, goal, 20.0)
     assert result.extras["sampler_calls"] >= 1
     assert result.samples_drawn == len(sampler.handed) >= 1

@@ -80,12 +80,12 @@ def demo(output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="F
 
 
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
-                    methods: list[str] | None, resume: bool, seed: int, pg_rows: int, baseline: str | None,
-                    task: str, robot: str) -> None:
+                    methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
+                    baseline: str | None, task: str, robot: str) -> None:
     from manifoldgen.bench.planning import PAPER_LIMITS, Experiment, default_baseline, default_methods, run_bench
     paper = PAPER_LIMITS[scene]
     experiment = Experiment(scene, task, robot, paper["time_limit"] if time_limit is None else time_limit, seed)
-    methods = methods or default_methods()
+    methods = methods or default_methods(models or None)
     table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
                          workers=workers, resume=resume, pg_rows=pg_rows,
                          baseline=baseline or default_baseline(methods))
@@ -106,13 +106,16 @@ def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: th
                time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 200)"),
                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
                methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
+               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
+                                                "methods (repeatable; default: the shipped model)"),
                resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
     """Table II: the wall scene, every method on the same query and seeds."""
-    _bench_planning("wall", runs, workers, time_limit, output, methods, resume, seed, pg_rows, baseline, task, robot)
+    _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                    task, robot)
 
 
 @bench_app.command("maze")
@@ -122,13 +125,16 @@ def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: th
                time_limit: float = typer.Option(None, "--time", help="Seconds per run (default: the paper's 200)"),
                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
                methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
+               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
+                                                "methods (repeatable; default: the shipped model)"),
                resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
     """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
-    _bench_planning("maze", runs, workers, time_limit, output, methods, resume, seed, pg_rows, baseline, task, robot)
+    _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                    task, robot)
 
 
 @app.command()

@@ -57,15 +57,16 @@ class OmplSettings:
     margin: OMPL's scalar tolerance is ``1 - margin`` on the tolerance-scaled residual (see
     :class:`OmplConstraint`), the margin our own planners keep for intermediate states;
     max_iterations: Newton iterations per projection (OMPL's default 50); lambda_: OMPL's
-    limit on manifold-walk length / chord length; range: planner range in rad (0: OMPL's
-    default, 20% of the space extent); sample_attempts: draws from our sampler per OMPL
+    limit on manifold-walk length / chord length; range: planner range in rad, by default
+    our planners' (``PlannerSettings.range``; 0: OMPL's default, 20% of the space extent,
+    2.6 rad for the panda, which makes tree planners slower in clutter); sample_attempts: draws from our sampler per OMPL
     request before giving up; validation_resolution: the final dense check (rad).
     """
 
     margin: float = 0.05
     max_iterations: int = 50
     lambda_: float = 2.0
-    range: float = 0.0
+    range: float = 0.6
     sample_attempts: int = 10
     validation_resolution: float = 0.005
 

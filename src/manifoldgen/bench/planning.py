@@ -101,19 +101,25 @@ def _default_label(planner: str, local: str, sampler: str | None) -> str:
     return label
 
 
-def default_methods() -> list[str]:
-    """The shipped learned model (when present) with each local planner, PG, CBiRRT, OMPL's three
-    constrained spaces with RRTConnect, and uniform rejection sampling."""
+def default_methods(models: list[str | Path] | None = None) -> list[str]:
+    """Each learned model (default: the shipped one, when present) with each local planner, PG,
+    CBiRRT, OMPL's three constrained spaces with RRTConnect, and uniform rejection sampling."""
     from manifoldgen.models import pretrained_model_dir
     from manifoldgen.planning import PLANNERS
+    if models is None:
+        try:
+            models = [pretrained_model_dir()]
+        except ManifoldgenError:
+            models = []
     methods = []
-    try:
-        model = pretrained_model_dir()
-        kind = json.loads((model / "model.json").read_text())["model"]
-        methods += [f"{kind}=rrtconnect:interpolate@{kind}:{model}",
-                    f"{kind}-project=rrtconnect:project@{kind}:{model}"]
-    except ManifoldgenError:
-        pass
+    for model in models:
+        doc = Path(model) / "model.json"
+        if not doc.is_file():
+            raise ManifoldgenError(f"no trained model at '{model}' (model.json missing); fix the path")
+        kind = json.loads(doc.read_text())["model"]
+        name = kind if len(models) == 1 else f"{kind}-{Path(model).name}"
+        methods += [f"{name}=rrtconnect:interpolate@{kind}:{model}",
+                    f"{name}-project=rrtconnect:project@{kind}:{model}"]
     methods += ["pg=rrtconnect:interpolate@pg"]
     if "cbirrt" in PLANNERS:
         methods += ["cbirrt=cbirrt:project@uniform"]
