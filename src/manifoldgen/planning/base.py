@@ -1,0 +1,316 @@
+"""The planner contract, shared settings, and the tree every tree planner grows.
+
+A planner gets a constraint at condition ``y``, a collision checker, a :class:`Sampler`
+and a local planner name; ``solve(start, goal, time_limit)`` returns a
+:class:`PlanResult` whose path passed :func:`validate_path` at
+``settings.validation_resolution``. A candidate path that fails that dense check loses
+its offending edge (and everything grown from it) and the search goes on.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.constraints import Constraint
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.planning.local import make_local
+from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.planning.validate import PathReport, state_problem, validate_path
+from manifoldgen.sampling import Sampler
+
+
+@dataclass
+class PlannerSettings:
+    """Knobs every planner shares.
+
+    range: longest extension (rad, joint-space Euclidean); margin: intermediate states of
+    a checked segment must stay within (1 - margin) x tolerance; step: distance between
+    projected states (``project``); partial: ``interpolate`` keeps the valid part of a
+    blocked extension; pool / pool_batch: ``interpolate`` stepping stones drawn up front /
+    whenever a tree has none within range (see :class:`SamplePool`);
+    validation_resolution: the final dense check of a found path.
+    """
+
+    range: float = 0.6
+    margin: float = 0.05
+    step: float = 0.1
+    partial: bool = True
+    pool: int = 1024
+    pool_batch: int = 256
+    validation_resolution: float = 0.005
+
+    def check(self) -> None:
+        if (self.range <= 0 or self.step <= 0 or self.validation_resolution <= 0 or not 0 <= self.margin < 1
+                or self.pool < 0 or self.pool_batch <= 0):
+            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, step, pool_batch and "
+                                   "validation_resolution must be positive, pool >= 0, margin in [0, 1)")
+
+
+class SamplerFailed(Exception):
+    """The sampler could not produce a configuration: the query ends unsolved."""
+
+
+class Tree:
+    """Configurations (N, n) with parent links; each edge is a straight, checked segment."""
+
+    def __init__(self, root: np.ndarray, capacity: int = 512):
+        self.q = np.full((capacity, len(root)), np.inf)
+        self.q[0] = root
+        self.parent = np.full(capacity, -1, dtype=int)
+        self.size = 1
+
+    def __len__(self) -> int:
+        return self.size
+
+    def add(self, parent: int, waypoints: np.ndarray) -> int:
+        """Append ``waypoints (K, n)`` as a chain below ``parent``; returns the last node."""
+        for q in waypoints:
+            if self.size == len(self.q):
+                self.q = np.concatenate([self.q, np.full_like(self.q, np.inf)])
+                self.parent = np.concatenate([self.parent, np.full_like(self.parent, -1)])
+            self.q[self.size], self.parent[self.size] = q, parent
+            parent = self.size
+            self.size += 1
+        return parent
+
+    def nearest(self, q: np.ndarray) -> int:
+        """Index of the live node closest to ``q (n,)``."""
+        diff = self.q[:self.size] - q
+        return int(np.argmin(np.einsum("ij,ij->i", diff, diff)))
+
+    def branch(self, i: int) -> list[int]:
+        """Node indices from the root to ``i``."""
+        out = [i]
+        while self.parent[out[-1]] >= 0:
+            out.append(int(self.parent[out[-1]]))
+        return out[::-1]
+
+    def kill(self, i: int) -> None:
+        """Remove node ``i`` and its descendants from nearest-neighbour queries."""
+        dead = np.zeros(self.size, dtype=bool)
+        dead[i] = True
+        for j in range(i + 1, self.size):
+            dead[j] = dead[self.parent[j]]
+        self.q[:self.size][dead] = np.inf
+
+
+class Planner(ABC):
+    """Plans on the manifold of ``constraint`` at ``y`` with samples from ``sampler``."""
+
+    name: ClassVar[str]
+    settings_type: ClassVar[type[PlannerSettings]] = PlannerSettings
+
+    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None, sampler: Sampler,
+                 *, local: str = "interpolate", resolution: float = 0.05, seed: int = 0,
+                 settings: PlannerSettings | None = None):
+        self.settings = self.settings_type() if settings is None else settings
+        if not isinstance(self.settings, self.settings_type):
+            raise ManifoldgenError(f"{self.name} takes {self.settings_type.__name__}, got "
+                                   f"{type(self.settings).__name__}")
+        self.settings.check()
+        self.constraint, self.checker, self.sampler = constraint, checker, sampler
+        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
+        self.local = make_local(local, constraint, self.y, checker, resolution, margin=self.settings.margin,
+                                partial=self.settings.partial, step=self.settings.step)
+        self.rng = np.random.default_rng(seed)
+        self.iterations = self.samples = self.rejected = 0
+        self.trees: list[Tree] = []
+        self.pool: SamplePool | None = None
+
+    # ---------------------------------------------------------------- the contract
+    def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
+        """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
+        if not np.isfinite(time_limit) or time_limit <= 0:
+            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        start, goal = self._query_state(start, "start"), self._query_state(goal, "goal")
+        before = self.sampler.stats.to_dict()
+        local_before = (self.local.states_checked, self.local.projections)
+        self.iterations = self.samples = self.rejected = 0
+        self.trees, self.pool = [], None
+        began = time.perf_counter()
+        failure = ""
+        try:
+            path = self._direct(start, goal)
+            if path is None:
+                path = self._solve(start, goal, began + time_limit)
+        except SamplerFailed as exc:
+            path, failure = None, str(exc)
+        elapsed = time.perf_counter() - began
+        after = self.sampler.stats.to_dict()
+        sampler = {k: after[k] - before[k] for k in after}
+        extras = {"local": self.local.name, "resolution": self.local.resolution, "sampler": sampler,
+                  "states_checked": self.local.states_checked - local_before[0],
+                  "rejected_paths": self.rejected, "nodes": [len(t) for t in self.trees], **self._extras()}
+        if failure:
+            extras["failure"] = failure
+        path = np.zeros((0, len(start))) if path is None else path
+        return PlanResult(len(path) > 0, path, elapsed, self.iterations, self.samples,
+                          self.local.projections - local_before[1] + sampler["refined"], self.name,
+                          path_length(path), extras)
+
+    @abstractmethod
+    def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
+        """A path (K, n) that passed :meth:`_accept`, or None at the deadline."""
+
+    def _extras(self) -> dict:
+        return {}
+
+    # ---------------------------------------------------------------- helpers
+    def _query_state(self, q: np.ndarray, what: str) -> np.ndarray:
+        n = self.constraint.robot.n
+        q = np.asarray(q, dtype=float)
+        if q.shape != (n,) or not np.all(np.isfinite(q)):
+            raise ManifoldgenError(f"{what} must be {n} finite joint values, got shape {q.shape}")
+        problem = state_problem(q, self.constraint, self.y, self.checker)
+        if problem:
+            fix = (f"choose a collision-free {what} or move the obstacle" if problem.startswith("is in collision")
+                   else f"choose a {what} that satisfies the constraint (project it onto the manifold)")
+            raise ManifoldgenError(f"{what} configuration {problem}; {fix}")
+        return q
+
+    def _direct(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        waypoints = self.local.connect(start, goal)
+        if waypoints is None:
+            return None
+        path = np.concatenate([start[None], waypoints])
+        return path if self._accept(path).valid else None
+
+    def _start_pool(self, trees: list[Tree]) -> None:
+        """Stepping stones for ``interpolate``; ``project`` steers toward any target."""
+        self.pool = (SamplePool(self._draw_many, trees, self.settings.range, self.settings.pool,
+                                self.settings.pool_batch) if self.local.name == "interpolate" else None)
+
+    def _grow(self, k: int, target: np.ndarray, keep: bool = True) -> int | None:
+        """Extend tree ``k`` toward ``target`` from its nearest node: the new node or None.
+
+        With the pool (``interpolate``) a target out of range is replaced by the pooled
+        sample within range of the tree that is closest to it (the target joins the pool
+        when ``keep``); with none in range the pool draws a batch and the step is skipped."""
+        tree = self.trees[k]
+        near = tree.nearest(target)
+        if self.pool is not None and np.linalg.norm(target - tree.q[near]) > self.settings.range:
+            if keep:
+                self.pool.add(target[None])
+            target = self.pool.take_toward(k, target)
+            if target is None:
+                self.pool.draw(self.pool.batch)
+                return None
+            near = tree.nearest(target)
+        waypoints, _ = self.local.steer(tree.q[near], target, self.settings.range)
+        return tree.add(near, waypoints) if len(waypoints) else None
+
+    def _draw(self) -> np.ndarray:
+        """One valid configuration from the sampler."""
+        self.samples += 1
+        try:
+            return self.sampler.sample()
+        except ManifoldgenError as exc:
+            raise SamplerFailed(str(exc)) from exc
+
+    def _draw_many(self, count: int) -> np.ndarray:
+        """(count, n) valid configurations from the sampler."""
+        self.samples += count
+        try:
+            return self.sampler.sample_many(count)
+        except ManifoldgenError as exc:
+            raise SamplerFailed(str(exc)) from exc
+
+    def _accept(self, path: np.ndarray) -> PathReport:
+        """The final dense validation of a candidate path (counts rejections)."""
+        report = validate_path(path, self.constraint, self.y, self.checker, self.settings.validation_resolution)
+        self.rejected += not report.valid
+        return report
+
+    def _finish(self, waypoints: np.ndarray, edges: list[tuple[Tree, int]]) -> np.ndarray | None:
+        """Dense-check a candidate path; segment s of ``waypoints`` is the edge into node
+        ``edges[s] = (tree, child)``. A failing edge is cut from its tree (None returned)."""
+        report = self._accept(waypoints)
+        if report.valid:
+            return waypoints
+        tree, child = edges[report.segment]
+        tree.kill(child)
+        return None
+
+
+class SamplePool:
+    """Samples drawn but not yet in a tree: the stepping stones of ``interpolate`` extensions.
+
+    A straight segment toward a far sample leaves the manifold at once, so a tree grown with
+    ``interpolate`` cannot step "toward" a random sample the way RRT truncates. Instead it
+    steps to the pooled sample, among those within ``radius`` of the tree, that lies
+    closest to the random sample: steering on the manifold, through samples. The pool
+    starts with ``initial`` samples and draws ``batch`` more whenever no sample is within
+    reach of a tree; the distance of every pooled sample to each tree is kept up to date
+    with new nodes only. Beyond ``capacity`` the oldest samples leave.
+    """
+
+    def __init__(self, draw: Callable[[int], np.ndarray], trees: list[Tree], radius: float, initial: int,
+                 batch: int, capacity: int = 16384):
+        self._draw, self.trees, self.radius, self.batch = draw, trees, radius, batch
+        self.q = np.zeros((capacity, trees[0].q.shape[1]))
+        self.free = np.zeros(capacity, dtype=bool)  # holds an unused sample
+        self.gap = np.full((capacity, len(trees)), np.inf)  # distance to the closest node of each tree
+        self.synced = [len(t) for t in trees]  # nodes of each tree accounted in gap
+        self.head = 0
+        self.draw(initial)
+
+    def draw(self, count: int) -> None:
+        """Add ``count`` new samples from the planner's sampler."""
+        self.add(self._draw(count))
+
+    def add(self, q: np.ndarray) -> None:
+        """Add samples ``q (B, n)``."""
+        slots = (self.head + np.arange(len(q))) % len(self.q)
+        self.q[slots], self.free[slots] = q, True
+        self.gap[slots] = np.stack([_distances(q, t.q[:s]) for t, s in zip(self.trees, self.synced)], axis=1)
+        self.head += len(q)
+
+    def _refresh(self, k: int) -> None:
+        tree = self.trees[k]
+        if len(tree) > self.synced[k]:
+            free = np.flatnonzero(self.free)
+            fresh = _distances(self.q[free], tree.q[self.synced[k]:tree.size])
+            self.gap[free, k] = np.minimum(self.gap[free, k], fresh)
+            self.synced[k] = len(tree)
+
+    def take_toward(self, k: int, target: np.ndarray, than: float = np.inf) -> np.ndarray | None:
+        """Remove and return the sample within ``radius`` of tree ``k`` closest to ``target``
+        (and closer to it than ``than``), or None."""
+        self._refresh(k)
+        near = np.flatnonzero(self.free & (self.gap[:, k] <= self.radius))
+        if not len(near):
+            return None
+        diff = self.q[near] - target
+        gap = np.einsum("ij,ij->i", diff, diff)
+        best = int(np.argmin(gap))
+        if gap[best] >= than * than:
+            return None
+        self.free[near[best]] = False
+        return self.q[near[best]].copy()
+
+    def take_near(self, node: np.ndarray, target: np.ndarray) -> np.ndarray | None:
+        """Remove and return the sample within ``radius`` of ``node`` closest to ``target``, or None."""
+        free = np.flatnonzero(self.free)
+        near = free[np.einsum("ij,ij->i", self.q[free] - node, self.q[free] - node) <= self.radius ** 2]
+        if not len(near):
+            return None
+        best = near[int(np.argmin(np.einsum("ij,ij->i", self.q[near] - target, self.q[near] - target)))]
+        self.free[best] = False
+        return self.q[best].copy()
+
+
+def _distances(q: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(B,) distance from each row of ``q (B, n)`` to its closest row of ``nodes (N, n)``
+    (rows of ``nodes`` set to inf, removed nodes, are ignored)."""
+    nodes = nodes[np.isfinite(nodes[:, 0])]
+    if not len(nodes):
+        return np.full(len(q), np.inf)
+    d2 = np.einsum("ij,ij->i", q, q)[:, None] - 2 * q @ nodes.T + np.einsum("ij,ij->i", nodes, nodes)[None]
+    return np.sqrt(np.maximum(d2.min(axis=1), 0.0))

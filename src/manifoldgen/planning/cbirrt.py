@@ -1,0 +1,44 @@
+"""CBiRRT (Berenson et al. 2011): RRT-Connect toward raw samples, every step projected onto the manifold."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.constraints import Constraint
+from manifoldgen.planning.base import PlannerSettings
+from manifoldgen.planning.rrt_connect import RRTConnect
+from manifoldgen.sampling import Sampler
+
+
+@dataclass
+class CBiRRTSettings(PlannerSettings):
+    """candidates: raw sampler candidates generated per batch."""
+
+    candidates: int = 64
+
+
+class CBiRRT(RRTConnect):
+    """Constrained bidirectional RRT. Targets are the sampler's raw candidates, unchecked
+    (uniform in the joint limits with the ``uniform`` sampler, as in the paper); extensions
+    always use the ``project`` local planner (ConstrainedExtend), whatever ``local`` says."""
+
+    name = "cbirrt"
+    settings_type = CBiRRTSettings
+
+    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None, sampler: Sampler,
+                 *, local: str = "project", resolution: float = 0.05, seed: int = 0,
+                 settings: CBiRRTSettings | None = None):
+        super().__init__(constraint, y, checker, sampler, local="project", resolution=resolution, seed=seed,
+                         settings=settings)
+        self._raw = np.zeros((0, constraint.robot.n))
+
+    def _target(self) -> np.ndarray:
+        if not len(self._raw):
+            self._raw = self.sampler.candidates(self.settings.candidates)
+            self.sampler.stats.generated += len(self._raw)
+        self.samples += 1
+        q, self._raw = self._raw[0], self._raw[1:]
+        return q

@@ -1,0 +1,116 @@
+"""A KPIECE-style planner (Sucan & Kavraki 2009): a tree whose growth is steered by a grid
+over a low-dimensional random projection, favouring the least explored border cells."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.planning.base import Planner, PlannerSettings, Tree
+
+
+@dataclass
+class KPIECESettings(PlannerSettings):
+    """goal_bias: probability of growing toward the goal; border_fraction: probability of
+    expanding a border cell (fewer than 2 d occupied neighbours); cells: grid cells along each
+    of the ``dimensions`` projected axes (0: max(2, ceil(log2 n)))."""
+
+    goal_bias: float = 0.05
+    border_fraction: float = 0.9
+    cells: int = 20
+    dimensions: int = 0
+
+    def check(self) -> None:
+        super().check()
+        if not (0 <= self.goal_bias <= 1 and 0 <= self.border_fraction <= 1 and self.cells > 0
+                and self.dimensions >= 0):
+            raise ManifoldgenError("KPIECE needs goal_bias and border_fraction in [0, 1], cells > 0, dimensions >= 0")
+
+
+class KPIECE(Planner):
+    """Single tree; each iteration picks a cell (border cells first, then the less selected
+    and less covered), then the node of that cell closest to a sample (or the goal), and
+    extends it toward that sample."""
+
+    name = "kpiece"
+    settings_type = KPIECESettings
+
+    def _solve(self, start, goal, deadline):
+        robot, settings = self.constraint.robot, self.settings
+        dims = settings.dimensions or max(2, int(np.ceil(np.log2(robot.n))))
+        axes = self.rng.normal(size=(dims, robot.n))
+        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+        corners = np.abs(axes) @ (robot.upper - robot.lower)
+        self._axes, self._cell = axes, corners / settings.cells
+        self._grid: dict[tuple[int, ...], list[int]] = {}
+        self._picked: dict[tuple[int, ...], int] = {}
+        tree = Tree(start)
+        self.trees = [tree]
+        self._start_pool(self.trees)
+        self._file(tree, 0)
+        while time.perf_counter() < deadline:
+            self.iterations += 1
+            cell = self._choose_cell()
+            to_goal = self.rng.random() < settings.goal_bias
+            target = goal if to_goal else self._draw()
+            members = [m for m in self._grid[cell] if np.isfinite(tree.q[m, 0])]  # not cut by a failed check
+            if not members:
+                continue
+            node = members[int(np.argmin(np.linalg.norm(tree.q[members] - target, axis=1)))]
+            new = self._extend(tree, node, target, keep=not to_goal)
+            if new is None:
+                continue
+            if np.linalg.norm(goal - tree.q[new]) <= settings.range:
+                waypoints = self.local.connect(tree.q[new], goal)
+                if waypoints is not None:
+                    last = tree.add(new, waypoints)
+                    branch = tree.branch(last)
+                    path = self._finish(tree.q[branch], [(tree, k) for k in branch[1:]])
+                    if path is not None:
+                        return path
+        return None
+
+    def _key(self, q: np.ndarray) -> tuple[int, ...]:
+        return tuple(np.floor(self._axes @ q / self._cell).astype(int).tolist())
+
+    def _file(self, tree: Tree, first: int) -> None:
+        for i in range(first, len(tree)):
+            self._grid.setdefault(self._key(tree.q[i]), []).append(i)
+
+    def _choose_cell(self) -> tuple[int, ...]:
+        cells = list(self._grid)
+        border = [c for c in cells if self._neighbours(c) < 2 * len(c)]
+        pool = border if border and self.rng.random() < self.settings.border_fraction else cells
+        weight = np.array([1.0 / ((1 + self._picked.get(c, 0)) * len(self._grid[c])) for c in pool])
+        cell = pool[self.rng.choice(len(pool), p=weight / weight.sum())]
+        self._picked[cell] = self._picked.get(cell, 0) + 1
+        return cell
+
+    def _neighbours(self, cell: tuple[int, ...]) -> int:
+        count = 0
+        for axis in range(len(cell)):
+            for sign in (-1, 1):
+                other = list(cell)
+                other[axis] += sign
+                count += tuple(other) in self._grid
+        return count
+
+    def _extend(self, tree: Tree, node: int, target: np.ndarray, keep: bool) -> int | None:
+        """Grow ``node`` toward ``target`` (through the pool with ``interpolate``)."""
+        origin = tree.q[node]
+        if self.pool is not None and np.linalg.norm(target - origin) > self.settings.range:
+            if keep:
+                self.pool.add(target[None])
+            target = self.pool.take_near(origin, target)
+            if target is None:
+                return None
+        waypoints, _ = self.local.steer(origin, target, self.settings.range)
+        if not len(waypoints):
+            return None
+        first = len(tree)
+        new = tree.add(node, waypoints)
+        self._file(tree, first)
+        return new

@@ -1,0 +1,77 @@
+"""One planning query end to end, as ``manifoldgen plan`` runs it: task + scene + sampler spec
++ planner -> a validated path file (``path (K, n)`` + ``meta``) and its picture.
+
+The path file's ``meta`` holds everything an outside checker needs with pinocchio and coal
+alone: the robot, joints, locked joints, the constraint specification, the condition ``y``
+of the query, and the scene (obstacles with world poses; the held tool with its frame,
+placement and touch links).
+"""
+
+from __future__ import annotations
+
+import difflib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_bytes, check_output_path
+from manifoldgen.planning.base import Planner
+from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.planning.smoothing import shortcut
+from manifoldgen.planning.validate import validate_path
+from manifoldgen.scene import Scene
+from manifoldgen.tasks import Task
+
+PATH_FORMAT_VERSION = 1
+
+
+def get_planner(name: str) -> type[Planner]:
+    """The planner class registered as ``name`` (clear error listing the known ones)."""
+    from manifoldgen.planning import PLANNERS
+
+    if name not in PLANNERS:
+        close = difflib.get_close_matches(name, list(PLANNERS), n=1)
+        hint = f"did you mean {close[0]}? " if close else ""
+        raise ManifoldgenError(f"unknown planner '{name}'; {hint}known planners: {', '.join(PLANNERS)}")
+    return PLANNERS[name]
+
+
+def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int, time_limit: float,
+              local: str = "interpolate", smooth: bool = False) -> tuple[PlanResult, dict]:
+    """Plan the scene's query; returns the result (path re-validated, optionally smoothed) and
+    the path file's ``meta``."""
+    from manifoldgen.specs import make_sampler
+
+    if not np.isfinite(time_limit) or time_limit <= 0:
+        raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
+    planner_type = get_planner(planner)
+    y = task.condition.check(scene.condition)[0]
+    checker = scene.checker(task.robot)
+    samples = make_sampler(sampler, task, y, checker, seed)
+    solver = planner_type(task.constraint, y, checker, samples, local=local, seed=seed)
+    result = solver.solve(scene.start, scene.goal, time_limit)
+    if result.solved and smooth:
+        result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
+        result.length = path_length(result.path)
+    report = validate_path(result.path, task.constraint, y, checker) if result.solved else None
+    if report is not None and not report.valid:  # the planners only return validated paths
+        raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
+    meta = {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
+            "condition": y.tolist(), "condition_names": list(task.condition.names),
+            "scene_name": scene.name, "scene": scene.to_meta(task.robot),
+            "start": scene.start.tolist(), "goal": scene.goal.tolist(),
+            "planner": planner, "sampler": sampler, "local": solver.local.name, "seed": seed,
+            "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
+            "validation": {"resolution": 0.005, **(report.to_dict() if report else {})}}
+    return result, meta
+
+
+def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
+    """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string), the layout of
+    :func:`manifoldgen.io.save_npz` (whose first parameter is also called ``path``)."""
+    buffer = io.BytesIO()
+    np.savez(buffer, meta=np.array(json.dumps(meta)), path=result.path)
+    atomic_write_bytes(check_output_path(output), buffer.getvalue())

@@ -1,0 +1,73 @@
+"""RRT-Connect (Kuffner & LaValle 2000): two trees, extend one toward a sample, connect the other."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from manifoldgen.planning.base import Planner, PlannerSettings, Tree
+
+
+@dataclass
+class RRTConnectSettings(PlannerSettings):
+    """RRT-Connect has only the shared settings (range, margin, step, partial, pool, validation)."""
+
+
+class RRTConnect(Planner):
+    """Bidirectional RRT, the paper's main planner: the trees take turns to extend toward a
+    sample, and after each extension the other tree greedily connects toward the new node."""
+
+    name = "rrtconnect"
+    settings_type = RRTConnectSettings
+
+    def _solve(self, start, goal, deadline):
+        trees = self.trees = [Tree(start), Tree(goal)]
+        self._start_pool(trees)
+        while time.perf_counter() < deadline:
+            self.iterations += 1
+            side = self.iterations % 2
+            new = self._grow(side, self._target())
+            if new is None:
+                continue
+            joint = self._connect(1 - side, trees[side].q[new], deadline)
+            if joint is None:
+                continue
+            ends = [(trees[side], new), (trees[1 - side], joint)]
+            path = self._join(*ends[side], *ends[1 - side])
+            if path is not None:
+                return path
+        return None
+
+    def _target(self) -> np.ndarray:
+        """The configuration to grow toward: a sample."""
+        return self._draw()
+
+    def _connect(self, k: int, target: np.ndarray, deadline: float) -> int | None:
+        """Grow tree ``k`` toward ``target`` until it reaches it (returns that node) or is stuck;
+        with the pool, through the pooled samples that bring it closer."""
+        tree = self.trees[k]
+        while time.perf_counter() < deadline:
+            node = tree.nearest(target)
+            gap = float(np.linalg.norm(target - tree.q[node]))
+            aim = target
+            if self.pool is not None and gap > self.settings.range:
+                aim = self.pool.take_toward(k, target, than=gap)
+                if aim is None:
+                    return None
+                node = tree.nearest(aim)
+            waypoints, reached = self.local.steer(tree.q[node], aim, self.settings.range)
+            if not len(waypoints):
+                return None
+            node = tree.add(node, waypoints)
+            if reached and aim is target:
+                return node
+        return None
+
+    def _join(self, a: Tree, i: int, b: Tree, j: int) -> np.ndarray | None:
+        """The path root(a) .. node i == node j .. root(b), densely checked."""
+        pa, pb = a.branch(i), b.branch(j)
+        waypoints = np.concatenate([a.q[pa], b.q[pb[-2::-1]]])
+        edges = [(a, k) for k in pa[1:]] + [(b, k) for k in pb[:0:-1]]
+        return self._finish(waypoints, edges)

@@ -1,0 +1,84 @@
+"""A planned path over its scene: the end-effector trace seen from the top and from the side."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.planning.validate import densify
+from manifoldgen.robot import Robot
+from manifoldgen.scene import Obstacle, Scene
+from manifoldgen.viz.losses import save_figure
+
+VIEWS = (("top view", 0, 1, "x (m)", "y (m)"), ("side view", 0, 2, "x (m)", "z (m)"))
+
+
+def plot_path(path: np.ndarray, robot: Robot, frame: str, scene: Scene, out: str | Path, title: str = "") -> None:
+    """Save a PNG: the trace of ``frame`` along ``path (K, n)`` over ``scene``'s obstacles
+    (grey), the held tool's footprint at start and goal (red), start (green) and goal (blue)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon
+
+    states = densify(path, 0.02)[0] if len(path) else np.stack([scene.start, scene.goal])
+    trace = robot.frame_pose(states, frame)[0]
+    ends = robot.frame_pose(np.stack([scene.start, scene.goal]), frame)[0]
+    shapes = [(o, _world_points(o)) for o in scene.obstacles]
+    tools = [_tool_points(scene, robot, q) for q in (scene.start, scene.goal)] if scene.attached else []
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, (name, i, j, xlabel, ylabel) in zip(axes, VIEWS):
+        for _, points in shapes:
+            ax.add_patch(Polygon(_hull(points[:, [i, j]]), closed=True, facecolor="0.75", edgecolor="0.35",
+                                 alpha=0.6))
+        for points in tools:
+            ax.add_patch(Polygon(_hull(points[:, [i, j]]), closed=True, facecolor="none", edgecolor="red"))
+        ax.plot(trace[:, i], trace[:, j], "-", color="m", lw=1.5, label=f"{frame} trace" if len(path) else None)
+        ax.plot(*ends[0, [i, j]], "o", color="green", label="start")
+        ax.plot(*ends[1, [i, j]], "s", color="blue", label="goal")
+        everything = np.concatenate([trace[:, [i, j]], *(p[:, [i, j]] for _, p in shapes)])
+        low, high = everything.min(0) - 0.05, everything.max(0) + 0.05
+        ax.set_xlim(low[0], high[0])
+        ax.set_ylim(low[1], high[1])
+        ax.set_aspect("equal")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(name)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    fig.suptitle(title or (f"{scene.name}: {len(path)} waypoints" if len(path) else f"{scene.name}: no path"))
+    save_figure(fig, out)
+
+
+def _world_points(obstacle: Obstacle) -> np.ndarray:
+    pose = obstacle.pose.se3()
+    return obstacle.local_points() @ pose.rotation.T + pose.translation
+
+
+def _tool_points(scene: Scene, robot: Robot, q: np.ndarray) -> np.ndarray:
+    p, R = robot.frame_pose(q, scene.attached.frame)
+    placement = scene.attached.shape.pose.se3()
+    local = scene.attached.shape.local_points() @ placement.rotation.T + placement.translation
+    return local @ R[0].T + p[0]
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (H, 2) of 2-D points, counter-clockwise (Andrew's monotone chain)."""
+    pts = sorted(set(map(tuple, np.round(points, 9))))
+    if len(pts) < 3:
+        return np.array(pts)
+
+    def half(seq):
+        out = []
+        for p in seq:
+            while len(out) >= 2 and _turn(out[-2], out[-1], p) <= 0:
+                out.pop()
+            out.append(p)
+        return out[:-1]
+    return np.array(half(pts) + half(pts[::-1]))
+
+
+def _turn(a, b, c) -> float:
+    """z of (b - a) x (c - a): positive for a counter-clockwise turn."""
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
