@@ -79,6 +79,41 @@ def demo(output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="F
     run_demo(output, seed, console)
 
 
+@app.command()
+@friendly
+def plan(task: str = typer.Argument(..., help="Task name, e.g. pose"),
+         robot: str = typer.Option("panda", help="example-robot-data name"),
+         scene: str = typer.Option(..., help="Named scene (wall, maze) or a scene .json file"),
+         sampler: str = typer.Option("project", help="uniform, project, pg:DATASET.npz or MODEL:DIR "
+                                     "(e.g. cvae:runs/cvae)"),
+         planner: str = typer.Option("rrtconnect", help="rrtconnect, rrt, prm, kpiece, cbirrt"),
+         local: str = typer.Option("interpolate", help="Local planner: interpolate or project"),
+         seed: int = typer.Option(0),
+         time_limit: float = typer.Option(30.0, "--time", help="Planning time limit in seconds"),
+         smooth: bool = typer.Option(False, help="Shortcut the path (re-validated) after planning"),
+         output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
+    """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
+    import torch
+
+    from manifoldgen.planning.query import run_query, save_path
+    from manifoldgen.scene import get_scene
+    from manifoldgen.viz.path import plot_path
+    torch.set_num_threads(1)
+    task_obj = _task(task, robot)
+    scene_obj = get_scene(task_obj, scene)
+    result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
+                             local=local, smooth=smooth)
+    save_path(output, result, meta)
+    picture = output.with_suffix(".png")
+    plot_path(result.path, task_obj.robot, meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name),
+              scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+    status = "[green]solved[/]" if result.solved else "[red]not solved[/]"
+    console.print(f"{status} in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
+                  f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations -> {output}, {picture}")
+    if not result.solved:
+        raise typer.Exit(1)
+
+
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
                     baseline: str | None, task: str, robot: str) -> None:

@@ -1,0 +1,206 @@
+"""``manifoldgen plan``: path files rechecked by an outside checker (pinocchio + coal, the file
+alone), and one clear error per bad input."""
+
+from __future__ import annotations
+
+import json
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.data import collect
+from manifoldgen.models import CVAE
+from manifoldgen.robot import resolve_robot
+from manifoldgen.scene import get_scene
+from manifoldgen.tasks import get_task
+
+runner = CliRunner()
+
+
+def _se3(pose: dict) -> pin.SE3:
+    x, y, z, w = pose["quaternion"]
+    return pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), np.array(pose["position"], float))
+
+
+def _shape(obj: dict):
+    if obj["type"] == "box":
+        return coal.Box(*obj["size"])
+    if obj["type"] == "sphere":
+        return coal.Sphere(obj["radius"])
+    if obj["type"] == "cylinder":
+        return coal.Cylinder(obj["radius"], obj["length"])
+    return coal.MeshLoader().load(obj["mesh"], np.array(obj["scale"], float))
+
+
+def outside_check(file) -> dict:
+    """Recheck a path file from its own contents: every segment at 0.005 rad against the pose
+    constraint, the joint limits, self-collision (SRDF and adjacent pairs skipped) and the
+    recorded scene (obstacles against every robot link; the tool against the obstacles and
+    the links outside its touch links)."""
+    data = np.load(file, allow_pickle=False)
+    meta, path = json.loads(str(data["meta"])), data["path"]
+    urdf, srdf = resolve_robot(meta["robot"])
+    model = pin.buildModelFromUrdf(str(urdf))
+    geom = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION,
+                                 package_dirs=[str(urdf.parents[4])])
+    geom.addAllCollisionPairs()
+    pin.removeCollisionPairs(model, geom, str(srdf))
+    links = [(g.parentJoint, model.frames[g.parentFrame].name) for g in geom.geometryObjects]
+    keep = [(p.first, p.second) for p in geom.collisionPairs if _apart(model, links, p)]
+    geom.removeAllCollisionPairs()
+    for a, b in keep:
+        geom.addCollisionPair(pin.CollisionPair(a, b))
+    robot_ids = range(len(links))
+    obstacles, tools = [], []
+    for obj in meta["scene"]:
+        if "attached_to" in obj:
+            frame = model.frames[model.getFrameId(obj["attached_to"])]
+            tools.append((geom.addGeometryObject(pin.GeometryObject(obj["name"], frame.parentJoint, frame.placement
+                                                                    * _se3(obj["pose"]), _shape(obj))),
+                          set(obj["touch_links"])))
+        else:
+            obstacles.append(geom.addGeometryObject(pin.GeometryObject(obj["name"], 0, _se3(obj["pose"]),
+                                                                       _shape(obj))))
+    for oid in obstacles:
+        for i in robot_ids:
+            geom.addCollisionPair(pin.CollisionPair(i, oid))
+    for tid, touch in tools:
+        for i in robot_ids:
+            if links[i][1] not in touch:
+                geom.addCollisionPair(pin.CollisionPair(i, tid))
+        for oid in obstacles:
+            geom.addCollisionPair(pin.CollisionPair(tid, oid))
+    gdata, mdata = pin.GeometryData(geom), model.createData()
+    spec, y = meta["constraint"], np.array(meta["condition"])
+    frame, target = model.getFrameId(spec["frame"]), np.array(spec["rotation"])
+    axes = ["xyz".index(a) for a in spec["position_axes"]]
+    tol = np.array([spec["tolerance"]["position"]] * len(axes) + [spec["tolerance"]["orientation"]] * 3)
+    base = pin.neutral(model)
+    for name, value in meta["locked"].items():
+        base[model.joints[model.getJointId(name)].idx_q] = value
+    idx = [model.joints[model.getJointId(j)].idx_q for j in meta["joints"]]
+    worst, collisions, outside, states = 0.0, 0, 0, 0
+    for a, b in zip(path[:-1], path[1:]):
+        steps = max(1, int(np.ceil(np.abs(b - a).max() / 0.005)))
+        for t in np.arange(steps + 1) / steps:
+            q = base.copy()
+            q[idx] = a + t * (b - a)
+            outside += bool(np.any(q < model.lowerPositionLimit - 1e-9) or np.any(q > model.upperPositionLimit + 1e-9))
+            pin.framesForwardKinematics(model, mdata, q)
+            placement = mdata.oMf[frame]
+            residual = np.concatenate([placement.translation[axes] - y, pin.log3(target.T @ placement.rotation)])
+            worst = max(worst, float(np.max(np.abs(residual) / tol)))
+            collisions += pin.computeCollisions(model, mdata, geom, gdata, q, True)
+            states += 1
+    return {"worst": worst, "collisions": collisions, "outside": outside, "states": states, "meta": meta,
+            "path": path}
+
+
+def _apart(model, links, pair) -> bool:
+    ja, jb = links[pair.first][0], links[pair.second][0]
+    return ja != jb and model.parents[ja] != jb and model.parents[jb] != ja
+
+
+@pytest.mark.parametrize("scene,seed", [("wall", 0), ("wall", 1), ("maze", 0)])
+def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, scene, seed):
+    out = tmp_path / "p.npz"
+    result = runner.invoke(app, ["plan", "pose", "--robot", "panda", "--scene", scene, "--sampler", "project",
+                                 "--planner", "rrtconnect", "--seed", str(seed), "--time", "60", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "solved in" in result.output and "waypoints" in result.output
+    check = outside_check(out)
+    assert check["worst"] <= 1.0 and check["collisions"] == 0 and check["outside"] == 0
+    assert check["states"] > len(check["path"])
+    meta = check["meta"]
+    assert meta["condition"] == [0.5] and meta["joints"] == [f"panda_joint{i}" for i in range(1, 8)]
+    assert meta["result"]["solved"] and meta["validation"]["valid"]
+    assert (out.with_suffix(".png")).stat().st_size > 10_000
+    if scene == "maze":
+        assert meta["scene"][-1]["attached_to"] == "panda_hand_tcp"
+
+
+def test_outside_checker_catches_a_path_through_the_wall(tmp_path, panda_task):
+    """The checker itself must see collisions and constraint violations."""
+    out = tmp_path / "p.npz"
+    runner.invoke(app, ["plan", "pose", "--scene", "wall", "--sampler", "project", "--time", "60", "-o", str(out)])
+    data = np.load(out)
+    meta = json.loads(str(data["meta"]))
+    straight = np.stack([data["path"][0], data["path"][-1]])
+    np.savez(tmp_path / "bad.npz", meta=np.array(json.dumps(meta)), path=straight)
+    check = outside_check(tmp_path / "bad.npz")
+    assert check["worst"] > 1.0 or check["collisions"] > 0
+
+
+def _plan(tmp_path, *args):
+    base = {"--scene": "wall", "--sampler": "project", "--planner": "rrtconnect", "--time": "5"}
+    for key, value in zip(args[::2], args[1::2]):
+        base[key] = value
+    argv = ["plan", "pose", "--robot", "panda", "-o", str(tmp_path / "p.npz")]
+    for key, value in base.items():
+        argv += [key, value]
+    return runner.invoke(app, argv)
+
+
+def _scene_file(tmp_path, panda_task, **change) -> str:
+    data = json.loads(get_scene(panda_task, "wall").to_json())
+    data.update(change)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+def test_bad_start_and_goal_say_by_how_much_and_which_link(tmp_path, panda_task):
+    wall = get_scene(panda_task, "wall")
+    off = _scene_file(tmp_path, panda_task, start=(wall.start + [0, 0.2, 0, 0, 0, 0, 0]).tolist())
+    result = _plan(tmp_path, "--scene", off)
+    assert result.exit_code == 2
+    assert "start configuration violates the constraint: residual component" in result.output
+    assert "times its tolerance" in result.output
+    hand = panda_task.robot.frame_pose(wall.goal, "panda_hand")[0][0].tolist()
+    blocked = json.loads(wall.to_json())["obstacles"] + [{"name": "crate", "type": "box", "size": [0.1, 0.1, 0.1],
+                                                          "pose": {"position": hand, "quaternion": [0, 0, 0, 1]}}]
+    result = _plan(tmp_path, "--scene", _scene_file(tmp_path, panda_task, obstacles=blocked))
+    assert result.exit_code == 2 and "goal configuration is in collision: " in result.output
+    assert "panda_hand_0 with crate" in result.output and "choose a collision-free goal" in result.output
+
+
+def test_bad_scene_file_time_and_planner(tmp_path, panda_task):
+    cone = json.loads(get_scene(panda_task, "wall").to_json())["obstacles"]
+    cone[0]["type"] = "cone"
+    result = _plan(tmp_path, "--scene", _scene_file(tmp_path, panda_task, obstacles=cone))
+    assert result.exit_code == 2 and "unknown type 'cone'" in result.output and "known types" in result.output
+    cone[0].update(type="box", size=[0.4, 0.0, 0.6])
+    result = _plan(tmp_path, "--scene", _scene_file(tmp_path, panda_task, obstacles=cone))
+    assert result.exit_code == 2 and "must be three positive extents" in result.output
+    result = _plan(tmp_path, "--time", "0")
+    assert result.exit_code == 2 and "--time must be a positive number of seconds, got 0.0" in result.output
+    result = _plan(tmp_path, "--planner", "rrtconect")
+    assert result.exit_code == 2
+    assert "unknown planner 'rrtconect'; did you mean rrtconnect? known planners: rrtconnect, rrt, prm, kpiece, " \
+           "cbirrt" in result.output
+    result = _plan(tmp_path, "--local", "spline")
+    assert result.exit_code == 2 and "unknown local planner 'spline'" in result.output
+
+
+def test_bad_sampler_specs(tmp_path, panda_task):
+    result = _plan(tmp_path, "--sampler", f"cvae:{tmp_path / 'nowhere'}")
+    assert result.exit_code == 2 and "no trained model at" in result.output and "manifoldgen train" in result.output
+    result = _plan(tmp_path, "--sampler", "gan:x")
+    assert result.exit_code == 2 and "unknown model 'gan'" in result.output
+    result = _plan(tmp_path, "--sampler", "random")
+    assert result.exit_code == 2 and "unknown sampler 'random'" in result.output
+    result = _plan(tmp_path, "--sampler", "project,refine=2")
+    assert result.exit_code == 2 and "takes no refine option" in result.output
+    pr2 = collect(get_task("pose", "pr2"), 40, seed=0, conditions=[[0.7], [0.8]], progress=False)
+    CVAE(hidden=[16], batch=32).fit(pr2, epochs=1, seed=0, progress=False, out=tmp_path / "pr2model")
+    result = _plan(tmp_path, "--sampler", f"cvae:{tmp_path / 'pr2model'}")
+    assert result.exit_code == 2 and "robot 'pr2'" in result.output and "not panda" in result.output
+    result = _plan(tmp_path, "--sampler", f"cgan:{tmp_path / 'pr2model'}")
+    assert result.exit_code == 2 and "holds a cvae model, not cgan" in result.output
+    pr2.save(tmp_path / "pr2.npz")
+    result = _plan(tmp_path, "--sampler", f"pg:{tmp_path / 'pr2.npz'}")
+    assert result.exit_code == 2 and "dataset" in result.output and "robot 'pr2'" in result.output
