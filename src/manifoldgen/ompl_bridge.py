@@ -23,7 +23,9 @@ OMPL guarantees only its own states (to its tolerance, ``delta`` apart on the ma
 not the straight segments between them. ``solved`` requires OMPL's exact solution *and* a
 valid path; ``extras`` keeps both verdicts, the worst violation and the reason.
 Constraint evaluations are our batched numpy code called one state at a time, so OMPL
-pays Python overhead on every Newton step (``extras`` counts them).
+pays Python overhead on every Newton step: ``projections`` counts calls of OMPL's
+``Constraint::project`` (the projected space; atlas and tangent bundle project through
+their charts), ``extras`` every space's Newton steps and residual evaluations.
 """
 
 from __future__ import annotations
@@ -98,6 +100,7 @@ class OmplConstraint(ob.Constraint):
         self.scale = 1.0 / constraint.tolerance
         self.function_evals = 0
         self.jacobian_evals = 0
+        self.projections = 0
 
     def function(self, x, out) -> None:
         """out (m,) = F(x, y) / tol."""
@@ -108,6 +111,11 @@ class OmplConstraint(ob.Constraint):
         """out (m, n) = dF/dq (x, y) / tol (row-scaled)."""
         self.jacobian_evals += 1
         out[:] = self.constraint.jacobian(np.asarray(x)[None], self.y)[1][0] * self.scale[:, None]
+
+    def project(self, x) -> bool:
+        """OMPL's own Newton projection, counted."""
+        self.projections += 1
+        return ob.Constraint.project(self, x)
 
 
 def read_state(state, n: int) -> np.ndarray:
@@ -305,7 +313,7 @@ class OmplPlanner:
             extras.update(valid=report.valid, worst_violation=report.worst_violation, reason=report.reason)
         if ompl_constraint is not None:
             extras.update(function_evals=ompl_constraint.function_evals,
-                          jacobian_evals=ompl_constraint.jacobian_evals)
+                          newton_steps=ompl_constraint.jacobian_evals)
         drawn = sum(b.drawn for b in bridge)
         if bridge:
             extras["sampler_calls"] = sum(b.calls for b in bridge)
@@ -313,7 +321,7 @@ class OmplPlanner:
         if self.space in ("atlas", "tangent"):
             extras["charts"] = int(space.getChartCount())
         solved = exact and bool(extras["valid"])
-        projections = ompl_constraint.jacobian_evals if ompl_constraint is not None else 0
+        projections = ompl_constraint.projections if ompl_constraint is not None else 0
         return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, int(data.numVertices()), drawn,
                           projections, self.name, path_length(path) if solved else 0.0, extras)
 
