@@ -50,7 +50,8 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
         ("atlas", 0, 5), ("atlas", 1, 6), ("pg", 0, 5), ("pg", 1, 6)]
     for r in records:  # solved means an independently valid path
         assert r["solved"] and r["valid"] and r["planner_solved"]
-        assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"]
+        assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"] and not r["late"]
+        assert 0 < r["cpu_s"]
     # the same seed gives the same run (OMPL reseeded in every worker, our samplers seeded)
     rerun = run_once(experiment, Method.parse(METHODS[0]), 1)
     first = next(r for r in records if (r["method"], r["run"]) == ("atlas", 1))
@@ -77,14 +78,14 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
 
 
 def test_summary_counts_failures_at_the_limit():
-    records = [{"method": "a", "solved": True, "time_s": 1.0, "time_limit": 10.0, "length": 2.0,
+    records = [{"method": "a", "solved": True, "time_s": 1.0, "cpu_s": 0.8, "time_limit": 10.0, "length": 2.0,
                 "samples_drawn": 5, "projections": 0, "worst_violation": 0.5},
                {"method": "a", "solved": False, "time_s": 3.0, "time_limit": 10.0, "length": 0.0,
                 "samples_drawn": 9, "projections": 0, "worst_violation": float("nan"), "error": "x"}]
     (s,) = summarize(records)
     assert (s.runs, s.solved, s.errors, s.success) == (2, 1, 1, 50.0)
     assert (s.time_mean, s.time_min, s.time_max, s.time_median) == (5.5, 1.0, 10.0, 5.5)
-    assert (s.length_mean, s.samples_mean, s.worst_violation) == (2.0, 5.0, 0.5)
+    assert (s.cpu_median, s.length_mean, s.samples_mean, s.worst_violation) == (0.8, 2.0, 5.0, 0.5)
 
 
 def test_truncated_last_line_is_ignored(tmp_path):

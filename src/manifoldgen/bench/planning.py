@@ -16,7 +16,7 @@ worker processes (each builds its own robot, checker, sampler and planner, with 
 thread); each finished run is appended to ``runs.jsonl`` at once, so an interrupted benchmark
 keeps its runs and ``resume=True`` skips them. Every solved path is re-validated here,
 independently of the planner, every 0.005 rad; a run counts as solved only when that check
-passes. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
+passes and the planner answered within the time limit. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
 """
 
 from __future__ import annotations
@@ -182,7 +182,9 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     try:
         planner, task, scene, checker = build(experiment, method, seed)
         record["build_s"] = time.perf_counter() - began
+        cpu = time.process_time()
         result = planner.solve(scene.start, scene.goal, experiment.time_limit)
+        record["cpu_s"] = time.process_time() - cpu  # this process's CPU: robust to other load
     except ManifoldgenError as exc:
         return {**record, "solved": False, "planner_solved": False, "time_s": experiment.time_limit,
                 "iterations": 0, "samples_drawn": 0, "projections": 0, "length": 0.0, "waypoints": 0,
@@ -190,7 +192,9 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     report = validate_path(result.path, task.constraint, scene.condition, checker, VALIDATION_RESOLUTION) \
         if result.solved else None
     summary = result.to_dict()
-    return {**record, "solved": bool(result.solved and report.valid), "planner_solved": bool(result.solved),
+    late = result.time_s > experiment.time_limit  # a planner may overrun its deadline inside one step
+    return {**record, "solved": bool(result.solved and report.valid and not late),
+            "planner_solved": bool(result.solved), "late": bool(late),
             "time_s": summary["time_s"], "iterations": summary["iterations"],
             "samples_drawn": summary["samples_drawn"], "projections": summary["projections"],
             "length": summary["length"], "waypoints": summary["waypoints"], "planner": summary["planner"],
