@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
-from typing import ClassVar
 
 import numpy as np
 import ompl.base as ob
@@ -142,11 +141,10 @@ class SamplerBridge(ob.ValidStateSampler):
     ``drawn`` count OMPL's requests and our samples.
     """
 
-    def __init__(self, si: ob.SpaceInformation, sampler: Sampler, n: int,
-                 constraint: OmplConstraint | None, attempts: int):
+    def __init__(self, si: ob.SpaceInformation, sampler: Sampler, constraint: OmplConstraint | None, attempts: int):
         super().__init__(si)
         self.setName("manifoldgen")
-        self.si, self.sampler, self.n, self.constraint, self.attempts = si, sampler, n, constraint, attempts
+        self.si, self.sampler, self.constraint, self.attempts = si, sampler, constraint, attempts
         self.scratch = si.allocState()
         self.calls = self.drawn = 0
 
@@ -185,11 +183,9 @@ class OmplPlanner:
     sampler: our Sampler for PRM / PRMstar / BKPIECE1 (None: OMPL's own sampling);
     resolution: OMPL's manifold step ``delta`` (constrained spaces) or the straight-segment
     check resolution (``joint``), in rad; seed: OMPL's global RNG seed, set before each
-    solve (OMPL is reproducible only when this process builds the same OMPL objects in the
-    same order, as a fresh worker per run does).
+    solve, so the same seed gives the same run in any process (except PRM / PRMstar, which
+    grow their roadmap in a second thread).
     """
-
-    settings_type: ClassVar[type[OmplSettings]] = OmplSettings
 
     def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
                  sampler: Sampler | None = None, *, space: str = "projected", planner: str = "rrtconnect",
@@ -273,7 +269,7 @@ class OmplPlanner:
         bridge = []
         if self.sampler is not None:
             def allocate(info):
-                bridge.append(SamplerBridge(info, self.sampler, n, ompl_constraint, self.settings.sample_attempts))
+                bridge.append(SamplerBridge(info, self.sampler, ompl_constraint, self.settings.sample_attempts))
                 return bridge[-1]
             si.setValidStateSamplerAllocator(allocate)
         setup = og.SimpleSetup(si)
