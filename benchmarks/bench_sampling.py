@@ -28,8 +28,9 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=3000)
     parser.add_argument("--reference", type=int, default=3000)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     args = parser.parse_args()
-    torch.set_num_threads(2)
+    torch.set_num_threads(max(1, args.threads))
     models = args.models or [pretrained_model_dir()]
     out = args.output or Path(tempfile.mkdtemp(prefix="bench-sampling-"))
     results = run_sampling_bench(models, out, samples=args.samples, reference_rows=args.reference,

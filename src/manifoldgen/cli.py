@@ -229,12 +229,13 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                    refine: int = typer.Option(3, help="LM iterations for the refined rate"),
                    reference: int = typer.Option(3000, help="Reference projection samples per condition"),
                    repeats: int = typer.Option(7, help="Timing repeats (median)"),
+                   threads: int = typer.Option(2, help="torch CPU threads for sampling"),
                    seed: int = typer.Option(0)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
     import torch
 
     from manifoldgen.bench.sampling import run_sampling_bench
-    torch.set_num_threads(2)
+    torch.set_num_threads(max(1, threads))
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed)
     console.print((output / "table.md").read_text())

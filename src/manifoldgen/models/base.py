@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 MODEL_FORMAT_VERSION = 1
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 CHUNK = 10_000  # rows per forward pass when sampling (fastest on 2 CPU cores)
+LIMIT_SCALE = 0.01  # rad: a joint-limit overshoot of this size costs as much as one tolerance
 
 
 def mlp(inputs: int, hidden: list[int], outputs: int, activation: type[torch.nn.Module] = torch.nn.SiLU,
@@ -121,15 +122,15 @@ class ConditionalSampler(ABC):
     def normalise_y(self, y: torch.Tensor) -> torch.Tensor:
         return (y - self._y_mean) / self._y_std
 
-    def denormalise_q(self, q: torch.Tensor) -> torch.Tensor:
-        """Normalised (B, d) -> configurations clamped to the joint limits."""
-        return torch.clamp(q * self._q_std + self._q_mean, self._lower, self._upper)
-
     def penalty(self, q: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q`` at ``y``."""
+        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q`` at ``y``,
+        plus their joint-limit violation in units of ``LIMIT_SCALE`` rad (so samples learn to stay inside)."""
         if self.residual_fn is None or self.config.get("residual_weight", 0.0) <= 0:
             return torch.zeros(())
-        return pseudo_huber(self.residual_fn(self.denormalise_q(q), y * self._y_std + self._y_mean)).mean()
+        q = q * self._q_std + self._q_mean
+        outside = (torch.relu(q - self._upper) + torch.relu(self._lower - q)) / LIMIT_SCALE
+        r2 = self.residual_fn(q, y * self._y_std + self._y_mean) + outside.pow(2).sum(dim=1)
+        return pseudo_huber(r2).mean()
 
     @property
     def condition(self) -> Condition:

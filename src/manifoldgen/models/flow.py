@@ -17,8 +17,8 @@ class ConditionalFlow(ConditionalSampler):
     """zuko NSF with ``passes=2`` (coupling: one pass both ways, fast sampling)."""
 
     name = "flow"
-    defaults = {"transforms": 4, "hidden": [128, 128], "bins": 8, "lr": 1e-3, "batch": 256,
-                "epochs": 60, "patience": 15, "residual_weight": 0.02}
+    defaults = {"transforms": 4, "hidden": [128, 128], "bins": 8, "lr": 1e-3, "batch": 512,
+                "epochs": 30, "patience": 10, "residual_weight": 0.2}
 
     def _build(self) -> None:
         c = self.config

@@ -12,8 +12,8 @@ class WGANGP(_GAN):
 
     name = "wgan"
     defaults = {"latent": 8, "hidden": [128, 128], "critic_hidden": [128, 128], "lr": 2e-4, "beta1": 0.5,
-                "batch": 256, "critic_steps": 3, "gp": 1.0, "epochs": 60, "patience": 20,
-                "residual_weight": 0.02}
+                "batch": 256, "critic_steps": 3, "gp": 1.0, "epochs": 40, "patience": 15,
+                "residual_weight": 0.1}
 
     def _noise(self, count, generator):
         return torch.randn(count, self.config["latent"], generator=generator)
