@@ -34,8 +34,9 @@ class PlannerSettings:
     a checked segment must stay within (1 - margin) x tolerance; step: distance between
     projected states (``project``); partial: ``interpolate`` keeps the valid part of a
     blocked extension; pool / pool_batch: ``interpolate`` stepping stones drawn up front /
-    whenever a tree has none within range (see :class:`SamplePool`);
-    validation_resolution: the final dense check of a found path.
+    whenever a tree has none within range (see :class:`SamplePool`); candidates: stepping
+    stones checked (in one batch) per extension; validation_resolution: the final dense
+    check of a found path.
     """
 
     range: float = 0.6
@@ -44,13 +45,14 @@ class PlannerSettings:
     partial: bool = True
     pool: int = 1024
     pool_batch: int = 256
+    candidates: int = 8
     validation_resolution: float = 0.005
 
     def check(self) -> None:
         if (self.range <= 0 or self.step <= 0 or self.validation_resolution <= 0 or not 0 <= self.margin < 1
-                or self.pool < 0 or self.pool_batch <= 0):
-            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, step, pool_batch and "
-                                   "validation_resolution must be positive, pool >= 0, margin in [0, 1)")
+                or self.pool < 0 or self.pool_batch <= 0 or self.candidates <= 0):
+            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, step, pool_batch, candidates "
+                                   "and validation_resolution must be positive, pool >= 0, margin in [0, 1)")
 
 
 class SamplerFailed(Exception):
@@ -191,20 +193,32 @@ class Planner(ABC):
         """Extend tree ``k`` toward ``target`` from its nearest node: the new node or None.
 
         With the pool (``interpolate``) a target out of range is replaced by the pooled
-        sample within range of the tree that is closest to it (the target joins the pool
+        samples within range of the tree that are closest to it (the target joins the pool
         when ``keep``); with none in range the pool draws a batch and the step is skipped."""
         tree = self.trees[k]
         near = tree.nearest(target)
-        if self.pool is not None and np.linalg.norm(target - tree.q[near]) > self.settings.range:
-            if keep:
-                self.pool.add(target[None])
-            target = self.pool.take_toward(k, target)
-            if target is None:
-                self.pool.draw(self.pool.batch)
-                return None
-            near = tree.nearest(target)
-        waypoints, _ = self.local.steer(tree.q[near], target, self.settings.range)
-        return tree.add(near, waypoints) if len(waypoints) else None
+        if self.pool is None or np.linalg.norm(target - tree.q[near]) <= self.settings.range:
+            waypoints, _ = self.local.steer(tree.q[near], target, self.settings.range)
+            return tree.add(near, waypoints) if len(waypoints) else None
+        if keep:
+            self.pool.add(target[None])
+        new = self._step_through_pool(k, target)
+        if new is None and not self.pool.reachable(k):
+            self.pool.draw(self.pool.batch)
+        return new
+
+    def _step_through_pool(self, k: int, target: np.ndarray, than: float = np.inf) -> int | None:
+        """Join tree ``k`` to the first valid of the ``candidates`` pooled samples within range of
+        it that are closest to ``target`` (and closer than ``than``); the tried ones leave the pool."""
+        tree = self.trees[k]
+        slots = self.pool.closest(k, target, self.settings.candidates, than)
+        if not len(slots):
+            return None
+        stones = self.pool.q[slots]
+        nodes = [tree.nearest(q) for q in stones]
+        i = self.local.first_valid(tree.q[nodes], stones)
+        self.pool.free[slots if i < 0 else slots[:i + 1]] = False
+        return None if i < 0 else tree.add(nodes[i], stones[i:i + 1])
 
     def _draw(self) -> np.ndarray:
         """One valid configuration from the sampler."""
@@ -272,32 +286,40 @@ class SamplePool:
         self.gap[slots] = np.stack([_distances(q, t.q[:s]) for t, s in zip(self.trees, self.synced)], axis=1)
         self.head += len(q)
 
+    @property
+    def _filled(self) -> int:
+        return min(self.head, len(self.q))
+
     def _refresh(self, k: int) -> None:
         tree = self.trees[k]
         if len(tree) > self.synced[k]:
-            free = np.flatnonzero(self.free)
+            free = np.flatnonzero(self.free[:self._filled])
             fresh = _distances(self.q[free], tree.q[self.synced[k]:tree.size])
             self.gap[free, k] = np.minimum(self.gap[free, k], fresh)
             self.synced[k] = len(tree)
 
-    def take_toward(self, k: int, target: np.ndarray, than: float = np.inf) -> np.ndarray | None:
-        """Remove and return the sample within ``radius`` of tree ``k`` closest to ``target``
-        (and closer to it than ``than``), or None."""
+    def reachable(self, k: int) -> bool:
+        """Some free sample lies within ``radius`` of tree ``k``."""
         self._refresh(k)
-        near = np.flatnonzero(self.free & (self.gap[:, k] <= self.radius))
-        if not len(near):
-            return None
+        end = self._filled
+        return bool(np.any(self.free[:end] & (self.gap[:end, k] <= self.radius)))
+
+    def closest(self, k: int, target: np.ndarray, count: int, than: float = np.inf) -> np.ndarray:
+        """Slots of up to ``count`` free samples within ``radius`` of tree ``k``, closest to
+        ``target`` first (and closer to it than ``than``)."""
+        self._refresh(k)
+        end = self._filled
+        near = np.flatnonzero(self.free[:end] & (self.gap[:end, k] <= self.radius))
         diff = self.q[near] - target
         gap = np.einsum("ij,ij->i", diff, diff)
-        best = int(np.argmin(gap))
-        if gap[best] >= than * than:
-            return None
-        self.free[near[best]] = False
-        return self.q[near[best]].copy()
+        keep = gap < than * than
+        near, gap = near[keep], gap[keep]
+        order = np.argsort(gap)[:count] if len(gap) > count else np.argsort(gap)
+        return near[order]
 
     def take_near(self, node: np.ndarray, target: np.ndarray) -> np.ndarray | None:
         """Remove and return the sample within ``radius`` of ``node`` closest to ``target``, or None."""
-        free = np.flatnonzero(self.free)
+        free = np.flatnonzero(self.free[:self._filled])
         near = free[np.einsum("ij,ij->i", self.q[free] - node, self.q[free] - node) <= self.radius ** 2]
         if not len(near):
             return None

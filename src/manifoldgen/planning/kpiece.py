@@ -43,26 +43,26 @@ class KPIECE(Planner):
         dims = settings.dimensions or max(2, int(np.ceil(np.log2(robot.n))))
         axes = self.rng.normal(size=(dims, robot.n))
         axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-        corners = np.abs(axes) @ (robot.upper - robot.lower)
-        self._axes, self._cell = axes, corners / settings.cells
-        self._grid: dict[tuple[int, ...], list[int]] = {}
-        self._picked: dict[tuple[int, ...], int] = {}
+        grid = _Grid(axes, np.abs(axes) @ (robot.upper - robot.lower) / settings.cells)
         tree = Tree(start)
         self.trees = [tree]
         self._start_pool(self.trees)
-        self._file(tree, 0)
+        grid.add(0, start)
         while time.perf_counter() < deadline:
             self.iterations += 1
-            cell = self._choose_cell()
+            cell = grid.choose(self.rng, settings.border_fraction)
             to_goal = self.rng.random() < settings.goal_bias
             target = goal if to_goal else self._draw()
-            members = [m for m in self._grid[cell] if np.isfinite(tree.q[m, 0])]  # not cut by a failed check
+            members = [m for m in grid.members[cell] if np.isfinite(tree.q[m, 0])]  # not cut by a failed check
             if not members:
                 continue
             node = members[int(np.argmin(np.linalg.norm(tree.q[members] - target, axis=1)))]
+            first = len(tree)
             new = self._extend(tree, node, target, keep=not to_goal)
             if new is None:
                 continue
+            for i in range(first, len(tree)):
+                grid.add(i, tree.q[i])
             if np.linalg.norm(goal - tree.q[new]) <= settings.range:
                 waypoints = self.local.connect(tree.q[new], goal)
                 if waypoints is not None:
@@ -72,31 +72,6 @@ class KPIECE(Planner):
                     if path is not None:
                         return path
         return None
-
-    def _key(self, q: np.ndarray) -> tuple[int, ...]:
-        return tuple(np.floor(self._axes @ q / self._cell).astype(int).tolist())
-
-    def _file(self, tree: Tree, first: int) -> None:
-        for i in range(first, len(tree)):
-            self._grid.setdefault(self._key(tree.q[i]), []).append(i)
-
-    def _choose_cell(self) -> tuple[int, ...]:
-        cells = list(self._grid)
-        border = [c for c in cells if self._neighbours(c) < 2 * len(c)]
-        pool = border if border and self.rng.random() < self.settings.border_fraction else cells
-        weight = np.array([1.0 / ((1 + self._picked.get(c, 0)) * len(self._grid[c])) for c in pool])
-        cell = pool[self.rng.choice(len(pool), p=weight / weight.sum())]
-        self._picked[cell] = self._picked.get(cell, 0) + 1
-        return cell
-
-    def _neighbours(self, cell: tuple[int, ...]) -> int:
-        count = 0
-        for axis in range(len(cell)):
-            for sign in (-1, 1):
-                other = list(cell)
-                other[axis] += sign
-                count += tuple(other) in self._grid
-        return count
 
     def _extend(self, tree: Tree, node: int, target: np.ndarray, keep: bool) -> int | None:
         """Grow ``node`` toward ``target`` (through the pool with ``interpolate``)."""
@@ -108,9 +83,36 @@ class KPIECE(Planner):
             if target is None:
                 return None
         waypoints, _ = self.local.steer(origin, target, self.settings.range)
-        if not len(waypoints):
-            return None
-        first = len(tree)
-        new = tree.add(node, waypoints)
-        self._file(tree, first)
-        return new
+        return tree.add(node, waypoints) if len(waypoints) else None
+
+
+class _Grid:
+    """Cells of size ``size (d,)`` over the projection ``axes (d, n)``: the nodes in each cell,
+    how many of its 2 d neighbour cells are occupied, and how often it was chosen."""
+
+    def __init__(self, axes: np.ndarray, size: np.ndarray):
+        self.axes, self.size = axes, size
+        self.members: dict[tuple[int, ...], list[int]] = {}
+        self.neighbours: dict[tuple[int, ...], int] = {}
+        self.picked: dict[tuple[int, ...], int] = {}
+
+    def add(self, node: int, q: np.ndarray) -> None:
+        cell = tuple(np.floor(self.axes @ q / self.size).astype(int).tolist())
+        if cell not in self.members:
+            around = [cell[:a] + (cell[a] + s,) + cell[a + 1:] for a in range(len(cell)) for s in (-1, 1)]
+            present = [c for c in around if c in self.members]
+            for c in present:
+                self.neighbours[c] += 1
+            self.neighbours[cell], self.members[cell], self.picked[cell] = len(present), [], 0
+        self.members[cell].append(node)
+
+    def choose(self, rng: np.random.Generator, border_fraction: float) -> tuple[int, ...]:
+        """A border cell (fewer than 2 d occupied neighbours) with probability ``border_fraction``
+        (when there is one), else any; weighted toward less chosen and less covered cells."""
+        cells = list(self.members)
+        border = [c for c in cells if self.neighbours[c] < 2 * len(c)]
+        pool = border if border and rng.random() < border_fraction else cells
+        weight = np.array([1.0 / ((1 + self.picked[c]) * len(self.members[c])) for c in pool])
+        cell = pool[rng.choice(len(pool), p=weight / weight.sum())]
+        self.picked[cell] += 1
+        return cell

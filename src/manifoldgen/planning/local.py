@@ -55,6 +55,25 @@ class LocalPlanner(ABC):
             count = self.checker.first_collision(states[:count])
         return count
 
+    def first_valid(self, starts: np.ndarray, ends: np.ndarray) -> int:
+        """Index of the first straight segment ``starts[i] -> ends[i]`` ((m, n) each; the ends are
+        valid states) that is valid all along, or -1: one constraint evaluation for every
+        segment, then collisions segment by segment in order."""
+        pieces = [self.segment_states(a, b) for a, b in zip(starts, ends)]
+        sizes = np.array([len(p) for p in pieces])
+        states, last = np.concatenate(pieces), np.cumsum(sizes) - 1
+        limit = np.full(len(states), 1.0 - self.margin)
+        limit[last] = 1.0
+        ok = (self.constraint.violation(states, self.y) <= limit) & self.constraint.robot.within_limits(states)
+        G = self.constraint.inequality(states, self.y)
+        if G.shape[1]:
+            ok &= np.all(G <= 0, axis=1)
+        self.states_checked += len(states)
+        for i in np.flatnonzero(np.logical_and.reduceat(ok, last - sizes + 1)):
+            if self.checker is None or self.checker.first_collision(pieces[i]) == sizes[i]:
+                return int(i)
+        return -1
+
     def segment_states(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(k, n) states every ``resolution`` from ``a`` (excluded) to ``b`` (included)."""
         k = max(1, int(np.ceil(np.linalg.norm(b - a) / self.resolution)))
@@ -94,7 +113,7 @@ class Project(LocalPlanner):
     """Steps of ``step`` toward the target, each projected onto the manifold and checked."""
 
     name = "project"
-    tol: float = 1e-4  # projection residual (a hundredth of the usual tolerance)
+    precision: float = 0.01  # projections converge to this fraction of the smallest tolerance
     max_iters: int = 20
 
     def steer(self, a, b, max_distance=np.inf):
@@ -107,7 +126,8 @@ class Project(LocalPlanner):
                 waypoints.append(b)
                 return np.array(waypoints), True
             target = q + (b - q) * min(1.0, self.step / max(gap, 1e-12))
-            projected = project(self.constraint, target[None], self.y, tol=self.tol, max_iters=self.max_iters)
+            projected = project(self.constraint, target[None], self.y, max_iters=self.max_iters,
+                                tol=self.precision * float(self.constraint.tolerance.min()))
             self.projections += 1
             nxt = projected.q[0]
             moved = float(np.linalg.norm(nxt - q))

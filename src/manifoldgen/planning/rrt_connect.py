@@ -51,17 +51,15 @@ class RRTConnect(Planner):
         while time.perf_counter() < deadline:
             node = tree.nearest(target)
             gap = float(np.linalg.norm(target - tree.q[node]))
-            aim = target
             if self.pool is not None and gap > self.settings.range:
-                aim = self.pool.take_toward(k, target, than=gap)
-                if aim is None:
+                if self._step_through_pool(k, target, than=gap) is None:
                     return None
-                node = tree.nearest(aim)
-            waypoints, reached = self.local.steer(tree.q[node], aim, self.settings.range)
+                continue
+            waypoints, reached = self.local.steer(tree.q[node], target, self.settings.range)
             if not len(waypoints):
                 return None
             node = tree.add(node, waypoints)
-            if reached and aim is target:
+            if reached:
                 return node
         return None
 
