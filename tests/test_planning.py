@@ -125,3 +125,11 @@ def test_bad_queries_are_refused_with_the_reason(panda_task):
         PLANNERS["rrt"](constraint, y, checker, ProjectionSampler(constraint, y), settings=RRTConnectSettings())
     with pytest.raises(ManifoldgenError, match="goal_bias"):
         PLANNERS["rrt"](constraint, y, checker, ProjectionSampler(constraint, y), settings=RRTSettings(goal_bias=2))
+    with pytest.raises(ManifoldgenError, match="rrtconnect needs a sampler"):
+        PLANNERS["rrtconnect"](constraint, y, checker, None)
+
+
+def test_cbirrt_without_a_sampler_draws_uniform_targets():
+    constraint, y, checker, start, goal = corridor_problem()
+    result = PLANNERS["cbirrt"](constraint, y, checker, None, seed=0).solve(start, goal, 20.0)
+    _check(result, constraint, y, checker, start, goal)

@@ -3,7 +3,9 @@
 ``uniform`` (rejection in the joint limits), ``project`` (uniform seeds projected),
 ``pg:DATASET.npz`` (the paper's precomputed-graph baseline: rows of a dataset) or
 ``MODEL:DIR`` (a trained model directory, e.g. ``cvae:runs/cvae``; any registered model
-name). Options follow after commas: ``cvae:runs/cvae,refine=2,batch=2048``.
+name). Options follow after commas: ``cvae:runs/cvae,refine=0,batch=2048``; model samples
+get ``MODEL_REFINE`` projection iterations unless ``refine`` says otherwise (``refine=0``:
+raw model samples, the paper's setting).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from manifoldgen.tasks import Task
 
 SPEC_HELP = "uniform, project, pg:DATASET.npz, or MODEL:DIR (e.g. cvae:runs/cvae; options: ,refine=N,batch=B)"
 OPTIONS = {"refine": int, "batch": int}
+MODEL_REFINE = 2  # Algorithm 1's refinement: samples on the manifold connect by straight segments twice as often
 
 
 def parse_spec(spec: str) -> tuple[str, str, dict[str, int]]:
@@ -55,7 +58,7 @@ def make_sampler(spec: str, task: Task, y: np.ndarray, checker: CollisionChecker
         dataset = Dataset.load(arg)
         _check_robot(dataset.meta, task, f"dataset {arg}")
         return DatasetSampler(constraint, y, dataset.q, dataset.y, **common)
-    return _model_sampler(name, arg, task, y, options.get("refine", 0), common)
+    return _model_sampler(name, arg, task, y, options.get("refine", MODEL_REFINE), common)
 
 
 def _model_sampler(name: str, path: str, task: Task, y: np.ndarray, refine: int, common: dict) -> Sampler:

@@ -43,7 +43,7 @@ class PlannerSettings:
     margin: float = 0.05
     step: float = 0.1
     partial: bool = True
-    pool: int = 1024
+    pool: int = 2048
     pool_batch: int = 256
     candidates: int = 8
     validation_resolution: float = 0.005
@@ -87,6 +87,13 @@ class Tree:
         diff = self.q[:self.size] - q
         return int(np.argmin(np.einsum("ij,ij->i", diff, diff)))
 
+    def nearest_many(self, q: np.ndarray) -> np.ndarray:
+        """(B,) indices of the live nodes closest to each row of ``q (B, n)``."""
+        nodes = self.q[:self.size]
+        live = np.flatnonzero(np.isfinite(nodes[:, 0]))
+        d2 = np.einsum("ij,ij->i", nodes[live], nodes[live])[None] - 2 * q @ nodes[live].T
+        return live[np.argmin(d2, axis=1)]
+
     def branch(self, i: int) -> list[int]:
         """Node indices from the root to ``i``."""
         out = [i]
@@ -117,6 +124,8 @@ class Planner(ABC):
             raise ManifoldgenError(f"{self.name} takes {self.settings_type.__name__}, got "
                                    f"{type(self.settings).__name__}")
         self.settings.check()
+        if sampler is None:
+            raise ManifoldgenError(f"{self.name} needs a sampler (uniform, project, pg:DATASET or MODEL:DIR)")
         self.constraint, self.checker, self.sampler = constraint, checker, sampler
         self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
         self.local = make_local(local, constraint, self.y, checker, resolution, margin=self.settings.margin,
@@ -215,7 +224,7 @@ class Planner(ABC):
         if not len(slots):
             return None
         stones = self.pool.q[slots]
-        nodes = [tree.nearest(q) for q in stones]
+        nodes = tree.nearest_many(stones)
         i = self.local.first_valid(tree.q[nodes], stones)
         self.pool.free[slots if i < 0 else slots[:i + 1]] = False
         return None if i < 0 else tree.add(nodes[i], stones[i:i + 1])

@@ -10,7 +10,7 @@ from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint
 from manifoldgen.planning.base import PlannerSettings
 from manifoldgen.planning.rrt_connect import RRTConnect
-from manifoldgen.sampling import Sampler
+from manifoldgen.sampling import Sampler, UniformSampler
 
 
 @dataclass
@@ -22,15 +22,17 @@ class CBiRRTSettings(PlannerSettings):
 
 class CBiRRT(RRTConnect):
     """Constrained bidirectional RRT. Targets are the sampler's raw candidates, unchecked
-    (uniform in the joint limits with the ``uniform`` sampler, as in the paper); extensions
-    always use the ``project`` local planner (ConstrainedExtend), whatever ``local`` says."""
+    (uniform in the joint limits with the ``uniform`` sampler or none, as in the paper);
+    extensions always use the ``project`` local planner (ConstrainedExtend), whatever
+    ``local`` says."""
 
     name = "cbirrt"
     settings_type = CBiRRTSettings
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None, sampler: Sampler,
-                 *, local: str = "project", resolution: float = 0.05, seed: int = 0,
+    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
+                 sampler: Sampler | None = None, *, local: str = "project", resolution: float = 0.05, seed: int = 0,
                  settings: CBiRRTSettings | None = None):
+        sampler = UniformSampler(constraint, y, seed=seed) if sampler is None else sampler
         super().__init__(constraint, y, checker, sampler, local="project", resolution=resolution, seed=seed,
                          settings=settings)
         self._raw = np.zeros((0, constraint.robot.n))

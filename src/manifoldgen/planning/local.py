@@ -57,9 +57,19 @@ class LocalPlanner(ABC):
 
     def first_valid(self, starts: np.ndarray, ends: np.ndarray) -> int:
         """Index of the first straight segment ``starts[i] -> ends[i]`` ((m, n) each; the ends are
-        valid states) that is valid all along, or -1: one constraint evaluation for every
-        segment, then collisions segment by segment in order."""
-        pieces = [self.segment_states(a, b) for a, b in zip(starts, ends)]
+        valid states) that is valid all along, or -1. The first segment is checked alone (it
+        usually passes), the others together: one constraint evaluation, then collisions
+        segment by segment in order."""
+        if self._all_valid([self.segment_states(starts[0], ends[0])]) == 0:
+            return 0
+        if len(starts) == 1:
+            return -1
+        i = self._all_valid([self.segment_states(a, b) for a, b in zip(starts[1:], ends[1:])])
+        return -1 if i < 0 else i + 1
+
+    def _all_valid(self, pieces: list[np.ndarray]) -> int:
+        """Index of the first of ``pieces`` (states after a valid node, ending at a valid state)
+        whose every state is valid, or -1."""
         sizes = np.array([len(p) for p in pieces])
         states, last = np.concatenate(pieces), np.cumsum(sizes) - 1
         limit = np.full(len(states), 1.0 - self.margin)
