@@ -34,7 +34,7 @@ def main() -> None:
     models = args.models or [pretrained_model_dir()]
     out = args.output or Path(tempfile.mkdtemp(prefix="bench-sampling-"))
     results = run_sampling_bench(models, out, samples=args.samples, reference_rows=args.reference,
-                                 repeats=args.repeats)
+                                 repeats=args.repeats, threads=max(1, args.threads))
     print((out / "table.md").read_text())
     print("targets (panda pose, tolerance 0.01 m / 0.01 rad):")
     for name, entry in results["models"].items():

@@ -237,6 +237,6 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     from manifoldgen.bench.sampling import run_sampling_bench
     torch.set_num_threads(max(1, threads))
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
-                       repeats=repeats, seed=seed)
+                       repeats=repeats, seed=seed, threads=max(1, threads))
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")

@@ -30,8 +30,12 @@ COUNTS = (100, 1_000, 10_000, 100_000)
 
 
 def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, ...] = COUNTS, repeats: int = 7,
-                  seed: int = 0) -> dict[int, float]:
-    """Median wall time (ms) of ``model.sample(y, n)`` per n, after one warm-up call."""
+                  seed: int = 0, threads: int = 2) -> dict[int, float]:
+    """Median wall time (ms) of ``model.sample(y, n)`` per n on ``threads`` torch threads, after a warm-up.
+
+    The thread count is set here because pinocchio's parallel collision checks reset OpenMP's.
+    """
+    torch.set_num_threads(threads)
     generator = torch.Generator().manual_seed(seed)
     result = {}
     for n in counts:
@@ -58,7 +62,7 @@ def default_conditions(values: np.ndarray) -> tuple[list[float], list[float]]:
 def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples: int = 3000, refine: int = 3,
                        reference_rows: int = 3000, repeats: int = 7, counts: tuple[int, ...] = COUNTS,
                        seen: list[float] | None = None, unseen: list[float] | None = None, seed: int = 0,
-                       progress: bool = True) -> dict:
+                       threads: int = 2, progress: bool = True) -> dict:
     """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
@@ -84,7 +88,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
 
     results: dict = {"task": task.name, "robot": robot.name, "samples": samples, "refine": refine,
                      "reference_rows": reference_rows, "seen": seen, "unseen": unseen,
-                     "threads": torch.get_num_threads(), "models": {}}
+                     "threads": threads, "models": {}}
     valid_rows: dict[str, np.ndarray] = {}
     violations: dict[str, np.ndarray] = {}
     with progress_bar("models", total=len(models) * (len(conditions) + 1), enabled=progress) as bar:
@@ -92,7 +96,8 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
             name = _label(model, label, models)
             entry = {"dir": label, "model": model.name, "per_condition": {}}
             entry["time_ms"] = {str(n): t for n, t in
-                                time_sampling(model, np.array([seen[len(seen) // 2]]), counts, repeats, seed).items()}
+                                time_sampling(model, np.array([seen[len(seen) // 2]]), counts, repeats, seed,
+                                              threads).items()}
             bar.advance(1)
             generator = torch.Generator().manual_seed(seed)
             valid, viol = [], []

@@ -56,20 +56,24 @@ def plot_residuals(violations: dict[str, np.ndarray], path: str | Path) -> None:
 
 
 def plot_coverage(results: dict, path: str | Path) -> None:
-    """Raw validity and k-NN recall per condition value and model (unseen conditions hollow)."""
+    """Raw validity, k-NN recall and coverage per condition value and model (unseen conditions hollow)."""
     plt = _pyplot()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 3.6))
+    panels = (("raw", "raw within-tolerance rate"), ("recall", "k-NN recall vs reference"),
+              ("coverage", "k-NN coverage vs reference"))
     for name, entry in results["models"].items():
         items = sorted((float(y), r) for y, r in entry["per_condition"].items())
         ys = [y for y, _ in items]
-        line, = left.plot(ys, [r["raw"] for _, r in items], lw=1, label=name)
-        right.plot(ys, [r["recall"] for _, r in items], lw=1, color=line.get_color())
-        for ax, key in ((left, "raw"), (right, "recall")):
+        color = None
+        for ax, (key, _) in zip(axes, panels):
+            line, = ax.plot(ys, [r[key] for _, r in items], lw=1, label=name, color=color)
+            color = line.get_color()
             for y, r in items:
-                ax.plot(y, r[key], "o", color=line.get_color(), mfc=line.get_color() if r["seen"] else "white")
-    left.set_title("raw within-tolerance rate")
-    right.set_title("k-NN recall vs reference")
-    for ax in (left, right):
+                ax.plot(y, r[key], "o", color=color, mfc=color if r["seen"] else "white")
+    for ax, (_, title) in zip(axes, panels):
+        ax.set_title(title)
+    left = axes[0]
+    for ax in axes:
         ax.set_xlabel("condition (hollow: unseen)")
         ax.set_ylim(0, 1.02)
     left.legend(fontsize=8)
