@@ -209,12 +209,13 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     import torch
 
     from manifoldgen.models import load_model
-    from manifoldgen.sampling import sample_to_file
+    from manifoldgen.sampling import check_model_matches, sample_to_file
     torch.set_num_threads(2)
     if n <= 0:
         raise ManifoldgenError(f"-n must be a positive number of samples, got {n}")
     net = load_model(model_dir)
     task_obj = _task(task or net.meta.get("task", "pose"), robot or net.meta["robot"])
+    check_model_matches(net, task_obj.constraint)
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
