@@ -81,15 +81,19 @@ def outside_check(file) -> dict:
     tol = np.array([spec["tolerance"]["position"]] * len(axes) + [spec["tolerance"]["orientation"]] * 3)
     base = pin.neutral(model)
     for name, value in meta["locked"].items():
-        base[model.joints[model.getJointId(name)].idx_q] = value
-    idx = [model.joints[model.getJointId(j)].idx_q for j in meta["joints"]]
+        _set(model, base, name, value)
+    lower = np.array([model.lowerPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
+    upper = np.array([model.upperPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
+    bounded = np.array([model.joints[model.getJointId(j)].nq == 1 for j in meta["joints"]])
     worst, collisions, outside, states = 0.0, 0, 0, 0
     for a, b in zip(path[:-1], path[1:]):
         steps = max(1, int(np.ceil(np.abs(b - a).max() / 0.005)))
         for t in np.arange(steps + 1) / steps:
+            active = a + t * (b - a)
             q = base.copy()
-            q[idx] = a + t * (b - a)
-            outside += bool(np.any(q < model.lowerPositionLimit - 1e-9) or np.any(q > model.upperPositionLimit + 1e-9))
+            for name, value in zip(meta["joints"], active):
+                _set(model, q, name, value)
+            outside += bool(np.any(bounded & ((active < lower - 1e-9) | (active > upper + 1e-9))))
             pin.framesForwardKinematics(model, mdata, q)
             placement = mdata.oMf[frame]
             residual = np.concatenate([placement.translation[axes] - y, pin.log3(target.T @ placement.rotation)])
@@ -100,15 +104,25 @@ def outside_check(file) -> dict:
             "path": path}
 
 
+def _set(model, q: np.ndarray, name: str, value: float) -> None:
+    """One joint value into a pinocchio configuration (continuous joints store cos, sin)."""
+    joint = model.joints[model.getJointId(name)]
+    if joint.nq == 2:
+        q[joint.idx_q:joint.idx_q + 2] = np.cos(value), np.sin(value)
+    else:
+        q[joint.idx_q] = value
+
+
 def _apart(model, links, pair) -> bool:
     ja, jb = links[pair.first][0], links[pair.second][0]
     return ja != jb and model.parents[ja] != jb and model.parents[jb] != ja
 
 
-@pytest.mark.parametrize("scene,seed", [("wall", 0), ("wall", 1), ("maze", 0)])
-def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, scene, seed):
+@pytest.mark.parametrize("robot,scene,seed", [("panda", "wall", 0), ("panda", "wall", 1), ("panda", "maze", 0),
+                                              ("pr2", "wall", 0)])
+def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, robot, scene, seed):
     out = tmp_path / "p.npz"
-    result = runner.invoke(app, ["plan", "pose", "--robot", "panda", "--scene", scene, "--sampler", "project",
+    result = runner.invoke(app, ["plan", "pose", "--robot", robot, "--scene", scene, "--sampler", "project",
                                  "--planner", "rrtconnect", "--seed", str(seed), "--time", "60", "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert "solved in" in result.output and "waypoints" in result.output
@@ -116,7 +130,8 @@ def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, scene, see
     assert check["worst"] <= 1.0 and check["collisions"] == 0 and check["outside"] == 0
     assert check["states"] > len(check["path"])
     meta = check["meta"]
-    assert meta["condition"] == [0.5] and meta["joints"] == [f"panda_joint{i}" for i in range(1, 8)]
+    assert meta["robot"] == robot and len(meta["joints"]) == len(check["path"][0])
+    assert meta["condition"] == ([0.5] if robot == "panda" else [0.8])
     assert meta["result"]["solved"] and meta["validation"]["valid"]
     assert (out.with_suffix(".png")).stat().st_size > 10_000
     if scene == "maze":

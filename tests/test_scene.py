@@ -11,25 +11,30 @@ import pytest
 from manifoldgen.collision import CollisionChecker, touch_links
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import SCENES, Attached, Obstacle, Pose, Scene, get_scene
+from manifoldgen.tasks import get_task
 
 
-@pytest.mark.parametrize("name", ["wall", "maze"])
-def test_named_scene_queries_are_valid(panda_task, name):
-    scene = get_scene(panda_task, name)
-    checker = scene.checker(panda_task.robot)
+@pytest.mark.parametrize("task_name,robot,name", [(t, r, n) for (t, r), scenes in SCENES.items() for n in scenes])
+def test_named_scene_queries_are_valid(task_name, robot, name):
+    task = get_task(task_name, robot)
+    scene = get_scene(task, name)
+    checker = scene.checker(task.robot)
     ends = np.stack([scene.start, scene.goal])
-    assert panda_task.constraint.satisfied(ends, scene.condition).all()
-    assert panda_task.constraint.violation(ends, scene.condition).max() < 1e-3
+    assert task.constraint.satisfied(ends, scene.condition).all()
+    assert task.constraint.violation(ends, scene.condition).max() < 1e-3
     assert not checker.in_collision(ends).any()
-    assert scene.condition.tolist() in panda_task.condition.values.tolist()  # PG datasets hold rows there
-    # the robot base, which the planning group cannot move, is clear of every obstacle
-    geom = panda_task.robot.collision_model.copy()
+    assert scene.condition.tolist() in task.condition.values.tolist()  # PG datasets hold rows there
+    assert scene.robot == robot
+    # the robot parts fixed to the world (the base) are clear of every obstacle
+    geom = task.robot.collision_model.copy()
+    static = [i for i, g in enumerate(geom.geometryObjects) if g.parentJoint == 0]
     ids = [geom.addGeometryObject(o.geometry_object()) for o in scene.obstacles]
     for oid in ids:
-        geom.addCollisionPair(pin.CollisionPair(0, oid))
-    data, gdata = panda_task.robot.model.createData(), pin.GeometryData(geom)
-    assert not pin.computeCollisions(panda_task.robot.model, data, geom, gdata,
-                                     panda_task.robot.to_pinocchio(scene.start)[0], False)
+        for i in static:
+            geom.addCollisionPair(pin.CollisionPair(i, oid))
+    data, gdata = task.robot.model.createData(), pin.GeometryData(geom)
+    assert static and not pin.computeCollisions(task.robot.model, data, geom, gdata,
+                                                task.robot.to_pinocchio(scene.start)[0], False)
 
 
 def test_scene_ends_are_on_the_right_sides(panda_task):
@@ -148,4 +153,4 @@ def test_scene_lookup_errors(tmp_path, panda_task):
     (tmp_path / "broken.json").write_text("{")
     with pytest.raises(ManifoldgenError, match="not valid JSON"):
         get_scene(panda_task, str(tmp_path / "broken.json"))
-    assert set(SCENES[("pose", "panda")]) == {"wall", "maze"}
+    assert set(SCENES[("pose", "panda")]) == {"wall", "maze"} and set(SCENES[("pose", "pr2")]) == {"wall"}

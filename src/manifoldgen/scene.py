@@ -3,9 +3,9 @@
 An obstacle is a box (full extents), sphere, cylinder (along its local z) or mesh, placed
 by a pose (position + quaternion ``[x, y, z, w]``) in the world. A scene is written to
 and read from JSON; :meth:`Scene.to_meta` gives the obstacle list stored in path files,
-enough for an outside checker with pinocchio and coal alone. Named scenes (``wall``,
-``maze``) live in :data:`SCENES` with start and goal configurations computed once by
-projection and stored as numbers.
+enough for an outside checker with pinocchio and coal alone. Named scenes live in
+:data:`SCENES` (pose task: ``wall`` and ``maze`` for panda, ``wall`` for pr2) with start and
+goal configurations computed once by projection and stored as numbers.
 """
 
 from __future__ import annotations
@@ -228,10 +228,10 @@ class Scene:
 
     def checker(self, robot: Robot) -> CollisionChecker:
         """Self, robot-scene and tool collisions for ``robot``."""
+        obstacles = [o.geometry_object() for o in self.obstacles]
         if self.attached is None:
-            return CollisionChecker(robot, obstacles=[o.geometry_object() for o in self.obstacles])
-        return CollisionChecker(robot, obstacles=[o.geometry_object() for o in self.obstacles],
-                                attached=[self.attached.geometry_object(robot)],
+            return CollisionChecker(robot, obstacles=obstacles)
+        return CollisionChecker(robot, obstacles=obstacles, attached=[self.attached.geometry_object(robot)],
                                 touch=[self.attached.resolved_touch_links(robot)])
 
     def to_meta(self, robot: Robot | None = None) -> list[dict]:
@@ -242,6 +242,8 @@ class Scene:
             tool = self.attached.to_dict()
             if robot is not None:
                 tool["touch_links"] = self.attached.resolved_touch_links(robot)
+                tool["parent_joint"] = robot.model.names[robot.model.frames[robot.frame_id(self.attached.frame)]
+                                                         .parentJoint]
             out.append(tool)
         return out
 
@@ -317,8 +319,21 @@ def panda_maze() -> Scene:
     return Scene("maze", obstacles, _down_tool(), start, goal, np.array([0.5]), "panda")
 
 
+def pr2_wall() -> Scene:
+    """PR2 (torso + right arm), gripper level at 0.8 m: two 95 cm walls 50 cm apart in front of
+    the right arm; the goal is between them, the start outside the right one."""
+    obstacles = [_box("wall_left", [0.75, 0.0, 0.475], [0.40, 0.04, 0.95]),
+                 _box("wall_right", [0.75, -0.5, 0.475], [0.40, 0.04, 0.95])]
+    start = np.array([0.30776986, -0.96784165, 0.55133009, -1.10841467, -0.50089438, -0.18903239, -0.57103583,
+                      1.03272315])
+    goal = np.array([0.30514929, -0.52066061, 0.81869265, -1.06762326, -1.13253237, 2.18470884, -0.39573349,
+                     -1.54070493])
+    return Scene("wall", obstacles, None, start, goal, np.array([0.8]), "pr2")
+
+
 SCENES: dict[tuple[str, str], dict[str, Callable[[], Scene]]] = {
     ("pose", "panda"): {"wall": panda_wall, "maze": panda_maze},
+    ("pose", "pr2"): {"wall": pr2_wall},
 }
 
 
