@@ -193,10 +193,17 @@ class Planner(ABC):
         path = np.concatenate([start[None], waypoints])
         return path if self._accept(path).valid else None
 
-    def _start_pool(self, trees: list[Tree]) -> None:
-        """Stepping stones for ``interpolate``; ``project`` steers toward any target."""
-        self.pool = (SamplePool(self._draw_many, trees, self.settings.range, self.settings.pool,
-                                self.settings.pool_batch) if self.local.name == "interpolate" else None)
+    def _start_pool(self, trees: list[Tree], deadline: float) -> None:
+        """Stepping stones for ``interpolate`` (drawn batch by batch until the deadline at the
+        latest); ``project`` steers toward any target."""
+        if self.local.name != "interpolate":
+            self.pool = None
+            return
+        self.pool = SamplePool(self._draw_many, trees, self.settings.range, self.settings.pool_batch)
+        for _ in range(0, self.settings.pool, self.settings.pool_batch):
+            if time.perf_counter() > deadline:
+                break
+            self.pool.draw(self.settings.pool_batch)
 
     def _grow(self, k: int, target: np.ndarray, keep: bool = True) -> int | None:
         """Extend tree ``k`` toward ``target`` from its nearest node: the new node or None.
@@ -268,21 +275,20 @@ class SamplePool:
     A straight segment toward a far sample leaves the manifold at once, so a tree grown with
     ``interpolate`` cannot step "toward" a random sample the way RRT truncates. Instead it
     steps to the pooled sample, among those within ``radius`` of the tree, that lies
-    closest to the random sample: steering on the manifold, through samples. The pool
-    starts with ``initial`` samples and draws ``batch`` more whenever no sample is within
-    reach of a tree; the distance of every pooled sample to each tree is kept up to date
-    with new nodes only. Beyond ``capacity`` the oldest samples leave.
+    closest to the random sample: steering on the manifold, through samples. The planner
+    fills the pool first, and it draws ``batch`` more whenever no sample is within reach of
+    a tree; the distance of every pooled sample to each tree is kept up to date with new
+    nodes only. Beyond ``capacity`` the oldest samples leave.
     """
 
-    def __init__(self, draw: Callable[[int], np.ndarray], trees: list[Tree], radius: float, initial: int,
-                 batch: int, capacity: int = 16384):
+    def __init__(self, draw: Callable[[int], np.ndarray], trees: list[Tree], radius: float, batch: int,
+                 capacity: int = 16384):
         self._draw, self.trees, self.radius, self.batch = draw, trees, radius, batch
         self.q = np.zeros((capacity, trees[0].q.shape[1]))
         self.free = np.zeros(capacity, dtype=bool)  # holds an unused sample
         self.gap = np.full((capacity, len(trees)), np.inf)  # distance to the closest node of each tree
         self.synced = [len(t) for t in trees]  # nodes of each tree accounted in gap
         self.head = 0
-        self.draw(initial)
 
     def draw(self, count: int) -> None:
         """Add ``count`` new samples from the planner's sampler."""

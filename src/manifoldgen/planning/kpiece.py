@@ -46,7 +46,7 @@ class KPIECE(Planner):
         grid = _Grid(axes, np.abs(axes) @ (robot.upper - robot.lower) / settings.cells)
         tree = Tree(start)
         self.trees = [tree]
-        self._start_pool(self.trees)
+        self._start_pool(self.trees, deadline)
         grid.add(0, start)
         while time.perf_counter() < deadline:
             self.iterations += 1

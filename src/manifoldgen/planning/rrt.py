@@ -32,7 +32,7 @@ class RRT(Planner):
     def _solve(self, start, goal, deadline):
         tree = Tree(start)
         self.trees = [tree]
-        self._start_pool(self.trees)
+        self._start_pool(self.trees, deadline)
         while time.perf_counter() < deadline:
             self.iterations += 1
             to_goal = self.rng.random() < self.settings.goal_bias

@@ -24,7 +24,7 @@ class RRTConnect(Planner):
 
     def _solve(self, start, goal, deadline):
         trees = self.trees = [Tree(start), Tree(goal)]
-        self._start_pool(trees)
+        self._start_pool(trees, deadline)
         while time.perf_counter() < deadline:
             self.iterations += 1
             side = self.iterations % 2
