@@ -8,6 +8,7 @@ import numpy as np
 
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import PlannerSettings
 from manifoldgen.planning.rrt_connect import RRTConnect
 from manifoldgen.sampling import Sampler, UniformSampler
@@ -15,9 +16,14 @@ from manifoldgen.sampling import Sampler, UniformSampler
 
 @dataclass
 class CBiRRTSettings(PlannerSettings):
-    """candidates: raw sampler candidates generated per batch."""
+    """targets: raw sampler candidates generated per batch (the random targets)."""
 
-    candidates: int = 64
+    targets: int = 64
+
+    def check(self) -> None:
+        super().check()
+        if self.targets <= 0:
+            raise ManifoldgenError(f"targets must be positive, got {self.targets}")
 
 
 class CBiRRT(RRTConnect):
@@ -39,7 +45,7 @@ class CBiRRT(RRTConnect):
 
     def _target(self) -> np.ndarray:
         if not len(self._raw):
-            self._raw = self.sampler.candidates(self.settings.candidates)
+            self._raw = self.sampler.candidates(self.settings.targets)
             self.sampler.stats.generated += len(self._raw)
         self.samples += 1
         q, self._raw = self._raw[0], self._raw[1:]
