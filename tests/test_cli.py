@@ -48,3 +48,11 @@ def test_bad_input_is_one_clear_line(args, message, tmp_path):
 def test_missing_output_directory(tmp_path):
     result = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(tmp_path / "no" / "x.npz")])
     assert result.exit_code == 2 and "does not exist" in result.output
+
+
+def test_tasks_lists_every_robot_with_its_range():
+    result = runner.invoke(app, ["tasks"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    for robot, low, high in [("panda", "0.2", "0.7"), ("pr2", "0.5", "1"), ("centauro", "-0.2", "0.3")]:
+        line = next(line for line in result.output.splitlines() if f" {robot} " in line)
+        assert f"[{low}, {high}] m" in line

@@ -72,6 +72,18 @@ def collect(task: str = typer.Argument(..., help="Task name, e.g. pose"),
 
 @app.command()
 @friendly
+def tasks():
+    """List the named tasks, their robots, planning groups and condition ranges."""
+    from manifoldgen.tasks import TASKS, get_task
+    for name, robots in TASKS.items():
+        for robot in robots:
+            t = get_task(name, robot)
+            console.print(f"{name:<6} {robot:<9} {t.robot.n:>2} joints  {t.condition.describe()}; training values "
+                          f"{', '.join(f'{v:g}' for v in t.condition.values.ravel())}")
+
+
+@app.command()
+@friendly
 def demo(output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
          seed: int = typer.Option(0)):
     """The whole pipeline on the embedded default (panda pose task)."""
@@ -112,64 +124,6 @@ def plan(task: str = typer.Argument(..., help="Task name, e.g. pose"),
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations -> {output}, {picture}")
     if not result.solved:
         raise typer.Exit(1)
-
-
-def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
-                    methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
-                    baseline: str | None, task: str, robot: str) -> None:
-    from manifoldgen.bench.planning import PAPER_LIMITS, Experiment, default_baseline, default_methods, run_bench
-    paper = PAPER_LIMITS[scene]
-    experiment = Experiment(scene, task, robot, paper["time_limit"] if time_limit is None else time_limit, seed)
-    methods = methods or default_methods(models or None)
-    table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
-                         workers=workers, resume=resume, pg_rows=pg_rows,
-                         baseline=baseline or default_baseline(methods))
-    console.print(table)
-    console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")
-
-
-_METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
-                 "cvae=rrtconnect:interpolate@cvae:DIR, "
-                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR "
-                 "(default: the shipped model, PG, CBiRRT, OMPL Projected/Atlas/TangentBundle, uniform)")
-
-
-@bench_app.command("wall")
-@friendly
-def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: the paper's 1000)"),
-               workers: int = typer.Option(1, help="Parallel worker processes"),
-               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 200)"),
-               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
-               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
-               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
-                                                "methods (repeatable; default: the shipped model)"),
-               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
-               seed: int = typer.Option(0, help="Run r uses seed + r"),
-               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
-               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
-    """Table II: the wall scene, every method on the same query and seeds."""
-    _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot)
-
-
-@bench_app.command("maze")
-@friendly
-def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: the paper's 100)"),
-               workers: int = typer.Option(1, help="Parallel worker processes"),
-               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default: the paper's 200)"),
-               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
-               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
-               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
-                                                "methods (repeatable; default: the shipped model)"),
-               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
-               seed: int = typer.Option(0, help="Run r uses seed + r"),
-               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
-               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
-    """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
-    _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot)
 
 
 @app.command()
@@ -241,3 +195,61 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                        repeats=repeats, seed=seed, threads=max(1, threads))
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
+
+
+def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
+                    methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
+                    baseline: str | None, task: str, robot: str) -> None:
+    from manifoldgen.bench.planning import PAPER_LIMITS, Experiment, default_baseline, default_methods, run_bench
+    paper = PAPER_LIMITS[scene]
+    experiment = Experiment(scene, task, robot, paper["time_limit"] if time_limit is None else time_limit, seed)
+    methods = methods or default_methods(models or None)
+    table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
+                         workers=workers, resume=resume, pg_rows=pg_rows,
+                         baseline=baseline or default_baseline(methods))
+    console.print(table)
+    console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")
+
+
+_METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
+                 "cvae=rrtconnect:interpolate@cvae:DIR, "
+                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR "
+                 "(default: the shipped model, PG, CBiRRT, OMPL Projected/Atlas/TangentBundle, uniform)")
+
+
+@bench_app.command("wall")
+@friendly
+def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: the paper's 1000)"),
+               workers: int = typer.Option(1, help="Parallel worker processes"),
+               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 200)"),
+               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
+               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
+               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
+                                                "methods (repeatable; default: the shipped model)"),
+               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
+               seed: int = typer.Option(0, help="Run r uses seed + r"),
+               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
+               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
+               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
+    """Table II: the wall scene, every method on the same query and seeds."""
+    _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                    task, robot)
+
+
+@bench_app.command("maze")
+@friendly
+def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: the paper's 100)"),
+               workers: int = typer.Option(1, help="Parallel worker processes"),
+               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default: the paper's 200)"),
+               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
+               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
+               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
+                                                "methods (repeatable; default: the shipped model)"),
+               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
+               seed: int = typer.Option(0, help="Run r uses seed + r"),
+               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
+               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
+               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
+    """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
+    _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                    task, robot)
