@@ -2,7 +2,10 @@
 
 Each row iterates ``dq = -J^T (J J^T + lambda I)^-1 F`` with ``lambda = |F|^2 + damping``
 (Sugihara's choice: Gauss-Newton near the manifold, gradient-like far from it), a
-capped step, and clipping to the joint limits. Only unconverged rows are updated.
+capped step, and clipping to the joint limits. A joint resting on a limit that the step
+would push it through is taken out of the step (its Jacobian column zeroed, the step
+recomputed), so the other joints do the work instead of the clip undoing it. Only
+unconverged rows are updated.
 """
 
 from __future__ import annotations
@@ -48,9 +51,19 @@ def project(constraint: Constraint, q: np.ndarray, y: np.ndarray, *, tol: float 
         if len(active) == 0 or it == max_iters:
             break
         lam = np.sum(F * F, axis=1) + damping
-        A = J @ np.transpose(J, (0, 2, 1)) + lam[:, None, None] * np.eye(F.shape[1])
-        dq = -np.einsum("bmn,bm->bn", J, np.linalg.solve(A, F[..., None])[..., 0])
+        dq = _step(J, F, lam)
+        qa = q[active]
+        blocked = ((qa <= robot.lower + 1e-9) & (dq < 0)) | ((qa >= robot.upper - 1e-9) & (dq > 0))
+        rows = blocked.any(axis=1)
+        if rows.any():
+            dq[rows] = _step(np.where(blocked[rows, None, :], 0.0, J[rows]), F[rows], lam[rows])
         norm = np.linalg.norm(dq, axis=1, keepdims=True)
         dq *= np.minimum(1.0, max_step / np.maximum(norm, 1e-12))
         q[active] = np.clip(q[active] + dq, robot.lower, robot.upper)
     return Projection(q, residual <= tol, iterations, residual)
+
+
+def _step(J: np.ndarray, F: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Damped least-squares step (B, n) for Jacobians (B, m, n), residuals (B, m), damping (B,)."""
+    A = J @ np.transpose(J, (0, 2, 1)) + lam[:, None, None] * np.eye(F.shape[1])
+    return -np.einsum("bmn,bm->bn", J, np.linalg.solve(A, F[..., None])[..., 0])
