@@ -31,8 +31,8 @@ class PlannerSettings:
     """Knobs every planner shares.
 
     range: longest extension (rad, joint-space Euclidean); margin: intermediate states of
-    a checked segment must stay within (1 - margin) x tolerance; step: distance between
-    projected states (``project``); partial: ``interpolate`` keeps the valid part of a
+    a checked segment must stay within (1 - margin) x tolerance; step: longest distance
+    between projected states (``project``, halved where a segment fails); partial: ``interpolate`` keeps the valid part of a
     blocked extension; pool / pool_batch: ``interpolate`` stepping stones drawn up front /
     whenever a tree has none within range (see :class:`SamplePool`); candidates: stepping
     stones checked (in one batch) per extension; validation_resolution: the final dense
@@ -41,7 +41,7 @@ class PlannerSettings:
 
     range: float = 0.6
     margin: float = 0.05
-    step: float = 0.1
+    step: float = 0.4
     partial: bool = True
     pool: int = 2048
     pool_batch: int = 256

@@ -2,8 +2,8 @@
 
 ``interpolate`` checks the straight segment every ``resolution`` rad for collision and
 constraint tolerance (MoveIt with path constraints, the paper). ``project`` walks toward
-the target in steps of ``step`` rad, projecting every step onto the manifold (CBiRRT,
-OMPL's ProjectedStateSpace), each short segment checked like ``interpolate``. Checks run
+the target in steps of at most ``step`` rad, projecting every step onto the manifold
+(CBiRRT, OMPL's ProjectedStateSpace), each short segment checked like ``interpolate``. Checks run
 on whole segments at once: one ``violation`` call, then collisions along the valid
 prefix in order, stopping at the first. Intermediate states must stay within
 ``(1 - margin)`` of the tolerance, so that the final dense validation (finer resolution)
@@ -28,7 +28,7 @@ class LocalPlanner(ABC):
     name: ClassVar[str]
 
     def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
-                 resolution: float = 0.05, *, margin: float = 0.05, partial: bool = True, step: float = 0.1):
+                 resolution: float = 0.05, *, margin: float = 0.05, partial: bool = True, step: float = 0.4):
         if resolution <= 0 or step <= 0 or not 0 <= margin < 1:
             raise ManifoldgenError(f"local planner needs resolution > 0, step > 0 and 0 <= margin < 1, got "
                                    f"{resolution}, {step}, {margin}")
@@ -120,33 +120,39 @@ class Interpolate(LocalPlanner):
 
 
 class Project(LocalPlanner):
-    """Steps of ``step`` toward the target, each projected onto the manifold and checked."""
+    """Steps toward the target, each projected onto the manifold and checked; a step whose
+    segment fails is retried at half the length (down to ``resolution``), and steps grow
+    back to ``step`` after a success, so the walk is long-legged where the manifold is flat."""
 
     name = "project"
     precision: float = 0.01  # projections converge to this fraction of the smallest tolerance
     max_iters: int = 20
 
     def steer(self, a, b, max_distance=np.inf):
-        waypoints, q, travelled = [], a, 0.0
+        waypoints, q, travelled, length = [], a, 0.0, self.step
         while travelled < max_distance:
             gap = float(np.linalg.norm(b - q))
-            if gap <= self.step and self.constraint.violation(b, self.y)[0] <= 1.0:
-                if not self._whole(q, b):
-                    break
-                waypoints.append(b)
-                return np.array(waypoints), True
-            target = q + (b - q) * min(1.0, self.step / max(gap, 1e-12))
-            projected = project(self.constraint, target[None], self.y, max_iters=self.max_iters,
-                                tol=self.precision * float(self.constraint.tolerance.min()))
-            self.projections += 1
-            nxt = projected.q[0]
-            moved = float(np.linalg.norm(nxt - q))
-            if (not projected.converged[0] or moved > 2 * self.step or moved < 1e-9
-                    or np.linalg.norm(b - nxt) >= gap or not self._whole(q, nxt)):
+            if gap <= length and self.constraint.violation(b, self.y)[0] <= 1.0:
+                if self._whole(q, b):
+                    waypoints.append(b)
+                    return np.array(waypoints), True
+            else:
+                target = q + (b - q) * min(1.0, length / max(gap, 1e-12))
+                projected = project(self.constraint, target[None], self.y, max_iters=self.max_iters,
+                                    tol=self.precision * float(self.constraint.tolerance.min()))
+                self.projections += 1
+                nxt = projected.q[0]
+                moved = float(np.linalg.norm(nxt - q))
+                if not projected.converged[0] or moved > 2 * length or moved < 1e-9 or np.linalg.norm(b - nxt) >= gap:
+                    break  # the manifold leads no closer to b from here
+                if self._whole(q, nxt):
+                    waypoints.append(nxt)
+                    travelled += moved
+                    q, length = nxt, min(self.step, 2 * length)
+                    continue
+            if length / 2 < self.resolution:
                 break
-            waypoints.append(nxt)
-            travelled += moved
-            q = nxt
+            length /= 2
         return (np.array(waypoints) if waypoints else np.zeros((0, len(a)))), False
 
     def _whole(self, a: np.ndarray, b: np.ndarray) -> bool:
