@@ -7,7 +7,7 @@ import pytest
 
 from manifoldgen.bench.planning import (Experiment, Method, default_baseline, drop_truncated_line, read_records,
                                         run_bench, run_once)
-from manifoldgen.bench.report import summarize
+from manifoldgen.bench.report import markdown_table, summarize
 from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import Scene
@@ -86,6 +86,9 @@ def test_summary_counts_failures_at_the_limit():
     assert (s.runs, s.solved, s.errors, s.success) == (2, 1, 1, 50.0)
     assert (s.time_mean, s.time_min, s.time_max, s.time_median) == (5.5, 1.0, 10.0, 5.5)
     assert (s.cpu_median, s.length_mean, s.samples_mean, s.worst_violation) == (0.8, 2.0, 5.0, 0.5)
+    fast = [{**r, "method": "b", "time_s": 0.5, "solved": True} for r in records]
+    table = markdown_table(summarize(records + fast), baseline="a")
+    assert "| b | 2 | 100.0 |" in table and "≥11.0x |" in table  # a's median run failed: a lower bound
 
 
 def test_truncated_last_line_is_ignored(tmp_path):

@@ -73,8 +73,11 @@ def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) 
     """The paper's table (average / min / max time, success) plus median wall time, median CPU time of
     the solved runs (the planner process's own CPU, insensitive to other load), path length, samples,
     projections and the worst constraint violation (x tolerance) along solved paths; with
-    ``baseline`` a column of median speed-ups over that method."""
-    reference = next((s.time_median for s in summaries if s.method == baseline), None)
+    ``baseline`` a column of median speed-ups over that method (marked as lower bounds, >=, when
+    the baseline's median run failed and so counts at the time limit)."""
+    base = next((s for s in summaries if s.method == baseline), None)
+    reference = None if base is None else base.time_median
+    bound = "≥" if base is not None and base.success <= 50 else ""  # its median run failed: a lower bound
     header = ["Method", "Runs", "Success (%)", "Mean time (s)", "Min (s)", "Max (s)", "Median (s)",
               "Median CPU, solved (s)", "Path length (rad)", "Samples drawn", "Projections", "Worst violation (x tol)"]
     if reference is not None:
@@ -85,7 +88,7 @@ def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) 
                _num(s.time_median), _num(s.cpu_median), _num(s.length_mean), _num(s.samples_mean),
                _num(s.projections_mean), _num(s.worst_violation)]
         if reference is not None:
-            row.append(f"{reference / s.time_median:.1f}x" if s.time_median > 0 else "-")
+            row.append(f"{bound}{reference / s.time_median:.1f}x" if s.time_median > 0 else "-")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
