@@ -134,7 +134,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
           output: Path = typer.Option(..., "-o", "--output", help="Model directory to write"),
           epochs: int = typer.Option(None, help="Maximum epochs (default: the model's)"),
           resume: bool = typer.Option(False, help="Continue an interrupted run from its checkpoint"),
-          threads: int = typer.Option(2, help="torch CPU threads")):
+          threads: int = typer.Option(1, help="torch CPU threads (one is as fast for these small MLPs and never spins against other processes)")):
     """Train a conditional generative model (checkpoints every epoch; --resume continues)."""
     import torch
 
