@@ -4,118 +4,23 @@ alone), and one clear error per bad input."""
 from __future__ import annotations
 
 import json
+import sys
+from pathlib import Path
 
-import coal
 import numpy as np
-import pinocchio as pin
 import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
 from manifoldgen.data import collect
 from manifoldgen.models import CVAE
-from manifoldgen.robot import resolve_robot
 from manifoldgen.scene import get_scene
 from manifoldgen.tasks import get_task
 
 runner = CliRunner()
-
-
-def _se3(pose: dict) -> pin.SE3:
-    x, y, z, w = pose["quaternion"]
-    return pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), np.array(pose["position"], float))
-
-
-def _shape(obj: dict):
-    if obj["type"] == "box":
-        return coal.Box(*obj["size"])
-    if obj["type"] == "sphere":
-        return coal.Sphere(obj["radius"])
-    if obj["type"] == "cylinder":
-        return coal.Cylinder(obj["radius"], obj["length"])
-    return coal.MeshLoader().load(obj["mesh"], np.array(obj["scale"], float))
-
-
-def outside_check(file) -> dict:
-    """Recheck a path file from its own contents: every segment at 0.005 rad against the pose
-    constraint, the joint limits, self-collision (SRDF and adjacent pairs skipped) and the
-    recorded scene (obstacles against every robot link; the tool against the obstacles and
-    the links outside its touch links)."""
-    data = np.load(file, allow_pickle=False)
-    meta, path = json.loads(str(data["meta"])), data["path"]
-    urdf, srdf = resolve_robot(meta["robot"])
-    model = pin.buildModelFromUrdf(str(urdf))
-    geom = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION,
-                                 package_dirs=[str(urdf.parents[4])])
-    geom.addAllCollisionPairs()
-    pin.removeCollisionPairs(model, geom, str(srdf))
-    links = [(g.parentJoint, model.frames[g.parentFrame].name) for g in geom.geometryObjects]
-    keep = [(p.first, p.second) for p in geom.collisionPairs if _apart(model, links, p)]
-    geom.removeAllCollisionPairs()
-    for a, b in keep:
-        geom.addCollisionPair(pin.CollisionPair(a, b))
-    robot_ids = range(len(links))
-    obstacles, tools = [], []
-    for obj in meta["scene"]:
-        if "attached_to" in obj:
-            frame = model.frames[model.getFrameId(obj["attached_to"])]
-            tools.append((geom.addGeometryObject(pin.GeometryObject(obj["name"], frame.parentJoint, frame.placement
-                                                                    * _se3(obj["pose"]), _shape(obj))),
-                          set(obj["touch_links"])))
-        else:
-            obstacles.append(geom.addGeometryObject(pin.GeometryObject(obj["name"], 0, _se3(obj["pose"]),
-                                                                       _shape(obj))))
-    for oid in obstacles:
-        for i in robot_ids:
-            geom.addCollisionPair(pin.CollisionPair(i, oid))
-    for tid, touch in tools:
-        for i in robot_ids:
-            if links[i][1] not in touch:
-                geom.addCollisionPair(pin.CollisionPair(i, tid))
-        for oid in obstacles:
-            geom.addCollisionPair(pin.CollisionPair(tid, oid))
-    gdata, mdata = pin.GeometryData(geom), model.createData()
-    spec, y = meta["constraint"], np.array(meta["condition"])
-    frame, target = model.getFrameId(spec["frame"]), np.array(spec["rotation"])
-    axes = ["xyz".index(a) for a in spec["position_axes"]]
-    tol = np.array([spec["tolerance"]["position"]] * len(axes) + [spec["tolerance"]["orientation"]] * 3)
-    base = pin.neutral(model)
-    for name, value in meta["locked"].items():
-        _set(model, base, name, value)
-    lower = np.array([model.lowerPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
-    upper = np.array([model.upperPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
-    bounded = np.array([model.joints[model.getJointId(j)].nq == 1 for j in meta["joints"]])
-    worst, collisions, outside, states = 0.0, 0, 0, 0
-    for a, b in zip(path[:-1], path[1:]):
-        steps = max(1, int(np.ceil(np.abs(b - a).max() / 0.005)))
-        for t in np.arange(steps + 1) / steps:
-            active = a + t * (b - a)
-            q = base.copy()
-            for name, value in zip(meta["joints"], active):
-                _set(model, q, name, value)
-            outside += bool(np.any(bounded & ((active < lower - 1e-9) | (active > upper + 1e-9))))
-            pin.framesForwardKinematics(model, mdata, q)
-            placement = mdata.oMf[frame]
-            residual = np.concatenate([placement.translation[axes] - y, pin.log3(target.T @ placement.rotation)])
-            worst = max(worst, float(np.max(np.abs(residual) / tol)))
-            collisions += pin.computeCollisions(model, mdata, geom, gdata, q, True)
-            states += 1
-    return {"worst": worst, "collisions": collisions, "outside": outside, "states": states, "meta": meta,
-            "path": path}
-
-
-def _set(model, q: np.ndarray, name: str, value: float) -> None:
-    """One joint value into a pinocchio configuration (continuous joints store cos, sin)."""
-    joint = model.joints[model.getJointId(name)]
-    if joint.nq == 2:
-        q[joint.idx_q:joint.idx_q + 2] = np.cos(value), np.sin(value)
-    else:
-        q[joint.idx_q] = value
-
-
-def _apart(model, links, pair) -> bool:
-    ja, jb = links[pair.first][0], links[pair.second][0]
-    return ja != jb and model.parents[ja] != jb and model.parents[jb] != ja
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+sys.path.insert(0, str(EXAMPLES))
+from check_path import outside_check  # noqa: E402  (the standalone checker users run)
 
 
 @pytest.mark.parametrize("robot,scene,seed", [("panda", "wall", 0), ("panda", "wall", 1), ("panda", "maze", 0),
