@@ -42,9 +42,9 @@ def check_output_path(path: str | Path) -> Path:
     return path
 
 
-def save_npz(path: str | Path, meta: dict, **arrays: np.ndarray) -> None:
-    """Atomically write ``arrays`` and ``meta`` (stored as a JSON string) to an .npz file."""
-    _atomic(Path(path), lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
+def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:
+    """Atomically write ``arrays`` (any names, ``path`` included) and ``meta`` (a JSON string) to an .npz."""
+    _atomic(Path(file), lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
 
 
 def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[str, np.ndarray]]:

@@ -10,14 +10,12 @@ placement and touch links).
 from __future__ import annotations
 
 import difflib
-import io
-import json
 from pathlib import Path
 
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_bytes, check_output_path
+from manifoldgen.io import check_output_path, save_npz
 from manifoldgen.planning.base import Planner
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.smoothing import shortcut
@@ -70,8 +68,5 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
 
 
 def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
-    """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string), the layout of
-    :func:`manifoldgen.io.save_npz` (whose first parameter is also called ``path``)."""
-    buffer = io.BytesIO()
-    np.savez(buffer, meta=np.array(json.dumps(meta)), path=result.path)
-    atomic_write_bytes(check_output_path(output), buffer.getvalue())
+    """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string)."""
+    save_npz(check_output_path(output), meta, path=result.path)
