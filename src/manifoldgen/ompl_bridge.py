@@ -42,7 +42,7 @@ from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.planning.validate import state_problem, validate_path
+from manifoldgen.planning.validate import check_query_state, validate_path
 from manifoldgen.sampling import Sampler
 
 SPACES = ("projected", "atlas", "tangent", "joint")
@@ -259,7 +259,8 @@ class OmplPlanner:
         if not np.isfinite(time_limit) or time_limit <= 0:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
         n = self.constraint.robot.n
-        start, goal = (self._query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
+        start, goal = (check_query_state(q, what, self.constraint, self.y, self.checker)
+                       for q, what in ((start, "start"), (goal, "goal")))
         _seed_ompl(self.seed)
         began = time.perf_counter()
         ompl_constraint = None if self.space == "joint" else OmplConstraint(
@@ -320,17 +321,6 @@ class OmplPlanner:
         projections = ompl_constraint.projections if ompl_constraint is not None else 0
         return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, int(data.numVertices()), drawn,
                           projections, self.name, path_length(path) if solved else 0.0, extras)
-
-    def _query_state(self, q: np.ndarray, what: str) -> np.ndarray:
-        n = self.constraint.robot.n
-        q = np.asarray(q, dtype=float)
-        if q.shape != (n,) or not np.all(np.isfinite(q)):
-            raise ManifoldgenError(f"{what} must be {n} finite joint values, got shape {q.shape}")
-        problem = state_problem(q, self.constraint, self.y, self.checker)
-        if problem:
-            raise ManifoldgenError(f"{what} configuration {problem}; choose a valid {what} (for example by "
-                                   "projecting it onto the constraint)")
-        return q
 
 
 def _seed_ompl(seed: int) -> None:

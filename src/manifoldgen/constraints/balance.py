@@ -14,8 +14,10 @@ from manifoldgen.robot import Robot
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
-    """(P, 2) -> (H, 2) hull vertices in counter-clockwise order (monotone chain)."""
-    pts = sorted(map(tuple, np.asarray(points, float)))
+    """(P, 2) -> (H, 2) hull vertices, counter-clockwise (Andrew's monotone chain)."""
+    pts = sorted(set(map(tuple, np.round(np.asarray(points, float), 9))))
+    if len(pts) < 3:
+        return np.array(pts)
 
     def turn(o, a, b):
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])

@@ -22,7 +22,7 @@ from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.local import make_local
 from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.planning.validate import PathReport, state_problem, validate_path
+from manifoldgen.planning.validate import PathReport, check_query_state, validate_path
 from manifoldgen.sampling import Sampler
 
 
@@ -140,7 +140,8 @@ class Planner(ABC):
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
         if not np.isfinite(time_limit) or time_limit <= 0:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
-        start, goal = self._query_state(start, "start"), self._query_state(goal, "goal")
+        start, goal = (check_query_state(q, what, self.constraint, self.y, self.checker)
+                       for q, what in ((start, "start"), (goal, "goal")))
         before = self.sampler.stats.to_dict()
         local_before = (self.local.states_checked, self.local.projections)
         self.iterations = self.samples = self.rejected = 0
@@ -174,18 +175,6 @@ class Planner(ABC):
         return {}
 
     # ---------------------------------------------------------------- helpers
-    def _query_state(self, q: np.ndarray, what: str) -> np.ndarray:
-        n = self.constraint.robot.n
-        q = np.asarray(q, dtype=float)
-        if q.shape != (n,) or not np.all(np.isfinite(q)):
-            raise ManifoldgenError(f"{what} must be {n} finite joint values, got shape {q.shape}")
-        problem = state_problem(q, self.constraint, self.y, self.checker)
-        if problem:
-            fix = (f"choose a collision-free {what} or move the obstacle" if problem.startswith("is in collision")
-                   else f"choose a {what} that satisfies the constraint (project it onto the manifold)")
-            raise ManifoldgenError(f"{what} configuration {problem}; {fix}")
-        return q
-
     def _direct(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         waypoints = self.local.connect(start, goal)
         if waypoints is None:

@@ -98,3 +98,18 @@ def state_problem(q: np.ndarray, constraint: Constraint, y: np.ndarray, checker:
         names = ", ".join(f"{a} with {b}" for a, b in pairs[:3]) or "a checked pair"
         return f"is in collision: {names}"
     return None
+
+
+def check_query_state(q: np.ndarray, what: str, constraint: Constraint, y: np.ndarray,
+                      checker: CollisionChecker | None) -> np.ndarray:
+    """A start or goal ``q (n,)`` as floats; a clear error if it is malformed, off the manifold or colliding."""
+    n = constraint.robot.n
+    q = np.asarray(q, dtype=float)
+    if q.shape != (n,) or not np.all(np.isfinite(q)):
+        raise ManifoldgenError(f"{what} must be {n} finite joint values, got shape {q.shape}")
+    problem = state_problem(q, constraint, y, checker)
+    if problem:
+        fix = (f"choose a collision-free {what} or move the obstacle" if problem.startswith("is in collision")
+               else f"choose a {what} that satisfies the constraint (project it onto the manifold)")
+        raise ManifoldgenError(f"{what} configuration {problem}; {fix}")
+    return q

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from manifoldgen.constraints.balance import convex_hull
 from manifoldgen.planning.validate import densify
 from manifoldgen.robot import Robot
 from manifoldgen.scene import Obstacle, Scene
@@ -30,10 +31,10 @@ def plot_path(path: np.ndarray, robot: Robot, frame: str, scene: Scene, out: str
     fig, axes = plt.subplots(1, 2, figsize=(11, 5))
     for ax, (name, i, j, xlabel, ylabel) in zip(axes, VIEWS):
         for _, points in shapes:
-            ax.add_patch(Polygon(_hull(points[:, [i, j]]), closed=True, facecolor="0.75", edgecolor="0.35",
+            ax.add_patch(Polygon(convex_hull(points[:, [i, j]]), closed=True, facecolor="0.75", edgecolor="0.35",
                                  alpha=0.6))
         for points in tools:
-            ax.add_patch(Polygon(_hull(points[:, [i, j]]), closed=True, facecolor="none", edgecolor="red"))
+            ax.add_patch(Polygon(convex_hull(points[:, [i, j]]), closed=True, facecolor="none", edgecolor="red"))
         ax.plot(trace[:, i], trace[:, j], "-", color="m", lw=1.5, label=f"{frame} trace" if len(path) else None)
         ax.plot(*ends[0, [i, j]], "o", color="green", label="start")
         ax.plot(*ends[1, [i, j]], "s", color="blue", label="goal")
@@ -61,24 +62,3 @@ def _tool_points(scene: Scene, robot: Robot, q: np.ndarray) -> np.ndarray:
     placement = scene.attached.shape.pose.se3()
     local = scene.attached.shape.local_points() @ placement.rotation.T + placement.translation
     return local @ R[0].T + p[0]
-
-
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull (H, 2) of 2-D points, counter-clockwise (Andrew's monotone chain)."""
-    pts = sorted(set(map(tuple, np.round(points, 9))))
-    if len(pts) < 3:
-        return np.array(pts)
-
-    def half(seq):
-        out = []
-        for p in seq:
-            while len(out) >= 2 and _turn(out[-2], out[-1], p) <= 0:
-                out.pop()
-            out.append(p)
-        return out[:-1]
-    return np.array(half(pts) + half(pts[::-1]))
-
-
-def _turn(a, b, c) -> float:
-    """z of (b - a) x (c - a): positive for a counter-clockwise turn."""
-    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
