@@ -275,3 +275,25 @@ def _validate_doc(path: Path, doc: object) -> None:
     joints = doc["meta"].get("joints")
     if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
         raise bad(f"meta must name the robot and its {d} joints")
+
+
+class SingleLossSampler(ConditionalSampler):
+    """A model trained by one optimiser on one loss: ``_losses(...)["loss"]`` (the CVAE, the flow)."""
+
+    @abstractmethod
+    def _losses(self, q: torch.Tensor, y: torch.Tensor, y_free: torch.Tensor,
+                generator: torch.Generator) -> dict[str, torch.Tensor]:
+        """The losses on a normalised batch; ``"loss"`` is minimised, the others are logged."""
+
+    def _train_step(self, q, y, y_free, optimizers, generator):
+        self.nets.train()
+        losses = self._losses(q, y, y_free, generator)
+        optimizers[0].zero_grad()
+        losses["loss"].backward()
+        optimizers[0].step()
+        return {key: float(v.detach()) for key, v in losses.items()}
+
+    def _validation_loss(self, q, y, generator):
+        self.nets.eval()
+        with torch.no_grad():
+            return float(self._losses(q, y, y, generator)["loss"])

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import torch
 
-from manifoldgen.models.base import ConditionalSampler, mlp
+from manifoldgen.models.base import SingleLossSampler, mlp
 
 
-class CVAE(ConditionalSampler):
+class CVAE(SingleLossSampler):
     """Encoder q(z | q, y), decoder q = D(z, y); reconstruction is squared error in normalised units."""
 
     name = "cvae"
@@ -50,16 +50,3 @@ class CVAE(ConditionalSampler):
         if self.config["recon_residual_weight"] > 0:
             total = total + self.config["recon_residual_weight"] * self.penalty(decoded, y)
         return {"loss": total, "recon": recon, "kl": kl, "residual": residual}
-
-    def _train_step(self, q, y, y_free, optimizers, generator):
-        self.nets.train()
-        losses = self._losses(q, y, y_free, generator)
-        optimizers[0].zero_grad()
-        losses["loss"].backward()
-        optimizers[0].step()
-        return {key: float(v.detach()) for key, v in losses.items()}
-
-    def _validation_loss(self, q, y, generator):
-        self.nets.eval()
-        with torch.no_grad():
-            return float(self._losses(q, y, y, generator)["loss"])

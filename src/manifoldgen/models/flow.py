@@ -10,10 +10,10 @@ from __future__ import annotations
 import torch
 import zuko
 
-from manifoldgen.models.base import ConditionalSampler
+from manifoldgen.models.base import SingleLossSampler
 
 
-class ConditionalFlow(ConditionalSampler):
+class ConditionalFlow(SingleLossSampler):
     """zuko NSF with ``passes=2`` (coupling: one pass both ways, fast sampling)."""
 
     name = "flow"
@@ -36,16 +36,3 @@ class ConditionalFlow(ConditionalSampler):
         nll = -self.nets["flow"](y).log_prob(q).mean()
         residual = self.penalty(self._generate(y_free, generator), y_free)
         return {"loss": nll + self.config["residual_weight"] * residual, "nll": nll, "residual": residual}
-
-    def _train_step(self, q, y, y_free, optimizers, generator):
-        self.nets.train()
-        losses = self._losses(q, y, y_free, generator)
-        optimizers[0].zero_grad()
-        losses["loss"].backward()
-        optimizers[0].step()
-        return {key: float(v.detach()) for key, v in losses.items()}
-
-    def _validation_loss(self, q, y, generator):
-        self.nets.eval()
-        with torch.no_grad():
-            return float(self._losses(q, y, y, generator)["loss"])
