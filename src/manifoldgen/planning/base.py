@@ -247,6 +247,16 @@ class Planner(ABC):
         self.rejected += not report.valid
         return report
 
+    def _reach_goal(self, tree: Tree, node: int, goal: np.ndarray) -> np.ndarray | None:
+        """Join ``node`` to the goal when it is within ``range``; the accepted path or None."""
+        if np.linalg.norm(goal - tree.q[node]) > self.settings.range:
+            return None
+        waypoints = self.local.connect(tree.q[node], goal)
+        if waypoints is None:
+            return None
+        branch = tree.branch(tree.add(node, waypoints))
+        return self._finish(tree.q[branch], [(tree, k) for k in branch[1:]])
+
     def _finish(self, waypoints: np.ndarray, edges: list[tuple[Tree, int]]) -> np.ndarray | None:
         """Dense-check a candidate path; segment s of ``waypoints`` is the edge into node
         ``edges[s] = (tree, child)``. A failing edge is cut from its tree (None returned)."""

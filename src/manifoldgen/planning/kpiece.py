@@ -63,14 +63,9 @@ class KPIECE(Planner):
                 continue
             for i in range(first, len(tree)):
                 grid.add(i, tree.q[i])
-            if np.linalg.norm(goal - tree.q[new]) <= settings.range:
-                waypoints = self.local.connect(tree.q[new], goal)
-                if waypoints is not None:
-                    last = tree.add(new, waypoints)
-                    branch = tree.branch(last)
-                    path = self._finish(tree.q[branch], [(tree, k) for k in branch[1:]])
-                    if path is not None:
-                        return path
+            path = self._reach_goal(tree, new, goal)
+            if path is not None:
+                return path
         return None
 
     def _extend(self, tree: Tree, node: int, target: np.ndarray, keep: bool) -> int | None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
@@ -37,14 +36,7 @@ class RRT(Planner):
             self.iterations += 1
             to_goal = self.rng.random() < self.settings.goal_bias
             new = self._grow(0, goal if to_goal else self._draw(), keep=not to_goal)
-            if new is None or np.linalg.norm(goal - tree.q[new]) > self.settings.range:
-                continue
-            waypoints = self.local.connect(tree.q[new], goal)
-            if waypoints is None:
-                continue
-            last = tree.add(new, waypoints)
-            branch = tree.branch(last)
-            path = self._finish(tree.q[branch], [(tree, k) for k in branch[1:]])
+            path = None if new is None else self._reach_goal(tree, new, goal)
             if path is not None:
                 return path
         return None
