@@ -6,10 +6,9 @@
 
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, unknown_name
 from manifoldgen.models.base import ConditionalSampler, read_model_dir
 from manifoldgen.models.cvae import CVAE
 from manifoldgen.models.flow import ConditionalFlow
@@ -22,9 +21,7 @@ MODELS: dict[str, type[ConditionalSampler]] = {cls.name: cls for cls in (CVAE, C
 def get_model_class(name: str) -> type[ConditionalSampler]:
     """The registered class for ``name`` (clear error with suggestions)."""
     if name not in MODELS:
-        close = difflib.get_close_matches(name, list(MODELS), n=2)
-        hint = f"did you mean {', '.join(close)}? " if close else ""
-        raise ManifoldgenError(f"unknown model '{name}'; {hint}known models: {', '.join(MODELS)}")
+        raise unknown_name("model", name, list(MODELS))
     return MODELS[name]
 
 

@@ -9,12 +9,11 @@ placement and touch links).
 
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, unknown_name
 from manifoldgen.io import check_output_path, save_npz
 from manifoldgen.planning.base import Planner
 from manifoldgen.planning.result import PlanResult, path_length
@@ -31,9 +30,7 @@ def get_planner(name: str) -> type[Planner]:
     from manifoldgen.planning import PLANNERS
 
     if name not in PLANNERS:
-        close = difflib.get_close_matches(name, list(PLANNERS), n=1)
-        hint = f"did you mean {close[0]}? " if close else ""
-        raise ManifoldgenError(f"unknown planner '{name}'; {hint}known planners: {', '.join(PLANNERS)}")
+        raise unknown_name("planner", name, list(PLANNERS))
     return PLANNERS[name]
 
 

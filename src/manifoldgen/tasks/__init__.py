@@ -6,7 +6,6 @@ names with clear errors. Pose tasks for panda, pr2 and centauro live in ``pose.p
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -14,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, unknown_name
 from manifoldgen.robot import Robot, resolve_robot
 
 
@@ -58,9 +57,7 @@ def register(name: str, robot: str):
 def get_task(name: str, robot: str | None = None) -> Task:
     """The task ``name`` for ``robot`` (default: the task's first robot)."""
     if name not in TASKS:
-        close = difflib.get_close_matches(name, list(TASKS), n=2)
-        hint = f"did you mean {', '.join(close)}? " if close else ""
-        raise ManifoldgenError(f"unknown task '{name}'; {hint}known tasks: {', '.join(TASKS)}")
+        raise unknown_name("task", name, list(TASKS))
     robots = TASKS[name]
     robot = robot or next(iter(robots))
     if robot not in robots:
