@@ -229,9 +229,7 @@ class Robot:
         offset = 0
         if self.floating_base:
             full[:, :3] = q[:, :3]
-            for b in range(len(q)):
-                rot = pin.rpy.rpyToMatrix(q[b, 5], q[b, 4], q[b, 3])
-                full[b, 3:7] = pin.Quaternion(rot).coeffs()
+            full[:, 3:7] = _zyx_quaternion(q[:, 3], q[:, 4], q[:, 5])
             offset = 6
         for i, jid in enumerate(self._joint_ids):
             jm, angle = self.model.joints[jid], q[:, offset + i]
@@ -339,6 +337,15 @@ def _joint_axis(jm) -> tuple[str, np.ndarray]:
     if short in ("RevoluteUnaligned", "RevoluteUnboundedUnaligned", "PrismaticUnaligned"):
         return short[0], np.asarray(jm.extract().axis, float)
     raise ManifoldgenError(f"joint type {short} cannot be in a planning group; lock it instead")
+
+
+def _zyx_quaternion(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(B,) ZYX Euler angles -> (B, 4) quaternions [x, y, z, w] of Rz(yaw) Ry(pitch) Rx(roll)."""
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    return np.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], axis=1)
 
 
 def _motion(m: _Motion, angle: np.ndarray) -> np.ndarray:
