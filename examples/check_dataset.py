@@ -31,10 +31,10 @@ def robot_files(name: str) -> tuple[Path, Path | None, Path]:
     return folder / "urdf" / f"{name}.urdf", srdf if srdf.exists() else (srdfs[0] if srdfs else None), share
 
 
-def check(path: str) -> dict[str, np.ndarray]:
-    data = np.load(path, allow_pickle=False)
-    meta, q, y = json.loads(str(data["meta"])), data["q"], data["y"]
-    urdf, srdf, share = robot_files(meta["robot"])
+def load_robot(name: str) -> tuple[pin.Model, pin.GeometryModel]:
+    """The robot's model and collision model with its self-collision pairs: all pairs but those
+    the SRDF disables and those between adjacent links."""
+    urdf, srdf, share = robot_files(name)
     model = pin.buildModelFromUrdf(str(urdf))
     geom = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=[str(share)])
     geom.addAllCollisionPairs()
@@ -49,17 +49,27 @@ def check(path: str) -> dict[str, np.ndarray]:
     geom.removeAllCollisionPairs()
     for p in keep:
         geom.addCollisionPair(p)
+    return model, geom
+
+
+def set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None:
+    """One joint value into a pinocchio configuration (continuous joints store cos, sin)."""
+    j = model.joints[model.getJointId(name)]
+    if j.nq == 2:
+        q[j.idx_q:j.idx_q + 2] = np.cos(value), np.sin(value)
+    else:
+        q[j.idx_q] = value
+
+
+def check(path: str) -> dict[str, np.ndarray]:
+    data = np.load(path, allow_pickle=False)
+    meta, q, y = json.loads(str(data["meta"])), data["q"], data["y"]
+    model, geom = load_robot(meta["robot"])
     mdata, gdata = model.createData(), pin.GeometryData(geom)
 
     full = pin.neutral(model)
-    def put(name, value):
-        j = model.joints[model.getJointId(name)]
-        if j.nq == 2:
-            full[j.idx_q:j.idx_q + 2] = np.cos(value), np.sin(value)
-        else:
-            full[j.idx_q] = value
     for name, value in meta["locked"].items():
-        put(name, value)
+        set_joint(model, full, name, value)
 
     c = meta["constraint"]
     assert c["type"] == "pose", "this checker knows the pose constraint"
@@ -71,7 +81,7 @@ def check(path: str) -> dict[str, np.ndarray]:
         limits = True
         for name, value in zip(meta["joints"], row):
             j = model.joints[model.getJointId(name)]
-            put(name, value)
+            set_joint(model, full, name, value)
             if j.nq == 1:
                 limits &= bool(model.lowerPositionLimit[j.idx_q] - 1e-9 <= value <= model.upperPositionLimit[j.idx_q] + 1e-9)
         pin.framesForwardKinematics(model, mdata, full)

@@ -20,7 +20,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from check_dataset import robot_files
+from check_dataset import load_robot, set_joint
 
 
 def _se3(pose: dict) -> pin.SE3:
@@ -45,17 +45,8 @@ def outside_check(file) -> dict:
     the links outside its touch links)."""
     data = np.load(file, allow_pickle=False)
     meta, path = json.loads(str(data["meta"])), data["path"]
-    urdf, srdf, share = robot_files(meta["robot"])
-    model = pin.buildModelFromUrdf(str(urdf))
-    geom = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=[str(share)])
-    geom.addAllCollisionPairs()
-    if srdf is not None:
-        pin.removeCollisionPairs(model, geom, str(srdf))
+    model, geom = load_robot(meta["robot"])
     links = [(g.parentJoint, model.frames[g.parentFrame].name) for g in geom.geometryObjects]
-    keep = [(p.first, p.second) for p in geom.collisionPairs if _apart(model, links, p)]
-    geom.removeAllCollisionPairs()
-    for a, b in keep:
-        geom.addCollisionPair(pin.CollisionPair(a, b))
     robot_ids = range(len(links))
     obstacles, tools = [], []
     for obj in meta["scene"]:
@@ -83,7 +74,7 @@ def outside_check(file) -> dict:
     tol = np.array([spec["tolerance"]["position"]] * len(axes) + [spec["tolerance"]["orientation"]] * 3)
     base = pin.neutral(model)
     for name, value in meta["locked"].items():
-        _set(model, base, name, value)
+        set_joint(model, base, name, value)
     lower = np.array([model.lowerPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
     upper = np.array([model.upperPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
     bounded = np.array([model.joints[model.getJointId(j)].nq == 1 for j in meta["joints"]])
@@ -94,7 +85,7 @@ def outside_check(file) -> dict:
             active = a + t * (b - a)
             q = base.copy()
             for name, value in zip(meta["joints"], active):
-                _set(model, q, name, value)
+                set_joint(model, q, name, value)
             outside += bool(np.any(bounded & ((active < lower - 1e-9) | (active > upper + 1e-9))))
             pin.framesForwardKinematics(model, mdata, q)
             placement = mdata.oMf[frame]
@@ -104,20 +95,6 @@ def outside_check(file) -> dict:
             states += 1
     return {"worst": worst, "collisions": collisions, "outside": outside, "states": states, "meta": meta,
             "path": path}
-
-
-def _set(model, q: np.ndarray, name: str, value: float) -> None:
-    """One joint value into a pinocchio configuration (continuous joints store cos, sin)."""
-    joint = model.joints[model.getJointId(name)]
-    if joint.nq == 2:
-        q[joint.idx_q:joint.idx_q + 2] = np.cos(value), np.sin(value)
-    else:
-        q[joint.idx_q] = value
-
-
-def _apart(model, links, pair) -> bool:
-    ja, jb = links[pair.first][0], links[pair.second][0]
-    return ja != jb and model.parents[ja] != jb and model.parents[jb] != ja
 
 
 def main(paths: list[str]) -> int:
