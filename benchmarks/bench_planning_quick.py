@@ -1,13 +1,13 @@
 """Planning speed on the panda pose scenes: success rate and time per sampler (one process).
 
     python benchmarks/bench_planning_quick.py [--runs 20] [--time 30] [--scenes wall maze]
-        [--sampler pg:pose.npz --sampler cvae:runs/cvae ...] [--planner rrtconnect] [--local interpolate]
+        [--sampler pg:pose.npz --sampler cvae:runs/cvae ...] [--planner rrtconnect] [--local auto]
         [--set range=0.6 --set pool=1024 ...]
 
 Default samplers: ``project`` and ``pg`` (10 000 rows collected at the scene's height, seed 0),
 plus the shipped model when the package has one. Every run uses seed r = 0..runs-1, a fresh
 sampler and planner; times are wall-clock ``PlanResult.time_s`` (sampling, search and the
-final 0.005 rad validation included), and the process CPU time of ``solve`` (the figure to
+final dense validation included), and the process CPU time of ``solve`` (the figure to
 trust on a loaded machine). Every returned path is re-validated here.
 Targets (panda pose, learned sampler): wall 100 % with mean <= 0.1 s; maze 100 %, mean <= 2 s.
 """
@@ -25,8 +25,9 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from manifoldgen.data import collect  # noqa: E402
-from manifoldgen.planning import PLANNERS, validate_path  # noqa: E402
+from manifoldgen.planning import DEFAULT_LOCAL, PLANNERS  # noqa: E402
 from manifoldgen.scene import get_scene  # noqa: E402
+from manifoldgen.space import ConstrainedSpace  # noqa: E402
 from manifoldgen.specs import make_sampler  # noqa: E402
 from manifoldgen.tasks import get_task  # noqa: E402
 
@@ -50,7 +51,7 @@ def main() -> None:
     parser.add_argument("--scenes", nargs="*", default=["wall", "maze"])
     parser.add_argument("--sampler", action="append", default=None, help="sampler spec (repeatable)")
     parser.add_argument("--planner", default="rrtconnect")
-    parser.add_argument("--local", default="interpolate")
+    parser.add_argument("--local", default=DEFAULT_LOCAL)
     parser.add_argument("--set", action="append", default=[], help="planner setting key=value (repeatable)")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -64,12 +65,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.scenes:
             scene = get_scene(task, name)
-            checker = scene.checker(task.robot)
+            space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
             for spec in args.sampler or default_samplers(task, scene, Path(tmp)):
                 times, cpu, lengths, samples, solved = [], [], [], [], 0
                 for seed in range(args.runs):
-                    sampler = make_sampler(spec, task, scene.condition, checker, seed)
-                    planner = cls(task.constraint, scene.condition, checker, sampler, local=args.local, seed=seed,
+                    planner = cls(space, make_sampler(spec, space, seed), local=args.local, seed=seed,
                                   settings=cls.settings_type(**overrides))
                     began = time.process_time()
                     result = planner.solve(scene.start, scene.goal, args.time)
@@ -77,7 +77,7 @@ def main() -> None:
                     times.append(result.time_s)
                     samples.append(result.samples_drawn)
                     if result.solved:
-                        report = validate_path(result.path, task.constraint, scene.condition, checker)
+                        report = space.validate_path(result.path)
                         assert report.valid, report.reason
                         solved += 1
                         lengths.append(result.length)

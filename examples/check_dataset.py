@@ -1,107 +1,108 @@
-"""Independent checker for manifoldgen dataset / sample files: pinocchio and coal only.
+"""Outside checker for manifoldgen dataset and sample files: numpy, pinocchio and coal only.
 
-It reads only the .npz file (``q``, ``y``, ``meta``) and the robot named in it, and
-recomputes, row by row, the pose constraint, the joint limits and self-collision
-(SRDF-disabled and adjacent pairs skipped), without importing manifoldgen.
+It reads only the .npz file (``q (N, n)``, ``y (N, k)``, ``meta``; see docs/file-formats.md) and the
+robot's URDF/SRDF (found by its example-robot-data name or recorded path, verified by sha256), and
+rechecks every row without importing manifoldgen: the constraint's residuals recomputed with
+pinocchio for every built-in type (pose, orientation, plane, joint_linear, closed_chain, balance and
+sets of them) against the file's per-component tolerance, its inequalities (balance: CoM inside the
+support polygon with margin), the joint limits and self-collision.
 
-    python examples/check_dataset.py pose.npz
-    -> pose.npz: 6000 rows; within tolerance 100.00%, within limits 100.00%, self-collision free 100.00%, all three 100.00%
+    python examples/check_dataset.py pose.npz [more.npz ...] [--urdf PATH] [--srdf PATH] [--show N]
+    -> pose.npz: 240 rows, pose on panda; within tolerance 100.00%, within limits 100.00%,
+       collision-free 100.00%, all three 100.00%: VALID
+
+Exit status: 0 every row of every file valid; 1 some row invalid; 2 bad usage; 3 could not recheck
+(a user constraint type ``module:Class``, the robot not found or not the file's, an unreadable file).
 """
 
 from __future__ import annotations
 
-import json
-import site
+import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
+                     exit_status, read_npz)
 
 
-def robot_files(name: str) -> tuple[Path, Path | None, Path]:
-    share = next(Path(p) / "cmeel.prefix" / "share" for p in site.getsitepackages()
-                 if (Path(p) / "cmeel.prefix" / "share" / "example-robot-data").is_dir())
-    if name.endswith(".urdf"):
-        srdf = Path(name).with_suffix(".srdf")
-        return Path(name), srdf if srdf.exists() else None, share
-    folder = share / "example-robot-data" / "robots" / f"{name}_description"
-    srdfs = sorted((folder / "srdf").glob("*.srdf"))
-    srdf = folder / "srdf" / f"{name}.srdf"
-    return folder / "urdf" / f"{name}.urdf", srdf if srdf.exists() else (srdfs[0] if srdfs else None), share
-
-
-def load_robot(name: str) -> tuple[pin.Model, pin.GeometryModel]:
-    """The robot's model and collision model with its self-collision pairs: all pairs but those
-    the SRDF disables and those between adjacent links."""
-    urdf, srdf, share = robot_files(name)
-    model = pin.buildModelFromUrdf(str(urdf))
-    geom = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=[str(share)])
-    geom.addAllCollisionPairs()
-    if srdf is not None:
-        pin.removeCollisionPairs(model, geom, str(srdf))
-    keep = []
-    for k in range(len(geom.collisionPairs)):
-        p = geom.collisionPairs[k]
-        ja, jb = geom.geometryObjects[p.first].parentJoint, geom.geometryObjects[p.second].parentJoint
-        if ja != jb and model.parents[ja] != jb and model.parents[jb] != ja:
-            keep.append(pin.CollisionPair(p.first, p.second))
-    geom.removeAllCollisionPairs()
-    for p in keep:
-        geom.addCollisionPair(p)
-    return model, geom
-
-
-def set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None:
-    """One joint value into a pinocchio configuration (continuous joints store cos, sin)."""
-    j = model.joints[model.getJointId(name)]
-    if j.nq == 2:
-        q[j.idx_q:j.idx_q + 2] = np.cos(value), np.sin(value)
+def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, show: int = 5) -> dict:
+    """Recheck one dataset / sample file. Returns ``status`` (exit code), ``line`` (the verdict),
+    ``details`` (notes and the first ``show`` invalid rows), ``rows``, and per row (N,) bool arrays
+    ``tolerance`` (None when the constraint is not rechecked), ``limits``, ``collision_free``, ``valid``."""
+    try:
+        meta, arrays = read_npz(path, ("q", "y"))
+        q, y = arrays["q"], arrays["y"]
+        if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
+            raise CannotRecheck(f"inconsistent shapes q {q.shape}, y {y.shape} for {len(meta['joints'])} joints")
+        checker = Checker(meta, y.shape[1], urdf=urdf, srdf=srdf, near=Path(path).parent)
+    except CannotRecheck as exc:
+        return {"status": EXIT_CANNOT, "line": f"{path}: CANNOT RECHECK: {exc}", "details": [], "rows": 0}
+    details = [f"note: {n}" for n in checker.notes]
+    tol, lim, col = [], [], []
+    shown = 0
+    for i, (row, cond) in enumerate(zip(q, y)):
+        if not (np.all(np.isfinite(row)) and np.all(np.isfinite(cond))):
+            tol.append(False), lim.append(False), col.append(False)
+            details.append(f"row {i}: NaN or infinite values")
+            continue
+        v = checker.judge(row, cond, explain=shown < show)
+        tol.append(v.ok_constraint)
+        lim.append(v.ok_limits)
+        col.append(v.ok_collision)
+        if not v.ok and shown < show:
+            details.append(f"row {i} (y = {cond.round(4).tolist()}): " + "; ".join(v.reasons))
+            shown += 1
+    n = len(q)
+    limits, free = np.array(lim, bool), np.array(col, bool)
+    rechecked = n == 0 or all(t is not None for t in tol)
+    within = np.array([t is not False for t in tol], bool)
+    valid = within & limits & free
+    robot = meta.get("robot", "?")
+    parts = [f"{n} rows, {checker.constraint.describe()} on {robot}"]
+    pct = (lambda a: f"{a.mean():.2%}" if n else "-")
+    if rechecked and checker.constraint.recheckable:
+        parts.append(f"within tolerance {pct(within)}, within limits {pct(limits)}, collision-free {pct(free)}, "
+                     f"all three {pct(valid)}")
     else:
-        q[j.idx_q] = value
+        what = ", ".join(checker.constraint.user_types)
+        parts.append(f"constraint NOT rechecked (user type {what})" if not any(
+            p.recheckable for p in checker.constraint.parts) or not checker.constraint.splittable else
+            f"built-in parts within tolerance {pct(within)}, user type {what} NOT rechecked")
+        parts.append(f"within limits {pct(limits)}, collision-free {pct(free)}")
+    if not valid.all():
+        status, word = EXIT_INVALID, f"INVALID ({int((~valid).sum())} of {n} rows)"
+    elif not checker.constraint.recheckable:
+        status, word = EXIT_CANNOT, "CANNOT RECHECK the constraint (user type)"
+    elif not checker.files.verified:
+        status, word = EXIT_CANNOT, "UNVERIFIED (the robot files differ from the file's; see the warning)"
+    else:
+        status, word = EXIT_VALID, "VALID"
+    line = f"{path}: {parts[0]}; {', '.join(parts[1:])}: {word}"
+    return {"status": status, "line": line, "details": details, "rows": n,
+            "tolerance": np.array(tol, bool) if rechecked and checker.constraint.recheckable else None,
+            "limits": limits, "collision_free": free, "valid": valid, "meta": meta}
 
 
-def check(path: str) -> dict[str, np.ndarray]:
-    data = np.load(path, allow_pickle=False)
-    meta, q, y = json.loads(str(data["meta"])), data["q"], data["y"]
-    model, geom = load_robot(meta["robot"])
-    mdata, gdata = model.createData(), pin.GeometryData(geom)
-
-    full = pin.neutral(model)
-    for name, value in meta["locked"].items():
-        set_joint(model, full, name, value)
-
-    c = meta["constraint"]
-    assert c["type"] == "pose", "this checker knows the pose constraint"
-    fid, target = model.getFrameId(c["frame"]), np.array(c["rotation"])
-    axes = ["xyz".index(a) for a in c["position_axes"]]
-    tol_p, tol_r = c["tolerance"]["position"], c["tolerance"]["orientation"]
-    ok_tol, ok_lim, ok_col = [], [], []
-    for row, cond in zip(q, y):
-        limits = True
-        for name, value in zip(meta["joints"], row):
-            j = model.joints[model.getJointId(name)]
-            set_joint(model, full, name, value)
-            if j.nq == 1:
-                limits &= bool(model.lowerPositionLimit[j.idx_q] - 1e-9 <= value <= model.upperPositionLimit[j.idx_q] + 1e-9)
-        pin.framesForwardKinematics(model, mdata, full)
-        M = mdata.oMf[fid]
-        pos_err = np.abs(M.translation[axes] - cond)
-        rot_err = np.abs(pin.log3(target.T @ M.rotation))
-        ok_tol.append(bool(np.all(pos_err <= tol_p) and np.all(rot_err <= tol_r)))
-        ok_lim.append(limits)
-        ok_col.append(not pin.computeCollisions(model, mdata, geom, gdata, full, True))
-    return {"tolerance": np.array(ok_tol), "limits": np.array(ok_lim), "collision_free": np.array(ok_col)}
-
-
-def main(paths: list[str]) -> None:
-    for path in paths:
-        r = check(path)
-        every = r["tolerance"] & r["limits"] & r["collision_free"]
-        print(f"{path}: {len(every)} rows; within tolerance {r['tolerance'].mean():.2%}, within limits "
-              f"{r['limits'].mean():.2%}, self-collision free {r['collision_free'].mean():.2%}, "
-              f"all three {every.mean():.2%}")
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Recheck manifoldgen dataset / sample files (pinocchio + coal only).",
+                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
+    parser.add_argument("files", nargs="+", help="dataset or sample .npz files")
+    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
+    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
+    parser.add_argument("--show", type=int, default=5, help="invalid rows to explain per file (default 5)")
+    args = parser.parse_args(argv)
+    statuses = []
+    for path in args.files:
+        report = check(path, args.urdf, args.srdf, args.show)
+        for line in report["details"]:
+            print("  " + line)
+        print(report["line"])
+        statuses.append(report["status"])
+    return exit_status(statuses)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    sys.exit(main())

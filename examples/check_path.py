@@ -1,113 +1,141 @@
-"""Independent checker for manifoldgen path files: pinocchio and coal only.
+"""Outside checker for manifoldgen path files: numpy, pinocchio and coal only.
 
-It reads only the .npz (``path (K, n)`` and ``meta``: robot, joints, locked joints, the pose
-constraint, the condition and the scene) and checks every segment interpolated at 0.005 rad
-against the constraint tolerance, the joint limits, self-collision (SRDF-disabled and adjacent
-pairs skipped) and the recorded obstacles and held tool, without importing manifoldgen.
+It reads only the .npz (``path (K, n)`` and ``meta``: the task with its robot identity, joints,
+locked joints, constraint spec and tolerance, the query's condition ``y``, start and goal, the scene's
+obstacles and held tool, the validation resolution; see docs/file-formats.md) and the robot's
+URDF/SRDF, and checks every straight segment between consecutive waypoints at states every
+``meta["validation"]["resolution"]`` (Euclidean, in the group's coordinates) against the constraint
+(every built-in type recomputed with pinocchio; tolerance per component; inequalities <= 0), the joint
+limits, self-collision, the obstacles and the held tool, without importing manifoldgen.
 
-    python examples/check_path.py p.npz
-    -> p.npz: 20 waypoints, 1,144 states checked; worst constraint use 0.87 of tolerance, 0 states in
-       collision, 0 outside the limits: VALID
-Exit status 1 if any file is invalid.
+    python examples/check_path.py p.npz [more.npz ...] [--urdf PATH] [--srdf PATH] [--resolution R]
+    -> p.npz: 20 waypoints, 1,144 states checked every 0.005; worst constraint use 0.87 of tolerance,
+       0 states violating the constraint, 0 in collision, 0 outside the limits: VALID
+
+Exit status: 0 every path valid; 1 some path invalid; 2 bad usage; 3 could not recheck (a user
+constraint type ``module:Class``, the robot not found or not the file's, an unreadable file).
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import sys
+from pathlib import Path
 
-import coal
 import numpy as np
-import pinocchio as pin
 
-from check_dataset import load_robot, set_joint
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
+                     exit_status, read_npz)
 
-
-def _se3(pose: dict) -> pin.SE3:
-    x, y, z, w = pose["quaternion"]
-    return pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), np.array(pose["position"], float))
-
-
-def _shape(obj: dict):
-    if obj["type"] == "box":
-        return coal.Box(*obj["size"])
-    if obj["type"] == "sphere":
-        return coal.Sphere(obj["radius"])
-    if obj["type"] == "cylinder":
-        return coal.Cylinder(obj["radius"], obj["length"])
-    return coal.MeshLoader().load(obj["mesh"], np.array(obj["scale"], float))
+DEFAULT_RESOLUTION = 0.005  # what manifoldgen used before paths recorded their resolution
+ENDPOINT_TOLERANCE = 1e-6
 
 
-def outside_check(file) -> dict:
-    """Recheck a path file from its own contents: every segment at 0.005 rad against the pose
-    constraint, the joint limits, self-collision (SRDF and adjacent pairs skipped) and the
-    recorded scene (obstacles against every robot link; the tool against the obstacles and
-    the links outside its touch links)."""
-    data = np.load(file, allow_pickle=False)
-    meta, path = json.loads(str(data["meta"])), data["path"]
-    model, geom = load_robot(meta["robot"])
-    links = [(g.parentJoint, model.frames[g.parentFrame].name) for g in geom.geometryObjects]
-    robot_ids = range(len(links))
-    obstacles, tools = [], []
-    for obj in meta["scene"]:
-        if "attached_to" in obj:
-            frame = model.frames[model.getFrameId(obj["attached_to"])]
-            tools.append((geom.addGeometryObject(pin.GeometryObject(obj["name"], frame.parentJoint, frame.placement
-                                                                    * _se3(obj["pose"]), _shape(obj))),
-                          set(obj["touch_links"])))
-        else:
-            obstacles.append(geom.addGeometryObject(pin.GeometryObject(obj["name"], 0, _se3(obj["pose"]),
-                                                                       _shape(obj))))
-    for oid in obstacles:
-        for i in robot_ids:
-            geom.addCollisionPair(pin.CollisionPair(i, oid))
-    for tid, touch in tools:
-        for i in robot_ids:
-            if links[i][1] not in touch:
-                geom.addCollisionPair(pin.CollisionPair(i, tid))
-        for oid in obstacles:
-            geom.addCollisionPair(pin.CollisionPair(tid, oid))
-    gdata, mdata = pin.GeometryData(geom), model.createData()
-    spec, y = meta["constraint"], np.array(meta["condition"])
-    frame, target = model.getFrameId(spec["frame"]), np.array(spec["rotation"])
-    axes = ["xyz".index(a) for a in spec["position_axes"]]
-    tol = np.array([spec["tolerance"]["position"]] * len(axes) + [spec["tolerance"]["orientation"]] * 3)
-    base = pin.neutral(model)
-    for name, value in meta["locked"].items():
-        set_joint(model, base, name, value)
-    lower = np.array([model.lowerPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
-    upper = np.array([model.upperPositionLimit[model.joints[model.getJointId(j)].idx_q] for j in meta["joints"]])
-    bounded = np.array([model.joints[model.getJointId(j)].nq == 1 for j in meta["joints"]])
-    worst, collisions, outside, states = 0.0, 0, 0, 0
-    for a, b in zip(path[:-1], path[1:]):
-        steps = max(1, int(np.ceil(np.abs(b - a).max() / 0.005)))
-        for t in np.arange(steps + 1) / steps:
-            active = a + t * (b - a)
-            q = base.copy()
-            for name, value in zip(meta["joints"], active):
-                set_joint(model, q, name, value)
-            outside += bool(np.any(bounded & ((active < lower - 1e-9) | (active > upper + 1e-9))))
-            pin.framesForwardKinematics(model, mdata, q)
-            placement = mdata.oMf[frame]
-            residual = np.concatenate([placement.translation[axes] - y, pin.log3(target.T @ placement.rotation)])
-            worst = max(worst, float(np.max(np.abs(residual) / tol)))
-            collisions += pin.computeCollisions(model, mdata, geom, gdata, q, True)
-            states += 1
-    return {"worst": worst, "collisions": collisions, "outside": outside, "states": states, "meta": meta,
-            "path": path}
+def densify(path: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """States every ``resolution`` (Euclidean) along each segment, the last waypoint included -> (M, n) states
+    and (M,) the segment of each state."""
+    if len(path) == 1:
+        return path.copy(), np.zeros(1, int)
+    steps = np.maximum(1, np.ceil(np.linalg.norm(np.diff(path, axis=0), axis=1) / resolution).astype(int))
+    segment = np.repeat(np.arange(len(steps)), steps)
+    t = np.concatenate([np.arange(k) / k for k in steps])
+    states = path[segment] + t[:, None] * (path[segment + 1] - path[segment])
+    return np.concatenate([states, path[-1:]]), np.append(segment, len(steps) - 1)
 
 
-def main(paths: list[str]) -> int:
-    failed = 0
-    for path in paths:
-        r = outside_check(path)
-        ok = r["worst"] <= 1.0 and r["collisions"] == 0 and r["outside"] == 0 and len(r["path"]) > 0
-        failed += not ok
-        print(f"{path}: {len(r['path'])} waypoints, {r['states']:,} states checked; worst constraint use "
-              f"{r['worst']:.2f} of tolerance, {r['collisions']} states in collision, {r['outside']} outside the "
-              f"limits: {'VALID' if ok else 'INVALID'}")
-    return 1 if failed else 0
+def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolution: float | None = None) -> dict:
+    """Recheck one path file. Returns ``status`` (exit code), ``line`` (verdict), ``details``, ``valid``,
+    ``reason`` (the first problem), ``worst`` (max |F_i| / tol_i over the states), ``violations`` (states
+    outside tolerance or violating an inequality), ``collisions``, ``outside`` (states outside the limits),
+    ``states``, ``resolution``, ``meta`` and ``path``."""
+    empty = {"worst": float("inf"), "collisions": 0, "outside": 0, "violations": 0, "states": 0, "valid": False,
+             "meta": {}, "path": np.zeros((0, 0)), "details": []}
+    try:
+        meta, arrays = read_npz(file, ("path",))
+        path = arrays["path"]
+        n = len(meta["joints"])
+        if path.ndim != 2 or path.shape[1] != n:
+            raise CannotRecheck(f"path has shape {path.shape}, expected (K, {n}) for the file's joints")
+        y = meta.get("condition")
+        if isinstance(y, dict):  # a dataset-style condition table: not a path file
+            raise CannotRecheck("meta 'condition' is not the query's condition values (is this a path file?)")
+        y = np.asarray(y if y is not None else [], float).reshape(-1)
+        if resolution is None:
+            resolution = float((meta.get("validation") or {}).get("resolution", DEFAULT_RESOLUTION))
+        if not resolution > 0:
+            raise CannotRecheck(f"resolution must be positive, got {resolution}")
+        checker = Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf,
+                          near=Path(file).parent)
+    except CannotRecheck as exc:
+        return {**empty, "status": EXIT_CANNOT, "reason": str(exc), "line": f"{file}: CANNOT RECHECK: {exc}"}
+    details = [f"note: {note}" for note in checker.notes]
+    scene = checker.collisions
+    details.append(f"note: collision pairs: {scene.self_pairs} self, {scene.obstacles} obstacle(s), "
+                   f"{scene.tools} held object(s)")
+    reason = ""
+    if len(path) == 0:
+        reason = "the path is empty"
+    elif not np.all(np.isfinite(path)):
+        reason = "the path contains NaN or infinite values"
+    else:
+        for key, row, what in (("start", path[0], "start"), ("goal", path[-1], "end")):
+            if meta.get(key) is not None:
+                recorded = np.asarray(meta[key], float)
+                if recorded.shape != row.shape or np.abs(recorded - row).max() > ENDPOINT_TOLERANCE:
+                    reason = reason or f"the path does not {what} at the recorded {key} {recorded.round(4).tolist()}"
+    worst, violations, collisions, outside, count = 0.0, 0, 0, 0, 0
+    rechecked = True
+    if len(path) and np.all(np.isfinite(path)):
+        states, segment = densify(path, resolution)
+        count = len(states)
+        for i, (q, seg) in enumerate(zip(states, segment)):
+            v = checker.judge(q, y, explain=not reason)
+            worst = max(worst, v.worst)
+            rechecked &= v.ok_constraint is not None
+            violations += v.ok_constraint is False
+            collisions += not v.ok_collision
+            outside += not v.ok_limits
+            if not v.ok and not reason:
+                reason = f"segment {seg} (state {i}): " + "; ".join(v.reasons)
+    valid = not reason
+    if reason:
+        details.append(f"first problem: {reason}")
+    user = ", ".join(checker.constraint.user_types)
+    use = f"worst constraint use {worst:.2f} of tolerance" + (f" (user type {user} NOT rechecked)" if user else "")
+    if not valid:
+        status, word = EXIT_INVALID, "INVALID"
+    elif not checker.constraint.recheckable or not rechecked:
+        status, word = EXIT_CANNOT, "CANNOT RECHECK the constraint (user type)"
+    elif not checker.files.verified:
+        status, word = EXIT_CANNOT, "UNVERIFIED (the robot files differ from the file's; see the warning)"
+    else:
+        status, word = EXIT_VALID, "VALID"
+    line = (f"{file}: {len(path)} waypoints, {count:,} states checked every {resolution:g}; {use}, {violations} "
+            f"states violating the constraint, {collisions} in collision, {outside} outside the limits: {word}")
+    return {"status": status, "line": line, "details": details, "valid": valid, "reason": reason, "worst": worst,
+            "violations": violations, "collisions": collisions, "outside": outside, "states": count,
+            "resolution": resolution, "meta": meta, "path": path}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Recheck manifoldgen path files (pinocchio + coal only).",
+                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
+    parser.add_argument("files", nargs="+", help="path .npz files written by `manifoldgen plan`")
+    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
+    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
+    parser.add_argument("--resolution", type=float,
+                        help="state spacing along segments (default: the file's meta.validation.resolution)")
+    args = parser.parse_args(argv)
+    statuses = []
+    for path in args.files:
+        report = outside_check(path, args.urdf, args.srdf, args.resolution)
+        for line in report["details"]:
+            print("  " + line)
+        print(report["line"])
+        statuses.append(report["status"])
+    return exit_status(statuses)
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

@@ -21,23 +21,3 @@ def panda_task():
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
-
-
-def pytest_sessionfinish(session, exitstatus):
-    session.config._manifoldgen_status = int(exitstatus)
-
-
-def pytest_unconfigure(config):
-    """End the process once pytest has reported, keeping its exit status.
-
-    OMPL's nanobind bindings print a long, harmless "leaked instances" report during interpreter
-    teardown (see DESIGN.md); it would bury pytest's summary line, so teardown is skipped.
-    """
-    import os
-    import sys
-
-    status = getattr(config, "_manifoldgen_status", None)
-    if status is not None and "ompl" in sys.modules:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(status)

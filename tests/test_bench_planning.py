@@ -31,7 +31,8 @@ def test_method_parsing():
     m = Method.parse("cvae=rrtconnect:project@cvae:runs/cvae,refine=2")
     assert (m.label, m.planner, m.local, m.sampler) == ("cvae", "rrtconnect", "project", "cvae:runs/cvae,refine=2")
     m = Method.parse("rrtconnect")
-    assert (m.label, m.local, m.sampler) == ("rrtconnect@uniform", "interpolate", "uniform")
+    assert (m.label, m.local, m.sampler) == ("rrtconnect@uniform", "auto", "uniform")
+    assert Method.parse("rrtconnect:interpolate").label == "rrtconnect:interpolate@uniform"
     m = Method.parse("ompl-atlas-prm@pg:data/pg.npz")
     assert m.is_ompl and m.label == "ompl-atlas-prm@pg:pg.npz" and m.sampler == "pg:data/pg.npz"
     assert default_baseline(["x=rrtconnect", "ref=ompl-projected-rrtconnect"]) == "ref"
@@ -49,7 +50,7 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     assert sorted((r["method"], r["run"], r["seed"]) for r in records) == [
         ("atlas", 0, 5), ("atlas", 1, 6), ("pg", 0, 5), ("pg", 1, 6)]
     for r in records:  # solved means an independently valid path
-        assert r["solved"] and r["valid"] and r["planner_solved"]
+        assert r["solved"] and r["valid"] and r["planner_solved"] and r["why"].startswith("solved in")
         assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"] and not r["late"]
         assert 0 < r["cpu_s"]
     # the same seed gives the same run (OMPL reseeded in every worker, our samplers seeded)

@@ -4,7 +4,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from manifoldgen.constraints import Condition, Constraint, ConstraintSet, PoseConstraint
+from manifoldgen.constraints import (BalanceConstraint, ClosedChainConstraint, Condition, Constraint, ConstraintSet,
+                                     JointLinearConstraint, OrientationConstraint, PlaneConstraint, PoseConstraint,
+                                     array_namespace, build_constraint, project)
+from manifoldgen.robot import Robot
 from manifoldgen.constraints.so3 import jlog3, log3
 from manifoldgen.errors import ManifoldgenError
 
@@ -53,8 +56,10 @@ def test_pose_residual_measures_height_and_orientation(panda_task):
 def test_spec_is_complete(panda_task):
     spec = panda_task.constraint.spec()
     assert spec["type"] == "pose" and spec["frame"] == "panda_hand_tcp" and spec["position_axes"] == ["z"]
-    assert spec["tolerance"] == {"position": 0.01, "orientation": 0.01}
+    assert spec["position_tolerance"] == 0.01 and spec["orientation_tolerance"] == 0.01
+    assert spec["values"] == [[0.2], [0.3], [0.4], [0.5], [0.6], [0.7]]
     assert np.allclose(np.array(spec["rotation"]) @ np.array(spec["rotation"]).T, np.eye(3))
+    assert ToolDownAtX(panda_task.robot).spec()["type"] == "test_constraints:ToolDownAtX"
 
 
 def test_condition_range_warns_or_refuses(panda_task):
@@ -68,35 +73,30 @@ def test_condition_range_warns_or_refuses(panda_task):
         cond.check([[0.3, 0.4]])
 
 
-class JointSum(Constraint):
-    """A user constraint in a few lines: q0 + q1 = y (a linear manifold with a known projection)."""
+class ToolDownAtX(Constraint):
+    """A user constraint as the README writes it: residual only (its Jacobian comes from autograd)."""
 
-    def __init__(self, robot):
-        self.robot, self.tolerance = robot, np.array([1e-3])
-        self.condition = Condition(("sum",), ("rad",), np.array([[0.0], [0.5]]))
+    def __init__(self, robot, frame="panda_hand_tcp", values=((0.4,), (0.5,)), tolerance=0.01):
+        self.robot, self.frame = robot, frame
+        self.condition = Condition(("x",), ("m",), np.asarray(values, float))
+        self.tolerance = np.full(3, tolerance)
 
     def residual(self, q, y):
         q, y = self.batch(q, y)
-        return q[:, :1] + q[:, 1:2] - y
-
-    def jacobian(self, q, y):
-        q, y = self.batch(q, y)
-        J = np.zeros((len(q), 1, self.robot.n))
-        J[:, 0, :2] = 1.0
-        return self.residual(q, y), J
-
-    def spec(self):
-        return {"type": "joint_sum"}
+        p, R = self.robot.frame_pose(q, self.frame)
+        return array_namespace(q).concat([p[:, :1] - y, R[:, :2, 2]], axis=1)
 
 
 def test_constraint_set_stacks_residuals_and_splits_conditions(panda_task, rng):
-    both = ConstraintSet([panda_task.constraint, JointSum(panda_task.robot)])
-    assert both.m == 5 and both.condition.k == 2 and both.condition.names[1] == "sum"
-    q, y = panda_task.robot.sample_uniform(4, rng), np.array([0.45, 0.1])
+    both = ConstraintSet([panda_task.constraint, ToolDownAtX(panda_task.robot)])
+    assert both.m == 7 and both.condition.k == 2 and both.condition.names[1] == "x"
+    assert both.condition.grid.shape == (12, 2)  # 6 heights x 2 x values
+    q, y = panda_task.robot.sample_uniform(4, rng), np.array([0.45, 0.4])
     F, J = both.jacobian(q, y)
-    assert F.shape == (4, 5) and J.shape == (4, 5, 7)
+    assert F.shape == (4, 7) and J.shape == (4, 7, 7)
     np.testing.assert_allclose(F[:, :4], panda_task.constraint.residual(q, [0.45]))
-    np.testing.assert_allclose(F[:, 4], q[:, 0] + q[:, 1] - 0.1)
+    p, _ = panda_task.robot.frame_pose(q, "panda_hand_tcp")
+    np.testing.assert_allclose(F[:, 4], p[:, 0] - 0.4)
 
 
 def test_pose_constraint_rejects_bad_specification(panda_task):
@@ -115,17 +115,84 @@ def _fd_check(constraint, q, y, eps=1e-6, atol=1e-5):
         np.testing.assert_allclose(J[:, :, i], fd, atol=atol)
 
 
-def test_closed_chain_between_pr2_grippers(rng):
-    from manifoldgen.constraints import project
-    from manifoldgen.constraints.closed_chain import ClosedChainConstraint
-    from manifoldgen.robot import Robot
-    from manifoldgen.tasks.pose import PR2_GROUP
+FACING = np.diag([-1.0, -1.0, 1.0])  # two grippers facing each other across a tray
+FEET = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
 
-    joints = PR2_GROUP + [j.replace("r_", "l_", 1) for j in PR2_GROUP[1:]]
-    robot = Robot.load("pr2", joints)
-    facing = np.diag([-1.0, -1.0, 1.0])  # the grippers face each other across a tray
+
+@pytest.fixture(scope="module")
+def pr2_both_arms():
+    group = ["torso_lift_joint"] + [f"{s}_{j}" for s in "rl" for j in (
+        "shoulder_pan_joint", "shoulder_lift_joint", "upper_arm_roll_joint", "elbow_flex_joint",
+        "forearm_roll_joint", "wrist_flex_joint", "wrist_roll_joint")]
+    return Robot.load("pr2", group)
+
+
+@pytest.fixture(scope="module")
+def centauro_floating():
+    robot = Robot.load("centauro", floating_base=True)
+    stance = np.clip(np.zeros(robot.n), robot.lower, robot.upper)
+    stance[2] = 0.7
+    return robot, stance
+
+
+def _balance(robot, stance):
+    return BalanceConstraint(robot, FEET, np.stack([robot.frame_pose(stance, f)[0][0] for f in FEET]), "pelvis",
+                             [[0.6], [0.7]])
+
+
+# every constraint type: (name, factory(panda, pr2, centauro) -> (constraint, seeds (B, n), y (k,)))
+CASES = {
+    "pose": lambda t, p, c: (t.constraint, None, [0.45]),
+    "pose-xy-axes": lambda t, p, c: (PoseConstraint(t.robot, "panda_hand_tcp", t.constraint.rotation, [[0.4, 0.0]],
+                                                    position_axes=("x", "y"), orientation_axes=("x", "y")),
+                                     None, [0.4, 0.1]),
+    "orientation": lambda t, p, c: (OrientationConstraint(t.robot, "panda_hand_tcp", (0, 0, 1), (0, 0, -1)),
+                                    None, []),
+    "plane": lambda t, p, c: (PlaneConstraint(t.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]]), None, [0.4]),
+    "line": lambda t, p, c: (PlaneConstraint(t.robot, "panda_hand_tcp", [[1, 0, 0], [0, 1, 1]], [[0.4, 0.5]]),
+                             None, [0.4, 0.5]),
+    "joint_linear": lambda t, p, c: (JointLinearConstraint(t.robot, [[1, 1, 0, 0, 0, 0, 0]], [[0.0], [0.5]]),
+                                     None, [0.3]),
+    "closed_chain": lambda t, p, c: (ClosedChainConstraint(p, "r_gripper_tool_frame", "l_gripper_tool_frame",
+                                                           FACING, [[0.3], [0.5]]), None, [0.4]),
+    "balance": lambda t, p, c: (_balance(*c), c[1] + 0.1 * np.random.default_rng(1).normal(size=(40, c[0].n)),
+                                [0.65]),
+    "set": lambda t, p, c: (ConstraintSet([OrientationConstraint(t.robot, "panda_hand_tcp", (0, 0, 1), (0, 0, -1)),
+                                           PlaneConstraint(t.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])]),
+                            None, [0.4]),
+    "user": lambda t, p, c: (ToolDownAtX(t.robot), None, [0.45]),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_constraint_contract(case, panda_task, pr2_both_arms, centauro_floating, rng):
+    """Every type: Jacobian = finite differences, torch residual = numpy residual (and differentiable),
+    spec round trip, projection converges onto points that satisfy it."""
+    import torch
+
+    c, seeds, y = CASES[case](panda_task, pr2_both_arms, centauro_floating)
+    robot = c.robot
+    q = robot.sample_uniform(3, rng) if seeds is None else seeds[:3]
+    _fd_check(c, q, np.broadcast_to(np.asarray(y, float), (3, len(y))))
+    qt = torch.as_tensor(q, dtype=torch.float64).requires_grad_(True)
+    Ft = c.residual(qt, torch.tensor(y, dtype=torch.float64))
+    np.testing.assert_allclose(Ft.detach().numpy(), c.residual(q, y), atol=1e-9)
+    Gt = c.inequality(qt, torch.tensor(y, dtype=torch.float64))
+    np.testing.assert_allclose(Gt.detach().numpy(), c.inequality(q, y), atol=1e-9)
+    c.penalty(qt, torch.tensor(y, dtype=torch.float64)).sum().backward()
+    assert torch.isfinite(qt.grad).all() and qt.grad.abs().sum() > 0
+    rebuilt = build_constraint(robot, c.spec())
+    assert type(rebuilt) is type(c) and rebuilt.spec() == c.spec()
+    np.testing.assert_allclose(rebuilt.residual(q, y), c.residual(q, y))
+    res = project(c, robot.sample_uniform(40, rng) if seeds is None else seeds, y)
+    assert res.converged.mean() > 0.3
+    ok = res.q[res.converged]
+    assert c.violation(ok, y).max() < 1e-3 and robot.within_limits(ok).all()
+
+
+def test_closed_chain_between_pr2_grippers(pr2_both_arms, rng):
+    robot, facing = pr2_both_arms, FACING
     c = ClosedChainConstraint(robot, "r_gripper_tool_frame", "l_gripper_tool_frame", facing, [[0.3], [0.5]])
-    _fd_check(c, robot.sample_uniform(3, rng), np.full((3, 1), 0.4))
     res = project(c, robot.sample_uniform(200, rng), [0.4])
     ok = res.q[res.converged]
     assert len(ok) > 50 and c.satisfied(ok, [0.4]).all()
@@ -135,19 +202,10 @@ def test_closed_chain_between_pr2_grippers(rng):
     np.testing.assert_allclose(np.transpose(Ra, (0, 2, 1)) @ Rb, np.broadcast_to(facing, Ra.shape), atol=1e-5)
 
 
-def test_balance_on_centauro_with_floating_base(rng):
-    from manifoldgen.constraints import project
-    from manifoldgen.constraints.balance import BalanceConstraint
-    from manifoldgen.robot import Robot
-
-    robot = Robot.load("centauro", floating_base=True)
-    feet = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
-    stance = np.clip(np.zeros(robot.n), robot.lower, robot.upper)
-    stance[2] = 0.7
-    c = BalanceConstraint(robot, feet, np.stack([robot.frame_pose(stance, f)[0][0] for f in feet]),
-                          "pelvis", [[0.6], [0.7]])
+def test_balance_on_centauro_with_floating_base(centauro_floating, rng):
+    robot, stance = centauro_floating
+    c = _balance(robot, stance)
     assert c.satisfied(stance, [0.7])[0] and np.all(c.inequality(stance, [0.7]) < 0)
-    _fd_check(c, stance + 0.05 * rng.normal(size=(2, robot.n)), np.full((2, 1), 0.65))
     res = project(c, np.clip(stance + 0.2 * rng.normal(size=(100, robot.n)), robot.lower, robot.upper), [0.65])
     assert res.converged.mean() > 0.9
     moved = res.q[res.converged]

@@ -30,7 +30,7 @@ def test_every_row_is_valid_and_meta_is_complete(panda_task, small):
     np.testing.assert_allclose(np.unique(dataset.y), [0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
     meta = dataset.meta
     assert meta["robot"] == "panda" and meta["joints"] == [f"panda_joint{i}" for i in range(1, 8)]
-    assert meta["constraint"]["type"] == "pose" and meta["seed"] == 3 and meta["format_version"] == 1
+    assert meta["constraint"]["type"] == "pose" and meta["seed"] == 3 and meta["format_version"] == 2
     assert set(meta["locked"]) == {"panda_finger_joint1", "panda_finger_joint2"}
 
 

@@ -14,6 +14,7 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CVAE, load_model
 from manifoldgen.robot import resolve_robot
 from manifoldgen.sampling import ModelSampler
+from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import get_task
 
 runner = CliRunner()
@@ -30,21 +31,22 @@ def model_dir(panda_task, tmp_path_factory):
 def test_model_sampler_returns_only_valid_samples(model_dir, panda_task):
     model = load_model(model_dir)
     checker = CollisionChecker(panda_task.robot)
-    sampler = ModelSampler(panda_task.constraint, [0.4], model, refine=5, checker=checker, batch=128, seed=1)
+    space = ConstrainedSpace(panda_task.constraint, [0.4], checker)
+    sampler = ModelSampler(space, model, refine=5, batch=128, seed=1)
     q = sampler.sample_many(40)
     assert q.shape == (40, 7)
     assert panda_task.constraint.satisfied(q, [0.4]).all()
     assert not checker.in_collision(q).any()
     assert sampler.stats.accepted == 40 and sampler.stats.refined == sampler.stats.generated
-    again = ModelSampler(panda_task.constraint, [0.4], model, refine=5, checker=checker, batch=128, seed=1)
+    again = ModelSampler(space, model, refine=5, batch=128, seed=1)
     np.testing.assert_array_equal(again.sample_many(40), q)
 
 
 def test_model_sampler_refuses_another_robot(model_dir):
     model = load_model(model_dir)
     pr2 = get_task("pose", "pr2")
-    with pytest.raises(ManifoldgenError, match="trained for robot 'panda'.*uses robot 'pr2'"):
-        ModelSampler(pr2.constraint, [0.8], model)
+    with pytest.raises(ManifoldgenError, match="made for another task: robot panda .* vs pr2"):
+        ModelSampler(ConstrainedSpace(pr2.constraint, [0.8]), model)
 
 
 def _pinocchio_valid(meta: dict, q: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -69,7 +71,7 @@ def _pinocchio_valid(meta: dict, q: np.ndarray, y: np.ndarray) -> np.ndarray:
         pos = np.abs(M.translation[axes] - y[b])
         rot = np.abs(pin.log3(target.T @ M.rotation))
         limits = np.all(full >= model.lowerPositionLimit - 1e-9) and np.all(full <= model.upperPositionLimit + 1e-9)
-        ok[b] = (pos.max() <= spec["tolerance"]["position"] and rot.max() <= spec["tolerance"]["orientation"]
+        ok[b] = (pos.max() <= spec["position_tolerance"] and rot.max() <= spec["orientation_tolerance"]
                  and limits)
     return ok
 
@@ -100,8 +102,8 @@ def test_sample_command_errors(model_dir, tmp_path):
     assert warn.exit_code == 0 and "outside the trained range" in warn.output and "0.3, 0.5" in warn.output
     strict = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.65", "-n", "10", "--strict", "-o", out])
     assert strict.exit_code == 2 and "outside the trained range" in strict.output
-    other = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.8", "--robot", "pr2", "-n", "10",
-                                "-o", out])
-    assert other.exit_code == 2 and "'panda'" in other.output and "'pr2'" in other.output
+    other = runner.invoke(app, ["sample", str(model_dir), "--condition", "0.8", "--task", "pose", "--robot", "pr2",
+                                "-n", "10", "-o", out])
+    assert other.exit_code == 2 and "robot panda" in other.output and "vs pr2" in other.output
     missing = runner.invoke(app, ["sample", str(tmp_path), "--condition", "0.4", "-n", "10", "-o", out])
     assert missing.exit_code == 2 and "missing model.json" in missing.output

@@ -6,9 +6,9 @@ import pytest
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.ompl_bridge import OmplConstraint, OmplPlanner, OmplSettings
-from manifoldgen.planning.validate import validate_path
+from manifoldgen.ompl_bridge import OmplConstraint, OmplPlanner
 from manifoldgen.sampling import ProjectionSampler
+from manifoldgen.space import ConstrainedSpace
 
 
 @pytest.fixture(scope="module")
@@ -16,6 +16,11 @@ def setup():
     from manifoldgen.tasks import get_task
     task = get_task("pose", "panda")
     return task, task.constraint, task.home_condition, CollisionChecker(task.robot)
+
+
+def _space(setup):
+    task, constraint, y, checker = setup
+    return ConstrainedSpace(constraint, y, checker)
 
 
 def _goal(task, offset):
@@ -44,7 +49,7 @@ def _check_path(result, task, y, checker, start, goal, tolerance):
     assert np.all(task.constraint.violation(path, y) <= tolerance + 1e-9)
     assert not checker.in_collision(path).any()
     # ... and every straight segment between them passes the independent dense check
-    report = validate_path(path, task.constraint, y, checker, 0.005)
+    report = ConstrainedSpace(task.constraint, y, checker).validate_path(path)
     assert report.valid, report.reason
     assert result.length == pytest.approx(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
@@ -53,9 +58,9 @@ def _check_path(result, task, y, checker, start, goal, tolerance):
 def test_constrained_spaces_solve_and_paths_validate(setup, space, seed):
     task, constraint, y, checker = setup
     goal = _goal(task, [0.3, 0, 0, 0, 0, 0, 0.3])
-    planner = OmplPlanner(constraint, y, checker, space=space, planner="rrtconnect", seed=seed)
+    planner = OmplPlanner(_space(setup), ompl_space=space, planner="rrtconnect", seed=seed)
     result = planner.solve(task.home, goal, 20.0)
-    _check_path(result, task, y, checker, task.home, goal, 1 - OmplSettings().margin)
+    _check_path(result, task, y, checker, task.home, goal, 1 - planner.space.settings.margin)
     assert result.planner == f"ompl-{space}-rrtconnect"
     assert result.extras["newton_steps"] > 0
     # OMPL projects through Constraint::project only in the projected space (atlas and tangent use charts)
@@ -65,7 +70,7 @@ def test_constrained_spaces_solve_and_paths_validate(setup, space, seed):
 def test_same_seed_same_path(setup):
     task, constraint, y, checker = setup
     goal = _goal(task, [0.4, 0.3, 0, 0.3, 0, 0, 0])
-    paths = [OmplPlanner(constraint, y, checker, space="atlas", seed=3).solve(task.home, goal, 10.0).path
+    paths = [OmplPlanner(_space(setup), ompl_space="atlas", seed=3).solve(task.home, goal, 10.0).path
              for _ in range(2)]
     np.testing.assert_array_equal(paths[0], paths[1])
 
@@ -74,8 +79,8 @@ def test_same_seed_same_path(setup):
 def test_python_sampler_feeds_ompl_planners(setup, space, planner):
     task, constraint, y, checker = setup
     goal = _goal(task, [1.2, 0.3, 0, 0.5, 0, 0, 0])
-    sampler = RecordingSampler(constraint, y, checker=checker, seed=0)
-    result = OmplPlanner(constraint, y, checker, sampler, space=space, planner=planner, seed=0).solve(
+    sampler = RecordingSampler(_space(setup), seed=0)
+    result = OmplPlanner(_space(setup), sampler, ompl_space=space, planner=planner, seed=0).solve(
         task.home, goal, 20.0)
     assert result.extras["sampler_calls"] >= 1
     assert result.samples_drawn == len(sampler.handed) >= 1
@@ -107,12 +112,15 @@ def test_ompl_constraint_scaling(setup):
 
 def test_refusals(setup):
     task, constraint, y, checker = setup
-    sampler = ProjectionSampler(constraint, y, seed=0)
+    space = _space(setup)
+    sampler = ProjectionSampler(ConstrainedSpace(constraint, y), seed=0)
     with pytest.raises(ManifoldgenError, match="cannot use a Python sampler"):
-        OmplPlanner(constraint, y, checker, sampler, planner="rrtconnect")
+        OmplPlanner(space, sampler, planner="rrtconnect")
     with pytest.raises(ManifoldgenError, match="unknown OMPL space"):
-        OmplPlanner(constraint, y, checker, space="atlass")
+        OmplPlanner(space, ompl_space="atlass")
     with pytest.raises(ManifoldgenError, match="needs a sampler"):
-        OmplPlanner(constraint, y, checker, space="joint", planner="prm")
+        OmplPlanner(space, ompl_space="joint", planner="prm")
+    with pytest.raises(ManifoldgenError, match="the sampler serves condition"):
+        OmplPlanner(space, ProjectionSampler(ConstrainedSpace(constraint, y + 0.05)), planner="prm")
     with pytest.raises(ManifoldgenError, match="violates the constraint"):
-        OmplPlanner(constraint, y, checker, space="atlas").solve(task.home + 0.3, task.home, 1.0)
+        OmplPlanner(space, ompl_space="atlas").solve(task.home + 0.3, task.home, 1.0)

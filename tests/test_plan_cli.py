@@ -118,9 +118,9 @@ def test_bad_sampler_specs(tmp_path, panda_task):
     pr2 = collect(get_task("pose", "pr2"), 40, seed=0, conditions=[[0.7], [0.8]], progress=False)
     CVAE(hidden=[16], batch=32).fit(pr2, epochs=1, seed=0, progress=False, out=tmp_path / "pr2model")
     result = _plan(tmp_path, "--sampler", f"cvae:{tmp_path / 'pr2model'}")
-    assert result.exit_code == 2 and "robot 'pr2'" in result.output and "not panda" in result.output
+    assert result.exit_code == 2 and "made for another task: robot pr2" in result.output and "vs panda" in result.output
     result = _plan(tmp_path, "--sampler", f"cgan:{tmp_path / 'pr2model'}")
     assert result.exit_code == 2 and "holds a cvae model, not cgan" in result.output
     pr2.save(tmp_path / "pr2.npz")
     result = _plan(tmp_path, "--sampler", f"pg:{tmp_path / 'pr2.npz'}")
-    assert result.exit_code == 2 and "dataset" in result.output and "robot 'pr2'" in result.output
+    assert result.exit_code == 2 and "dataset" in result.output and "made for another task: robot pr2" in result.output

@@ -2,15 +2,15 @@
 
 import numpy as np
 
-from manifoldgen.constraints import project
-from test_constraints import JointSum
+from manifoldgen.constraints import JointLinearConstraint, project
 
 
 def test_linear_constraint_projects_orthogonally(panda_task, rng):
     robot = panda_task.robot
     mid = (robot.lower + robot.upper) / 2
     q = mid + 0.2 * (robot.sample_uniform(50, rng) - mid)  # well inside the limits
-    res = project(JointSum(robot), q, [0.5])
+    joint_sum = JointLinearConstraint(robot, [[1, 1, 0, 0, 0, 0, 0]], [[0.0], [0.5]], tolerance=1e-3)
+    res = project(joint_sum, q, [0.5])
     assert res.converged.all() and np.all(res.iterations <= 6)
     shift = (0.5 - q[:, 0] - q[:, 1]) / 2  # closest point on q0 + q1 = 0.5
     np.testing.assert_allclose(res.q[:, 0], q[:, 0] + shift, atol=1e-6)

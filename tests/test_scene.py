@@ -10,11 +10,13 @@ import pytest
 
 from manifoldgen.collision import CollisionChecker, touch_links
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.scene import SCENES, Attached, Obstacle, Pose, Scene, get_scene
-from manifoldgen.tasks import get_task
+from manifoldgen.scene import Attached, Obstacle, Pose, Scene, get_scene
+from manifoldgen.tasks import builtin_tasks, get_task
+
+NAMED = [(t, r, n) for t, robots in builtin_tasks().items() for r in robots for n in get_task(t, r).scenes]
 
 
-@pytest.mark.parametrize("task_name,robot,name", [(t, r, n) for (t, r), scenes in SCENES.items() for n in scenes])
+@pytest.mark.parametrize("task_name,robot,name", NAMED)
 def test_named_scene_queries_are_valid(task_name, robot, name):
     task = get_task(task_name, robot)
     scene = get_scene(task, name)
@@ -145,7 +147,7 @@ def test_scene_lookup_errors(tmp_path, panda_task):
         get_scene(panda_task, "mazee")
     data = json.loads(get_scene(panda_task, "wall").to_json())
     (tmp_path / "short.json").write_text(json.dumps({**data, "start": [0.0, 0.1]}))
-    with pytest.raises(ManifoldgenError, match="start and goal need 7 joint values"):
+    with pytest.raises(ManifoldgenError, match="start needs 7 joint values .* or an end-effector target"):
         get_scene(panda_task, str(tmp_path / "short.json"))
     (tmp_path / "pr2.json").write_text(json.dumps({**data, "robot": "pr2"}))
     with pytest.raises(ManifoldgenError, match="is for robot 'pr2', not panda"):
@@ -153,4 +155,4 @@ def test_scene_lookup_errors(tmp_path, panda_task):
     (tmp_path / "broken.json").write_text("{")
     with pytest.raises(ManifoldgenError, match="not valid JSON"):
         get_scene(panda_task, str(tmp_path / "broken.json"))
-    assert set(SCENES[("pose", "panda")]) == {"wall", "maze"} and set(SCENES[("pose", "pr2")]) == {"wall"}
+    assert {(r, n) for _, r, n in NAMED} == {("panda", "wall"), ("panda", "maze"), ("pr2", "wall")}

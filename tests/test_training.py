@@ -36,6 +36,15 @@ def test_bad_datasets_are_refused(tiny):
         check_dataset(Dataset(tiny.q[:3], tiny.y[:3], tiny.meta))
     with pytest.raises(ManifoldgenError, match="epochs must be positive"):
         CVAE(**TINY).fit(tiny, epochs=0, progress=False)
+    reversed_joints = Dataset(tiny.q, tiny.y, {**tiny.meta, "joints": tiny.meta["joints"][::-1]})
+    with pytest.raises(ManifoldgenError, match="not its task's planning group"):
+        check_dataset(reversed_joints)
+    extra = Dataset(tiny.q, np.concatenate([tiny.y, tiny.y], axis=1), tiny.meta)
+    with pytest.raises(ManifoldgenError, match="2 condition columns but its task has 1"):
+        check_dataset(extra)
+    off = Dataset(tiny.q + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3]), tiny.y, tiny.meta)
+    with pytest.raises(ManifoldgenError, match="does not satisfy its task's constraint"):
+        CVAE(**TINY).fit(off, epochs=1, progress=False)
 
 
 def test_outputs_and_early_stopping(tiny, tmp_path):

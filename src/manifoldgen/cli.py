@@ -8,8 +8,10 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.text import Text
 
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.runtime import REFINE, TORCH_THREADS, set_torch_threads
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Constrained motion planning with learned samplers.")
@@ -23,17 +25,33 @@ def friendly(command):
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         def show(message, category, filename, lineno, file=None, line=None):
-            console.print(f"[yellow]warning:[/] {message}")
+            console.print(Text.assemble(("warning: ", "yellow"), str(message)))
         warnings.showwarning = show
         try:
             return command(*args, **kwargs)
         except ManifoldgenError as exc:
-            console.print(f"[red]error:[/] {exc}")
+            console.print(Text.assemble(("error: ", "red"), str(exc)))  # verbatim: no markup
             raise typer.Exit(2) from None
     return wrapper
 
 
-def _task(task: str, robot: str):
+TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"
+ROBOT_HELP = "Robot of a built-in task (default: the task's default robot)"
+
+
+def _names(registry: str) -> list[str]:
+    """Names in a registry, for --help (``models``, ``planners``, ``constraints``)."""
+    if registry == "models":
+        from manifoldgen.models import MODELS
+        return MODELS.names()
+    if registry == "planners":
+        from manifoldgen.planning import PLANNERS
+        return list(PLANNERS)
+    from manifoldgen.constraints import CONSTRAINTS
+    return CONSTRAINTS.names()
+
+
+def _task(task: str, robot: str | None):
     from manifoldgen.tasks import get_task
     return get_task(task, robot)
 
@@ -47,8 +65,8 @@ def _check_conditions(task_obj, condition: list[float] | None, strict: bool):
 
 @app.command()
 @friendly
-def collect(task: str = typer.Argument(..., help="Task name, e.g. pose"),
-            robot: str = typer.Option("panda", help="example-robot-data name"),
+def collect(task: str = typer.Argument(..., help=TASK_HELP),
+            robot: str = typer.Option(None, help=ROBOT_HELP),
             per_condition: int = typer.Option(1000, help="Valid rows per condition value"),
             seed: int = typer.Option(0),
             condition: list[float] = typer.Option(None, help="Condition values (default: the task's)"),
@@ -66,20 +84,38 @@ def collect(task: str = typer.Argument(..., help="Task name, e.g. pose"),
     dataset = run_collect(task_obj, per_condition, seed, output, conditions=values)
     elapsed = time.perf_counter() - start
     console.print(f"wrote {output}: {len(dataset)} rows x {dataset.q.shape[1]} joints "
-                  f"({task_obj.robot.name}, {task} task) in {elapsed:.1f} s "
+                  f"({task_obj.robot.name}, {task_obj.name} task) in {elapsed:.1f} s "
                   f"({len(dataset) / elapsed:,.0f} rows/s)")
 
 
 @app.command()
 @friendly
-def tasks():
-    """List the named tasks, their robots, planning groups and condition ranges."""
-    from manifoldgen.tasks import TASKS, get_task
-    for name, robots in TASKS.items():
-        for robot in robots:
-            t = get_task(name, robot)
-            console.print(f"{name:<6} {robot:<9} {t.robot.n:>2} joints  {t.condition.describe()}; training values "
-                          f"{', '.join(f'{v:g}' for v in t.condition.values.ravel())}")
+def tasks(files: list[str] = typer.Argument(None, help="Task .toml files to describe (default: the built-in tasks)")):
+    """List tasks: robot, planning group size, condition range, training values and scenes."""
+    from manifoldgen.tasks import builtin_tasks, get_task
+    entries = [(f, None) for f in files] if files else [(n, r) for n, robots in builtin_tasks().items() for r in robots]
+    for name, robot in entries:
+        t = get_task(name, robot)
+        values = "; ".join(", ".join(f"{v:g}" for v in row) for row in t.condition.grid) or "none"
+        console.print(f"{t.name:<8} {t.robot.name:<9} {t.robot.n:>2} joints  {t.condition.describe() or 'unconditioned'}"
+                      f"; training values {values}; scenes: {', '.join(t.scenes) or 'none'}", markup=False)
+
+
+@app.command()
+@friendly
+def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to describe (default: list the names)"),
+           srdf: Path = typer.Option(None, help="SRDF for a URDF path (default: the one beside it)")):
+    """List the robots that load by name, or describe one: joints, limits, frames, SRDF and URDF hash."""
+    from manifoldgen.robot import Robot, known_robots
+    if robot is None:
+        console.print(", ".join(known_robots()), markup=False)
+        return
+    r = Robot.load(robot, srdf=srdf)
+    console.print(f"{r.name}: URDF {r.urdf_path} (sha256 {r.identity['urdf_sha256'][:12]}), SRDF {r.srdf or 'none'}",
+                  markup=False)
+    for joint, lo, hi in zip(r.joints, r.lower, r.upper):
+        console.print(f"  {joint:<28} [{lo:+.3f}, {hi:+.3f}]", markup=False)
+    console.print(f"  frames: {', '.join(f.name for f in r.model.frames[1:])}", markup=False)
 
 
 @app.command()
@@ -93,24 +129,24 @@ def demo(output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="F
 
 @app.command()
 @friendly
-def plan(task: str = typer.Argument(..., help="Task name, e.g. pose"),
-         robot: str = typer.Option("panda", help="example-robot-data name"),
+def plan(task: str = typer.Argument(..., help=TASK_HELP),
+         robot: str = typer.Option(None, help=ROBOT_HELP),
          scene: str = typer.Option(..., help="Named scene (wall, maze) or a scene .json file"),
          sampler: str = typer.Option("project", help="uniform, project, pg:DATASET.npz or MODEL:DIR "
                                      "(e.g. cvae:runs/cvae)"),
-         planner: str = typer.Option("rrtconnect", help="rrtconnect, rrt, prm, kpiece, cbirrt"),
-         local: str = typer.Option("interpolate", help="Local planner: interpolate or project"),
+         planner: str = typer.Option("rrtconnect", help=f"Planner: {', '.join(_names('planners'))}"),
+         local: str = typer.Option("auto", help="Local planner: auto (straight segments, projected walks where "
+                                   "they leave the manifold), interpolate or project"),
          seed: int = typer.Option(0),
          time_limit: float = typer.Option(30.0, "--time", help="Planning time limit in seconds"),
          smooth: bool = typer.Option(False, help="Shortcut the path (re-validated) after planning"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
-    import torch
-
     from manifoldgen.planning.query import run_query, save_path
+    from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
     from manifoldgen.viz.path import plot_path
-    torch.set_num_threads(1)
+    set_torch_threads()
     task_obj = _task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
@@ -123,25 +159,30 @@ def plan(task: str = typer.Argument(..., help="Task name, e.g. pose"),
     console.print(f"{status} in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations -> {output}, {picture}")
     if not result.solved:
+        console.print(result.why(), markup=False)
         raise typer.Exit(1)
 
 
 @app.command()
 @friendly
 def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
-          model: str = typer.Option("cvae", "--model", help="Model name: cvae, cgan, wgan, flow"),
+          model: str = typer.Option("cvae", "--model", help=f"Model: {', '.join(_names('models'))}, or module:Class"),
+          settings: list[str] = typer.Option(None, "--set", help="Hyper-parameter KEY=VALUE (repeatable), e.g. "
+                                             "--set latent=8 --set 'hidden=[128,128]'"),
+          config: Path = typer.Option(None, help="TOML file of hyper-parameters (--set wins)"),
           seed: int = typer.Option(0),
           output: Path = typer.Option(..., "-o", "--output", help="Model directory to write"),
           epochs: int = typer.Option(None, help="Maximum epochs (default: the model's)"),
           resume: bool = typer.Option(False, help="Continue an interrupted run from its checkpoint"),
-          threads: int = typer.Option(1, help="torch CPU threads (one is as fast for these small MLPs and never spins against other processes)")):
+          threads: int = typer.Option(TORCH_THREADS, help="torch CPU threads (one is as fast for these small MLPs "
+                                      "and never spins against other processes)")):
     """Train a conditional generative model (checkpoints every epoch; --resume continues)."""
-    import torch
-
     from manifoldgen.data import Dataset
     from manifoldgen.models import get_model_class
-    torch.set_num_threads(max(1, threads))
-    net = get_model_class(model)()
+    from manifoldgen.settings import parse_settings
+    set_torch_threads(threads)
+    cls = get_model_class(model)
+    net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
     log = net.fit(Dataset.load(dataset), epochs=epochs, seed=seed, out=output, resume=resume)
     console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
                   f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}) "
@@ -154,22 +195,22 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
            condition: list[float] = typer.Option(..., help="Condition value(s) y, e.g. --condition 0.45"),
            n: int = typer.Option(1000, "-n", help="Number of samples"),
            seed: int = typer.Option(0),
-           refine: int = typer.Option(0, help="Max projection iterations per sample (0: raw rows)"),
+           refine: int = typer.Option(REFINE, help="Max projection iterations per written sample (0: raw rows; "
+                                      "the raw rate is printed either way)"),
            strict: bool = typer.Option(False, help="Refuse conditions outside the trained range"),
-           task: str = typer.Option(None, help="Task to check against (default: the model's)"),
-           robot: str = typer.Option(None, help="Robot of --task (default: the model's)"),
+           task: str = typer.Option(None, help="Task to check against (default: the model's own, from its file): "
+                                    + TASK_HELP),
+           robot: str = typer.Option(None, help=ROBOT_HELP),
            output: Path = typer.Option(..., "-o", "--output", help="Samples .npz (dataset format)")):
     """Generate configurations with a trained model; prints raw and refined within-tolerance rates."""
-    import torch
-
     from manifoldgen.models import load_model
-    from manifoldgen.sampling import check_model_matches, sample_to_file
-    torch.set_num_threads(2)
+    from manifoldgen.sampling import sample_to_file
+    from manifoldgen.tasks import task_from_meta
+    set_torch_threads(2)
     if n <= 0:
         raise ManifoldgenError(f"-n must be a positive number of samples, got {n}")
     net = load_model(model_dir)
-    task_obj = _task(task or net.meta.get("task", "pose"), robot or net.meta["robot"])
-    check_model_matches(net, task_obj.constraint)
+    task_obj = task_from_meta(net.meta) if task is None else _task(task, robot)
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
@@ -181,34 +222,67 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
 def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained model directories"),
                    output: Path = typer.Option(..., "-o", "--output", help="Folder for JSON, Markdown, PNGs"),
                    samples: int = typer.Option(3000, help="Samples per condition for accuracy/coverage"),
-                   refine: int = typer.Option(3, help="LM iterations for the refined rate"),
+                   refine: int = typer.Option(REFINE, help="LM iterations for the refined rate"),
                    reference: int = typer.Option(3000, help="Reference projection samples per condition"),
                    repeats: int = typer.Option(7, help="Timing repeats (median)"),
                    threads: int = typer.Option(2, help="torch CPU threads for sampling"),
+                   seen: list[float] = typer.Option(None, help="Seen conditions to score (repeatable; default: the "
+                                                    "training values)"),
+                   unseen: list[float] = typer.Option(None, help="Unseen conditions to score (repeatable; default: "
+                                                      "midpoints and one step past the top); unreachable ones are "
+                                                      "skipped with a warning"),
                    seed: int = typer.Option(0)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
-    import torch
-
     from manifoldgen.bench.sampling import run_sampling_bench
-    torch.set_num_threads(max(1, threads))
+    set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
-                       repeats=repeats, seed=seed, threads=max(1, threads))
+                       repeats=repeats, seed=seed, threads=max(1, threads), seen=seen or None, unseen=unseen or None)
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 
 
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
-                    baseline: str | None, task: str, robot: str) -> None:
-    from manifoldgen.bench.planning import PAPER_LIMITS, Experiment, default_baseline, default_methods, run_bench
-    paper = PAPER_LIMITS[scene]
-    experiment = Experiment(scene, task, robot, paper["time_limit"] if time_limit is None else time_limit, seed)
+                    baseline: str | None, task: str, robot: str | None) -> None:
+    from manifoldgen.bench.planning import (OTHER_LIMITS, PAPER_LIMITS, Experiment, default_baseline,
+                                            default_methods, run_bench)
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import BUILTIN_DIR, get_task
+    task_obj = get_task(task, robot)
+    get_scene(task_obj, scene)  # a bad scene fails before any run starts
+    builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR
+    paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS
+    experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,
+                            paper["time_limit"] if time_limit is None else time_limit, seed)
+    if not methods and not models and not builtin:
+        raise ManifoldgenError(f"give --methods or --model for task {task_obj.name}: the shipped model is for the "
+                               "panda pose task; e.g. -m rrtconnect@project -m cbirrt@uniform -m cvae=rrtconnect@cvae:DIR")
     methods = methods or default_methods(models or None)
     table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
                          workers=workers, resume=resume, pg_rows=pg_rows,
                          baseline=baseline or default_baseline(methods))
     console.print(table)
     console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")
+
+
+@bench_app.command("plan")
+@friendly
+def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
+               scene: str = typer.Option(..., help="A scene the task names, or a scene .json file"),
+               robot: str = typer.Option(None, help=ROBOT_HELP),
+               runs: int = typer.Option(None, help="Runs per method (default: 20; the paper's counts for wall/maze)"),
+               workers: int = typer.Option(1, help="Parallel worker processes"),
+               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 30; 200 for wall/maze)"),
+               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
+               methods: list[str] = typer.Option(None, "--methods", "-m", help="see `bench wall --help`"),
+               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default methods"),
+               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
+               seed: int = typer.Option(0, help="Run r uses seed + r"),
+               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
+               baseline: str = typer.Option(None, help="Method label for the speed-up column")):
+    """Any task's scene (a task file's or a scene .json): every method on the same query and seeds."""
+    _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                    task, robot)
 
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
@@ -230,7 +304,7 @@ def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: th
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
+               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP)):
     """Table II: the wall scene, every method on the same query and seeds."""
     _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
                     task, robot)
@@ -249,7 +323,10 @@ def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: th
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose"), robot: str = typer.Option("panda")):
+               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP)):
     """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
     _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
                     task, robot)
+
+
+from manifoldgen import cli_view  # noqa: E402,F401  (registers view, trajectory)

@@ -138,9 +138,9 @@ def _self_pairs(robot: Robot) -> list[tuple[int, int]]:
 
 def _sampled_matrix(robot: Robot, pairs: list[tuple[int, int]]) -> list[tuple[int, int]]:
     """Drop pairs never or always in collision over random configurations (cached)."""
-    key = hashlib.sha256(json.dumps([robot.name, robot.joints, robot.reference.tolist(), pairs,
+    key = hashlib.sha256(json.dumps([robot.identity, robot.joints, robot.reference.tolist(), pairs,
                                      MATRIX_SAMPLES]).encode()).hexdigest()[:16]
-    path = cache_dir() / "collision" / f"{Path(robot.name).stem}-{key}.json"
+    path = cache_dir() / "collision" / f"{robot.name}-{key}.json"
     if path.exists():
         try:
             return [tuple(p) for p in json.loads(path.read_text())["pairs"]]

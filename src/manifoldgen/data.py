@@ -22,9 +22,10 @@ from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
-from manifoldgen.tasks import Task, get_task
+from manifoldgen.space import ConstrainedSpace
+from manifoldgen.tasks import Task, task_from_meta
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 
 
 @dataclass
@@ -57,8 +58,8 @@ class Dataset:
         return cls(q, y, meta)
 
     def task(self) -> Task:
-        """The registered task this dataset was collected for."""
-        return get_task(self.meta.get("task", "pose"), self.meta["robot"])
+        """The task this dataset was collected for, rebuilt from its meta alone."""
+        return task_from_meta(self.meta)
 
     def summary(self) -> dict:
         values, counts = np.unique(self.y, axis=0, return_counts=True)
@@ -66,10 +67,15 @@ class Dataset:
                 "conditions": {json.dumps(v.tolist()): int(c) for v, c in zip(values, counts)}}
 
 
-def valid_rows(task: Task, q: np.ndarray, y: np.ndarray, checker: CollisionChecker) -> np.ndarray:
-    """(B,) bool: within tolerance, inside the limits and free of self-collision."""
-    ok = task.constraint.satisfied(q, y)
-    ok[ok] = ~checker.in_collision(q[ok])
+def valid_rows(task: Task, q: np.ndarray, y: np.ndarray, checker: CollisionChecker | None) -> np.ndarray:
+    """(B,) bool: row ``q[i] (n,)`` valid at its own condition ``y[i] (k,)`` (``y (B, k)``) by the
+    :class:`ConstrainedSpace` rule, with ``checker`` (e.g. self-collision only) or none."""
+    q, y = np.asarray(q, float), np.asarray(y, float).reshape(len(q), task.condition.k)
+    ok = np.zeros(len(q), dtype=bool)
+    values, which = np.unique(y, axis=0, return_inverse=True)
+    for c, value in enumerate(values):
+        rows = which.ravel() == c
+        ok[rows] = ConstrainedSpace(task.constraint, value, checker).valid(q[rows])
     return ok
 
 
@@ -84,8 +90,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     """
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be a positive number of rows, got {per_condition}")
-    values = task.condition.values if conditions is None else np.atleast_2d(conditions)
-    values = np.asarray(values, float).reshape(-1, task.condition.k)
+    k = task.condition.k
+    values = task.condition.grid if conditions is None or not k else np.asarray(conditions, float).reshape(-1, k)
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
             "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection"}
     partial = None
@@ -97,6 +103,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
         for c, y in enumerate(values):
+            space = ConstrainedSpace(task.constraint, y, checker)
             got = []
             for b in range(max_batches):
                 if sum(len(g) for g in got) >= per_condition:
@@ -105,7 +112,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
                 if rows is None:
                     rng = np.random.default_rng([seed, c, b])
                     res = project(task.constraint, task.robot.sample_uniform(batch, rng), y)
-                    rows = res.q[valid_rows(task, res.q, np.broadcast_to(y, (batch, len(y))), checker)]
+                    rows = res.q[space.valid(res.q)]
                     if partial is not None:
                         save_npz(partial / f"c{c}-b{b}.npz", {}, q=rows)
                 got.append(rows)

@@ -19,6 +19,7 @@ from manifoldgen.models import get_model_class
 from manifoldgen.planning.query import run_query, save_path
 from manifoldgen.sampling import generate
 from manifoldgen.scene import get_scene
+from manifoldgen.runtime import REFINE, set_torch_threads
 from manifoldgen.tasks import get_task
 from manifoldgen.training import CHECKPOINT_STATE
 from manifoldgen.viz.path import plot_path
@@ -28,14 +29,12 @@ EPOCHS = 20
 # A lighter residual penalty than the cvae default: in a 20-epoch run the default's penalty
 # narrows the samples before they spread over the manifold, and the wall query needs coverage.
 CVAE_SETTINGS = {"residual_weight": 0.05, "recon_residual_weight": 0.05}
-REFINE = 3  # the learned sampler's samples get at most 3 projection steps ("learned + project")
 SAMPLES = 4000
 
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:
     """Run the pipeline into ``output``; print and return the figures."""
-    torch.set_num_threads(1)  # a small MLP gains nothing from a second thread, and one thread
-    # cannot spin against another process's OpenMP threads on a shared 2-core machine
+    set_torch_threads()
     output.mkdir(parents=True, exist_ok=True)
     task = get_task("pose", "panda")
     scene = get_scene(task, "wall")

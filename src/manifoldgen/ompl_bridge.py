@@ -11,6 +11,9 @@
   straight segments checked every ``resolution`` rad, as MoveIt does with path
   constraints (the paper's setting). Only useful with a sampler that lands on the manifold.
 
+Validity is the :class:`~manifoldgen.space.ConstrainedSpace`'s (in the constrained spaces
+without the equality test: OMPL keeps its states on the manifold itself).
+
 A :class:`~manifoldgen.sampling.Sampler` (learned model, PG, projection, uniform) enters
 OMPL *unmodified* planners through ``si.setValidStateSamplerAllocator``: OMPL's PRM,
 PRMstar and BKPIECE1 then draw their states from it (:class:`SamplerBridge`); the tree
@@ -18,7 +21,7 @@ planners RRT, RRTConnect and KPIECE1 have no Python state-sampler hook in OMPL 2
 bindings, so they refuse a sampler.
 
 The returned path is OMPL's solution densified by OMPL's ``interpolate`` and then checked
-by :func:`~manifoldgen.planning.validate.validate_path` at ``validation_resolution``:
+by the space's :meth:`~manifoldgen.space.ConstrainedSpace.validate_path`:
 OMPL guarantees only its own states (to its tolerance, ``delta`` apart on the manifold),
 not the straight segments between them. ``solved`` requires OMPL's exact solution *and* a
 valid path; ``extras`` keeps both verdicts, the worst violation and the reason.
@@ -38,12 +41,11 @@ import ompl.base as ob
 import ompl.geometric as og
 import ompl.util as ou
 
-from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.planning.validate import check_query_state, validate_path
 from manifoldgen.sampling import Sampler
+from manifoldgen.space import ConstrainedSpace
 
 SPACES = ("projected", "atlas", "tangent", "joint")
 PLANNERS = {"rrtconnect": og.RRTConnect, "rrt": og.RRT, "kpiece": og.KPIECE1, "prm": og.PRM,
@@ -53,29 +55,26 @@ SAMPLER_PLANNERS = ("prm", "prmstar", "bkpiece")  # call a Python ValidStateSamp
 
 @dataclass
 class OmplSettings:
-    """OMPL knobs.
+    """OMPL knobs (OMPL's scalar tolerance is ``1 - margin`` of the space's validation settings
+    on the tolerance-scaled residual, see :class:`OmplConstraint`: the margin our own planners
+    keep for intermediate states).
 
-    margin: OMPL's scalar tolerance is ``1 - margin`` on the tolerance-scaled residual (see
-    :class:`OmplConstraint`), the margin our own planners keep for intermediate states;
     max_iterations: Newton iterations per projection (OMPL's default 50); lambda_: OMPL's
     limit on manifold-walk length / chord length; range: planner range in rad, by default
     our planners' (``PlannerSettings.range``; 0: OMPL's default, 20% of the space extent,
     2.6 rad for the panda, which makes tree planners slower in clutter); sample_attempts: draws from our sampler per OMPL
-    request before giving up; validation_resolution: the final dense check (rad).
+    request before giving up.
     """
 
-    margin: float = 0.05
     max_iterations: int = 50
     lambda_: float = 2.0
     range: float = 0.6
     sample_attempts: int = 10
-    validation_resolution: float = 0.005
 
     def check(self) -> None:
-        if not 0 <= self.margin < 1 or self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 \
-                or self.sample_attempts < 1 or self.validation_resolution <= 0:
-            raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need 0 <= margin < 1, max_iterations "
-                                   ">= 1, lambda_ > 1, range >= 0, sample_attempts >= 1, validation_resolution > 0")
+        if self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 or self.sample_attempts < 1:
+            raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need max_iterations >= 1, lambda_ > 1, "
+                                   "range >= 0, sample_attempts >= 1")
 
 
 class OmplConstraint(ob.Constraint):
@@ -178,7 +177,8 @@ class SamplerBridge(ob.ValidStateSampler):
 
 
 class OmplPlanner:
-    """OMPL ``planner`` in OMPL ``space`` for our ``constraint`` at ``y``; see the module docstring.
+    """OMPL ``planner`` in the OMPL state space ``ompl_space`` for our constrained ``space``; see
+    the module docstring.
 
     sampler: our Sampler for PRM / PRMstar / BKPIECE1 (None: OMPL's own sampling);
     resolution: OMPL's manifold step ``delta`` (constrained spaces) or the straight-segment
@@ -187,44 +187,34 @@ class OmplPlanner:
     grow their roadmap in a second thread).
     """
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
-                 sampler: Sampler | None = None, *, space: str = "projected", planner: str = "rrtconnect",
-                 resolution: float = 0.05, seed: int = 0, settings: OmplSettings | None = None):
-        if space not in SPACES:
-            raise ManifoldgenError(f"unknown OMPL space '{space}'; known: {', '.join(SPACES)}")
+    def __init__(self, space: ConstrainedSpace, sampler: Sampler | None = None, *, ompl_space: str = "projected",
+                 planner: str = "rrtconnect", resolution: float = 0.05, seed: int = 0,
+                 settings: OmplSettings | None = None):
+        if ompl_space not in SPACES:
+            raise ManifoldgenError(f"unknown OMPL space '{ompl_space}'; known: {', '.join(SPACES)}")
         if planner not in PLANNERS:
             raise ManifoldgenError(f"unknown OMPL planner '{planner}'; known: {', '.join(PLANNERS)}")
         if sampler is not None and planner not in SAMPLER_PLANNERS:
             raise ManifoldgenError(f"OMPL's {planner} cannot use a Python sampler (no state-sampler binding); "
                                    f"use one of {', '.join(SAMPLER_PLANNERS)} or no sampler")
-        if sampler is None and space == "joint":
+        if sampler is None and ompl_space == "joint":
             raise ManifoldgenError("the 'joint' space needs a sampler that lands on the manifold (uniform "
                                    "joint samples almost never satisfy the constraint); pass one or use "
                                    "a constrained space")
+        if sampler is not None and not np.array_equal(sampler.space.y, space.y):
+            raise ManifoldgenError(f"the sampler serves condition {sampler.space.y.tolist()}, the planner "
+                                   f"{space.y.tolist()}; make both for the same condition")
         if resolution <= 0:
             raise ManifoldgenError(f"resolution must be positive, got {resolution}")
         self.settings = OmplSettings() if settings is None else settings
         self.settings.check()
-        self.constraint, self.checker, self.sampler = constraint, checker, sampler
-        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
-        self.space, self.planner_name, self.resolution, self.seed = space, planner, resolution, seed
-        self.name = f"ompl-{space}-{planner}"
-        self._inequalities = constraint.inequality(constraint.robot.lower, self.y).shape[1] > 0
+        self.space, self.sampler = space, sampler
+        self.ompl_space, self.planner_name, self.resolution, self.seed = ompl_space, planner, resolution, seed
+        self.name = f"ompl-{ompl_space}-{planner}"
 
     # ---------------------------------------------------------------- building blocks
-    def _valid(self, q: np.ndarray) -> bool:
-        """Joint limits, inequalities (and, in the joint space, the constraint) and collisions."""
-        robot = self.constraint.robot
-        if self.space == "joint":
-            ok = bool(self.constraint.satisfied(q, self.y)[0])
-        else:
-            ok = bool(robot.within_limits(q[None])[0])
-            if ok and self._inequalities:
-                ok = bool(np.all(self.constraint.inequality(q, self.y) <= 0))
-        return ok and (self.checker is None or not self.checker.in_collision(q[None])[0])
-
     def _ambient(self) -> ob.RealVectorStateSpace:
-        robot = self.constraint.robot
+        robot = self.space.robot
         box = ob.RealVectorStateSpace(robot.n)
         bounds = ob.RealVectorBounds(robot.n)
         for i in range(robot.n):
@@ -234,23 +224,23 @@ class OmplPlanner:
         return box
 
     def _spaces(self, ompl_constraint: OmplConstraint | None):
-        """(state space, space information) for ``self.space``."""
+        """(state space, space information) for ``self.ompl_space``."""
         box = self._ambient()
-        if self.space == "joint":
+        if self.ompl_space == "joint":
             si = ob.SpaceInformation(box)
             si.setStateValidityCheckingResolution(self.resolution / box.getMaximumExtent())
             return box, si
         kind = {"projected": ob.ProjectedStateSpace, "atlas": ob.AtlasStateSpace,
-                "tangent": ob.TangentBundleStateSpace}[self.space]
+                "tangent": ob.TangentBundleStateSpace}[self.ompl_space]
         space = kind(box, ompl_constraint)
-        si = (ob.TangentBundleSpaceInformation if self.space == "tangent" else ob.ConstrainedSpaceInformation)(space)
+        si = (ob.TangentBundleSpaceInformation if self.ompl_space == "tangent" else ob.ConstrainedSpaceInformation)(space)
         space.setDelta(self.resolution)
         space.setLambda(self.settings.lambda_)
         return space, si
 
     def _state(self, space, q: np.ndarray):
         state = space.allocState()
-        write_state(state, q, self.space != "joint")
+        write_state(state, q, self.ompl_space != "joint")
         return state
 
     # ---------------------------------------------------------------- the contract
@@ -258,65 +248,70 @@ class OmplPlanner:
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
         if not np.isfinite(time_limit) or time_limit <= 0:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
-        n = self.constraint.robot.n
-        start, goal = (check_query_state(q, what, self.constraint, self.y, self.checker)
-                       for q, what in ((start, "start"), (goal, "goal")))
+        n, joint = self.space.n, self.ompl_space == "joint"
+        start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         _seed_ompl(self.seed)
         began = time.perf_counter()
-        ompl_constraint = None if self.space == "joint" else OmplConstraint(
-            self.constraint, self.y, 1.0 - self.settings.margin, self.settings.max_iterations)
+        margin = self.space.settings.margin
+        ompl_constraint = None if joint else OmplConstraint(self.space.constraint, self.space.y, 1.0 - margin,
+                                                             self.settings.max_iterations)
         space, si = self._spaces(ompl_constraint)
-        si.setStateValidityChecker(lambda state: self._valid(read_state(state, n)))
+        valid = self.space.valid
+        si.setStateValidityChecker(lambda state: bool(valid(read_state(state, n)[None], equality=joint)[0]))
         bridge = []
         if self.sampler is not None:
             def allocate(info):
                 bridge.append(SamplerBridge(info, self.sampler, ompl_constraint, self.settings.sample_attempts))
                 return bridge[-1]
             si.setValidStateSamplerAllocator(allocate)
-        setup = og.SimpleSetup(si)
-        states = [self._state(space, q) for q in (start, goal)]
-        if ompl_constraint is not None:
-            for state, what in zip(states, ("start", "goal")):
-                if not ompl_constraint.isSatisfied(state):
-                    raise ManifoldgenError(f"{what} is within our tolerance but not within OMPL's stricter one "
-                                           f"(norm of the tolerance-scaled residual <= {1 - self.settings.margin:g}); "
-                                           f"project it onto the constraint more tightly")
-        if self.space in ("atlas", "tangent"):
-            for state in states:
-                space.anchorChart(state)
-        setup.setStartAndGoalStates(*states)
-        planner = PLANNERS[self.planner_name](si)
-        if self.settings.range and hasattr(planner, "setRange"):
-            planner.setRange(self.settings.range)
-        setup.setPlanner(planner)
-        setup.setup()
-        status = setup.solve(float(time_limit) - (time.perf_counter() - began))
-        elapsed = time.perf_counter() - began
-        exact = bool(setup.haveExactSolutionPath())
-        data = ob.PlannerData(si)
-        setup.getPlannerData(data)
-        extras = {"space": self.space, "ompl_planner": self.planner_name, "ompl_status": str(status),
-                  "ompl_solved": exact, "vertices": int(data.numVertices()), "resolution": self.resolution,
-                  "ompl_tolerance": 1.0 - self.settings.margin}
-        path = np.zeros((0, n))
+        try:
+            setup = og.SimpleSetup(si)
+            states = [self._state(space, q) for q in (start, goal)]
+            if ompl_constraint is not None:
+                for state, what in zip(states, ("start", "goal")):
+                    if not ompl_constraint.isSatisfied(state):
+                        raise ManifoldgenError(f"{what} is within our tolerance but not within OMPL's stricter one "
+                                               f"(norm of the tolerance-scaled residual <= {1 - margin:g}); "
+                                               f"project it onto the constraint more tightly")
+            if self.ompl_space in ("atlas", "tangent"):
+                for state in states:
+                    space.anchorChart(state)
+            setup.setStartAndGoalStates(*states)
+            planner = PLANNERS[self.planner_name](si)
+            if self.settings.range and hasattr(planner, "setRange"):
+                planner.setRange(self.settings.range)
+            setup.setPlanner(planner)
+            setup.setup()
+            status = setup.solve(float(time_limit) - (time.perf_counter() - began))
+            elapsed = time.perf_counter() - began
+            exact = bool(setup.haveExactSolutionPath())
+            data = ob.PlannerData(si)
+            setup.getPlannerData(data)
+            extras = {"space": self.ompl_space, "ompl_planner": self.planner_name, "ompl_status": str(status),
+                      "ompl_solved": exact, "vertices": int(data.numVertices()), "resolution": self.resolution,
+                      "ompl_tolerance": 1.0 - margin}
+            path = np.zeros((0, n))
+            if exact:
+                solution = setup.getSolutionPath()
+                extras["ompl_states"] = int(solution.getStateCount())
+                densify_began = time.perf_counter()
+                solution.interpolate()
+                path = np.array([read_state(state, n) for state in solution.getStates()])
+                extras["interpolate_s"] = time.perf_counter() - densify_began
+            if self.ompl_space in ("atlas", "tangent"):
+                extras["charts"] = int(space.getChartCount())
+            drawn = sum(b.drawn for b in bridge)
+            if bridge:
+                extras["sampler_calls"] = sum(b.calls for b in bridge)
+                extras["sampler"] = self.sampler.stats.to_dict()
+        finally:  # the allocator's closure holds the samplers, which hold the SpaceInformation: a cycle through C++
+            if self.sampler is not None:
+                si.clearValidStateSamplerAllocator()
         if exact:
-            solution = setup.getSolutionPath()
-            extras["ompl_states"] = int(solution.getStateCount())
-            densify_began = time.perf_counter()
-            solution.interpolate()
-            path = np.array([read_state(s, n) for s in solution.getStates()])
-            extras["interpolate_s"] = time.perf_counter() - densify_began
-            report = validate_path(path, self.constraint, self.y, self.checker, self.settings.validation_resolution)
+            report = self.space.validate_path(path)
             extras.update(valid=report.valid, worst_violation=report.worst_violation, reason=report.reason)
         if ompl_constraint is not None:
-            extras.update(function_evals=ompl_constraint.function_evals,
-                          newton_steps=ompl_constraint.jacobian_evals)
-        drawn = sum(b.drawn for b in bridge)
-        if bridge:
-            extras["sampler_calls"] = sum(b.calls for b in bridge)
-            extras["sampler"] = self.sampler.stats.to_dict()
-        if self.space in ("atlas", "tangent"):
-            extras["charts"] = int(space.getChartCount())
+            extras.update(function_evals=ompl_constraint.function_evals, newton_steps=ompl_constraint.jacobian_evals)
         solved = exact and bool(extras["valid"])
         projections = ompl_constraint.projections if ompl_constraint is not None else 0
         return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, int(data.numVertices()), drawn,

@@ -10,8 +10,13 @@ batches ``q (B, n)`` in numpy. A floating base is six Euclidean coordinates
 from __future__ import annotations
 
 import difflib
+import functools
+import hashlib
 import os
+import re
 import site
+import xml.etree.ElementTree as ET
+from collections import Counter
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -24,8 +29,25 @@ from manifoldgen.errors import ManifoldgenError
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
 _BASE_AXES = (("P", (1, 0, 0)), ("P", (0, 1, 0)), ("P", (0, 0, 1)),
               ("R", (0, 0, 1)), ("R", (0, 1, 0)), ("R", (1, 0, 0)))
-# example-robot-data names whose files do not follow <name>_description/{urdf,srdf}/<name>.*
-_SPECIAL_FILES = {"baxter": ("baxter", "baxter_manipulation")}
+# pinocchio joint types that can be in a planning group: one revolute or prismatic axis
+_ALIGNED_TYPES = ("RX", "RY", "RZ", "RUBX", "RUBY", "RUBZ", "PX", "PY", "PZ")
+_UNALIGNED_TYPES = ("RevoluteUnaligned", "RevoluteUnboundedUnaligned", "PrismaticUnaligned")
+_GROUP_TYPES = frozenset(_ALIGNED_TYPES + _UNALIGNED_TYPES)
+# Names that no file stem gives, or gives ambiguously: name -> (folder, URDF stem).
+_ALIASES = {
+    "anymal": ("anymal_b_simple_description", "anymal"),  # anymal.urdf is in both ANYmal folders
+    "anymal_b": ("anymal_b_simple_description", "anymal"),
+    "anymal_c": ("anymal_c_simple_description", "anymal"),
+    "g1": ("g1_description", "g1_29dof_rev_1_0"),
+    "so_arm": ("so_arm_description", "so101"),
+    "talos": ("talos_data", "talos_reduced"),
+}
+# URDFs that are not robots Robot.load can plan for: (folder, URDF stem).
+_EXCLUDED = {
+    ("ur_description", "ur3"),  # a xacro stub without a robot name: pinocchio cannot parse it (ur3 is ur3_robot)
+    ("hector_description", "quadrotor_base"),  # a single body without joints: nothing to plan for
+    ("iris_description", "iris_simple"),  # a single body without joints (iris has its rotor joints)
+}
 
 
 def robots_dir() -> Path:
@@ -38,36 +60,110 @@ def robots_dir() -> Path:
 
 
 def known_robots() -> list[str]:
-    """Names of example-robot-data robots that have a URDF at the conventional place."""
-    names = []
-    for folder in sorted(robots_dir().glob("*_description")):
-        name = folder.name.removesuffix("_description")
-        if _robot_files(name)[0].exists():
-            names.append(name)
-    return names
+    """Sorted names that :meth:`Robot.load` accepts for example-robot-data robots."""
+    return list(_catalogue(robots_dir()))
 
 
-def _robot_files(name: str) -> tuple[Path, Path]:
-    urdf_stem, srdf_stem = _SPECIAL_FILES.get(name, (name, name))
-    folder = robots_dir() / f"{name}_description"
-    return folder / "urdf" / f"{urdf_stem}.urdf", folder / "srdf" / f"{srdf_stem}.srdf"
+@functools.cache
+def _catalogue(root: Path) -> dict[str, tuple[Path, Path | None]]:
+    """Name -> (URDF, SRDF or None) for every robot under ``root``, read from the files.
+
+    Each ``*_description`` / ``*_data`` folder's ``urdf/`` and ``robots/`` URDFs are named by
+    their stem (lower case, ``-``/``.`` as ``_``), by the stem without ``_robot`` (``ur5_robot``
+    -> ``ur5``) and, for a folder's only URDF or the one named after it, by the folder; an
+    explicit alias wins, then a stem, then the shorter names; ties go to the first folder.
+    """
+    ranked: dict[str, tuple[int, Path, Path | None]] = {}
+    by_file: dict[tuple[str, str], tuple[Path, Path | None]] = {}
+    for folder in sorted([*root.glob("*_description"), *root.glob("*_data")]):
+        package = folder.name.removesuffix("_description").removesuffix("_data")
+        urdfs = [u for sub in ("urdf", "robots") for u in sorted((folder / sub).glob("*.urdf"))
+                 if (folder.name, u.stem) not in _EXCLUDED]
+        srdfs = sorted((folder / "srdf").glob("*.srdf"))
+        for urdf in urdfs:
+            files = by_file[folder.name, urdf.stem] = (urdf, _matching_srdf(urdf.stem, package, srdfs))
+            stem = re.sub(r"[^a-z0-9]+", "_", urdf.stem.lower())
+            names = [(stem, 1), (stem.removesuffix("_robot"), 2)]
+            if len(urdfs) == 1 or stem == package:
+                names.append((package, 3))
+            for name, rank in names:
+                if name not in ranked or rank < ranked[name][0]:
+                    ranked[name] = (rank, *files)
+    for name, key in _ALIASES.items():
+        if key in by_file:
+            ranked[name] = (0, *by_file[key])
+    return {name: (urdf, srdf) for name, (_, urdf, srdf) in sorted(ranked.items())}
 
 
-def resolve_robot(robot: str) -> tuple[Path, Path | None]:
-    """Map an example-robot-data name or a URDF path to ``(urdf, srdf or None)``."""
-    if robot.endswith(".urdf") or os.sep in robot:
+def _matching_srdf(stem: str, package: str, srdfs: list[Path]) -> Path | None:
+    """The SRDF of a URDF: same stem (or without ``_robot``), else the folder's only one or its namesake."""
+    by_stem = {s.stem: s for s in srdfs}
+    for candidate in (stem, stem.removesuffix("_robot")):
+        if candidate in by_stem:
+            return by_stem[candidate]
+    return srdfs[0] if len(srdfs) == 1 else by_stem.get(package)
+
+
+def _is_path(robot: str) -> bool:
+    return robot.endswith(".urdf") or os.sep in robot
+
+
+def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Path, Path | None]:
+    """Map an example-robot-data name or a URDF path to ``(urdf, srdf or None)``.
+
+    srdf: an explicit SRDF path; by default the robot's own (for a path: the ``.srdf`` beside it).
+    """
+    if _is_path(robot):
         urdf = Path(robot)
         if not urdf.is_file():
             raise ManifoldgenError(f"URDF file not found: {robot}; give an existing path or a robot name")
-        srdf = urdf.with_suffix(".srdf")
-        return urdf, srdf if srdf.is_file() else None
-    urdf, srdf = _robot_files(robot)
-    if not urdf.exists():
-        close = difflib.get_close_matches(robot, known_robots(), n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ManifoldgenError(
-            f"unknown robot '{robot}'{hint}; known: {', '.join(known_robots())}, or a path to a .urdf")
-    return urdf, srdf if srdf.exists() else None
+        beside = urdf.with_suffix(".srdf")
+        default = beside if beside.is_file() else None
+    else:
+        catalogue = _catalogue(robots_dir())
+        if robot not in catalogue:
+            close = difflib.get_close_matches(robot, list(catalogue), n=3)
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise ManifoldgenError(
+                f"unknown robot '{robot}'{hint}; known: {', '.join(catalogue)}, or a path to a .urdf")
+        urdf, default = catalogue[robot]
+    if srdf is None:
+        return urdf, default
+    if not Path(srdf).is_file():
+        raise ManifoldgenError(f"SRDF file not found: {srdf}; give an existing .srdf path, "
+                               f"or none to use {default or 'no SRDF'}")
+    return urdf, Path(srdf)
+
+
+def find_robot(identity: dict, hint: str | None = None) -> str:
+    """What to pass to :meth:`Robot.load` for the robot of ``identity`` (see :attr:`Robot.identity`).
+
+    The example-robot-data name if its URDF has the identity's hash, else ``hint`` (a URDF path
+    or robot name) if its URDF has it: files are compared by content, not by path.
+    """
+    name, digest = identity.get("name"), identity.get("urdf_sha256")
+    if not digest:
+        raise ManifoldgenError(f"robot identity {identity} has no urdf_sha256; "
+                               "give an identity from Robot.identity")
+    catalogue = _catalogue(robots_dir())
+    tried = []
+    for source in ([name] if name in catalogue else []) + ([str(hint)] if hint is not None else []):
+        urdf = Path(source) if _is_path(source) else catalogue.get(source, (None,))[0]
+        if urdf is not None and urdf.is_file():
+            found = _sha256(urdf)
+            if found == digest:
+                return source
+            tried.append(f"{source} has {found[:12]}")
+        else:
+            tried.append(f"{source} is not a URDF file or robot name")
+    if name not in catalogue:
+        tried.insert(0, f"'{name}' is not an example-robot-data robot")
+    raise ManifoldgenError(f"no URDF with sha256 {digest[:12]} (robot '{name}'): {'; '.join(tried)}; "
+                           "pass the path of the URDF the robot was built from")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -97,31 +193,40 @@ class Robot:
 
     def __init__(self, name: str, model: pin.Model, collision_model: pin.GeometryModel,
                  srdf: Path | None, joints: list[str], reference: np.ndarray,
-                 floating_base: bool, base_bounds: np.ndarray):
-        self.name = name
+                 floating_base: bool, base_bounds: np.ndarray, *, source: str, urdf_path: Path):
+        self.name = name  # example-robot-data name, or the URDF file stem for a path
+        self.source = source  # what was passed to load: a name or a URDF path
+        self.urdf_path = urdf_path
         self.model = model
         self.collision_model = collision_model
         self.srdf = srdf
+        self._urdf_sha256 = _sha256(urdf_path)
+        self._srdf_sha256 = _sha256(srdf) if srdf is not None else None
         self.joints = list(joints)
         self.reference = reference  # (model.nq,) full pinocchio configuration for locked joints
         self.floating_base = floating_base
         self._joint_ids = [model.getJointId(j) for j in joints if j not in BASE_JOINTS]
+        self.base_bounds = np.asarray(base_bounds, float)  # (2, 3) floating-base translation low, high
         self.lower, self.upper = self._limits(base_bounds)
         self._links = self._build_links()
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def load(cls, robot: str, joints: list[str] | None = None, *,
+    def load(cls, robot: str | os.PathLike, joints: list[str] | None = None, *,
              reference: dict[str, float] | None = None, floating_base: bool = False,
-             base_bounds: tuple[tuple[float, ...], tuple[float, ...]] = ((-2, -2, -1), (2, 2, 2))) -> Robot:
-        """Load an example-robot-data name or a URDF path (an SRDF beside it is used).
+             base_bounds: tuple[tuple[float, ...], tuple[float, ...]] = ((-2, -2, -1), (2, 2, 2)),
+             srdf: str | os.PathLike | None = None) -> Robot:
+        """Load an example-robot-data name (see :func:`known_robots`) or a URDF path.
 
-        joints: the planning group, in order (default: every movable joint).
+        joints: the planning group, in order (default: every movable joint that is not a mimic).
         reference: values of locked joints (default: the SRDF's first group state, else neutral).
         floating_base: prepend the six coordinates of ``BASE_JOINTS``, bounded by
         ``base_bounds`` (translation low, high; angles are bounded by ±pi).
+        srdf: an SRDF path (default: the robot's own; for a URDF path, the ``.srdf`` beside it).
         """
-        urdf, srdf = resolve_robot(robot)
+        source = os.fspath(robot)
+        urdf, srdf = resolve_robot(source, srdf)
+        name = urdf.stem if _is_path(source) else source
         share = str(robots_dir().parent.parent)
         try:
             model = (pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer()) if floating_base
@@ -131,26 +236,18 @@ class Robot:
         except (RuntimeError, ValueError) as exc:
             raise ManifoldgenError(f"cannot parse URDF {urdf}: {str(exc).splitlines()[0]}; "
                                    "check that the file is a valid URDF") from exc
-        movable = [model.names[j] for j in range(1, model.njoints)
-                   if model.joints[j].nq > 0 and model.names[j] != "root_joint"]
-        base = list(BASE_JOINTS) if floating_base else []
-        joints = base + (movable if joints is None else [j for j in joints if j not in BASE_JOINTS])
-        for j in joints:
-            if j not in BASE_JOINTS and j not in movable:
-                close = difflib.get_close_matches(j, movable, n=3)
-                hint = f"did you mean {', '.join(close)}?" if close else f"movable joints: {', '.join(movable)}"
-                raise ManifoldgenError(f"unknown joint '{j}' for robot {robot}; {hint}")
+        joints = _planning_group(model, _urdf_mimics(urdf), name, joints, floating_base)
         q_ref = pin.neutral(model)
         if srdf is not None:
             states = _srdf_states(srdf)
-            for name, value in (states[0][1].items() if states else []):
-                _set_joint(model, q_ref, name, value)
-        for name, value in (reference or {}).items():
-            if not model.existJointName(name):
-                raise ManifoldgenError(f"unknown joint '{name}' in reference for robot {robot}")
-            _set_joint(model, q_ref, name, value)
-        return cls(robot, model, collision, srdf, joints, q_ref, floating_base,
-                   np.asarray(base_bounds, dtype=float))
+            for joint, value in (states[0][1].items() if states else []):
+                _set_joint(model, q_ref, joint, value)
+        for joint, value in (reference or {}).items():
+            if not model.existJointName(joint):
+                raise ManifoldgenError(f"unknown joint '{joint}' in reference for robot {name}")
+            _set_joint(model, q_ref, joint, value)
+        return cls(name, model, collision, srdf, joints, q_ref, floating_base,
+                   np.asarray(base_bounds, dtype=float), source=source, urdf_path=urdf)
 
     def _limits(self, base_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lower, upper = [], []
@@ -187,6 +284,14 @@ class Robot:
         return links
 
     # ------------------------------------------------------------------ basic facts
+    @property
+    def identity(self) -> dict[str, str]:
+        """``{"name", "urdf_sha256"[, "srdf_sha256"]}``: this robot by file content (see :func:`find_robot`)."""
+        out = {"name": self.name, "urdf_sha256": self._urdf_sha256}
+        if self._srdf_sha256 is not None:
+            out["srdf_sha256"] = self._srdf_sha256
+        return out
+
     @property
     def n(self) -> int:
         """Number of active coordinates."""
@@ -268,6 +373,8 @@ class Robot:
 
     def frame_pose(self, q: np.ndarray, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """World position (B, 3) and rotation (B, 3, 3) of ``frame``."""
+        if is_tensor(q):
+            return self.torch_kinematics.frame_pose(q, frame)
         q = as_batch(q, self.n)
         f = self.model.frames[self.frame_id(frame)]
         T = self._world(q, [f.parentJoint])[f.parentJoint] @ f.placement.homogeneous
@@ -297,6 +404,12 @@ class Robot:
         return J
 
     @cached_property
+    def torch_kinematics(self):
+        """The differentiable torch path of :meth:`frame_pose` and :meth:`com` (built on first use)."""
+        from manifoldgen.kinematics_torch import TorchKinematics
+        return TorchKinematics(self)
+
+    @cached_property
     def _bodies(self) -> list[tuple[int, float, np.ndarray]]:
         return [(j, self.model.inertias[j].mass, np.append(self.model.inertias[j].lever, 1.0))
                 for j in range(1, self.model.njoints) if self.model.inertias[j].mass > 0]
@@ -306,7 +419,10 @@ class Robot:
         return float(sum(m for _, m, _ in self._bodies))
 
     def com(self, q: np.ndarray, jacobian: bool = False):
-        """Centre of mass (B, 3); with jacobian=True also its Jacobian (B, 3, n)."""
+        """Centre of mass (B, 3); with jacobian=True also its Jacobian (B, 3, n). A tensor ``q``
+        takes the differentiable torch path (no Jacobian: autograd gives it)."""
+        if is_tensor(q):
+            return self.torch_kinematics.com(q)
         q = as_batch(q, self.n)
         world, met = self._world(q, [j for j, _, _ in self._bodies], axes=True)
         com, J = np.zeros((len(q), 3)), np.zeros((len(q), 3, self.n))
@@ -320,6 +436,11 @@ class Robot:
         return (com, J) if jacobian else com
 
 
+def is_tensor(x) -> bool:
+    """True for a torch tensor (checked without importing torch)."""
+    return type(x).__module__.startswith("torch")
+
+
 def as_batch(q: np.ndarray, n: int) -> np.ndarray:
     """Promote (n,) to (1, n) and check the width."""
     q = np.asarray(q, dtype=float)
@@ -330,13 +451,68 @@ def as_batch(q: np.ndarray, n: int) -> np.ndarray:
     return q
 
 
+def _planning_group(model: pin.Model, mimics: dict[str, str], robot: str, joints: list[str] | None,
+                    floating_base: bool) -> list[str]:
+    """The checked planning group: ``BASE_JOINTS`` first when floating, then ``joints`` in order."""
+    base = list(BASE_JOINTS) if floating_base else []
+    movable = [model.names[j] for j in range(1, model.njoints) if model.names[j] != "root_joint"
+               and _joint_type(model.joints[j]) in _GROUP_TYPES and model.names[j] not in mimics]
+    if joints is None:
+        if not base and not movable:
+            raise ManifoldgenError(f"robot {robot} has no movable joint; "
+                                   "load it with floating_base=True to move it as a rigid body")
+        return base + movable
+    for j, count in Counter(joints).items():
+        if count > 1:
+            raise ManifoldgenError(f"joint '{j}' is {count} times in the planning group of {robot}; list it once")
+    for j in joints:
+        if j in BASE_JOINTS:
+            if not floating_base:
+                raise ManifoldgenError(f"joint '{j}' is a floating-base coordinate but robot {robot} "
+                                       "has a fixed base; load it with floating_base=True")
+        elif model.existFrame(j) and model.frames[model.getFrameId(j)].type == pin.FrameType.FIXED_JOINT:
+            raise ManifoldgenError(f"joint '{j}' of robot {robot} is fixed and cannot move; "
+                                   "remove it from the planning group")
+        elif not model.existJointName(j):
+            close = difflib.get_close_matches(j, movable, n=3)
+            hint = f"did you mean {', '.join(close)}?" if close else f"movable joints: {', '.join(movable)}"
+            raise ManifoldgenError(f"unknown joint '{j}' for robot {robot}; {hint}")
+        elif j in mimics:
+            raise ManifoldgenError(f"joint '{j}' of robot {robot} mimics '{mimics[j]}' and cannot move on "
+                                   "its own; remove it from the planning group")
+        elif (short := _joint_type(model.joints[model.getJointId(j)])) not in _GROUP_TYPES:
+            raise ManifoldgenError(f"joint '{j}' of robot {robot} is a {short} joint, which cannot be in a "
+                                   "planning group (one revolute or prismatic axis per coordinate); lock it")
+    group = base + [j for j in joints if j not in BASE_JOINTS]
+    if not group:
+        raise ManifoldgenError(f"empty planning group for robot {robot}; name at least one joint, "
+                               "or leave joints unset for every movable joint")
+    return group
+
+
+def _urdf_mimics(urdf: Path) -> dict[str, str]:
+    """Mimic joint -> the joint it follows, from the URDF's ``<mimic>`` tags.
+
+    pinocchio builds a mimic joint as an independent one unless asked (``mimic=False`` keeps one
+    coordinate per joint), so its model alone cannot tell.
+    """
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as exc:
+        raise ManifoldgenError(f"cannot parse URDF {urdf}: {exc}; check that the file is a valid URDF") from exc
+    return {j.get("name"): m.get("joint") for j in root.iter("joint") if (m := j.find("mimic")) is not None}
+
+
+def _joint_type(jm) -> str:
+    return jm.shortname().removeprefix("JointModel")
+
+
 def _joint_axis(jm) -> tuple[str, np.ndarray]:
-    short = jm.shortname().removeprefix("JointModel")
-    if short in ("RX", "RY", "RZ", "RUBX", "RUBY", "RUBZ", "PX", "PY", "PZ"):
-        return short[0], np.eye(3)["XYZ".index(short[-1])]
-    if short in ("RevoluteUnaligned", "RevoluteUnboundedUnaligned", "PrismaticUnaligned"):
+    """Kind ("R" or "P") and unit axis (3,) in the joint frame of a joint of a ``_GROUP_TYPES`` type."""
+    short = _joint_type(jm)
+    if short in _UNALIGNED_TYPES:
         return short[0], np.asarray(jm.extract().axis, float)
-    raise ManifoldgenError(f"joint type {short} cannot be in a planning group; lock it instead")
+    return short[0], np.eye(3)["XYZ".index(short[-1])]
 
 
 def _zyx_quaternion(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
@@ -375,8 +551,6 @@ def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None
 
 def _srdf_states(srdf: Path) -> list[tuple[str, dict[str, float]]]:
     """The SRDF's group states as (name, {joint: value})."""
-    import xml.etree.ElementTree as ET
-
     try:
         root = ET.parse(srdf).getroot()
     except ET.ParseError as exc:

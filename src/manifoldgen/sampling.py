@@ -1,22 +1,23 @@
 """Samplers: what planners draw configurations from.
 
-Every sampler serves one fixed condition ``y`` and returns, from ``sample()``, one
-configuration ``(n,)`` that satisfies the constraint (and is collision-free when a
-``CollisionChecker`` is given). Candidates are produced in batches and kept in a
-buffer, as in the paper's Algorithm 1; ``stats`` counts what it cost.
+Every sampler serves one :class:`~manifoldgen.space.ConstrainedSpace` (a constraint at a fixed
+condition ``y``, with or without a collision checker) and returns, from ``sample()``, one
+configuration ``(n,)`` valid in it. Candidates are produced in batches and kept in a buffer, as
+in the paper's Algorithm 1; ``stats`` counts what it cost.
 """
 
 from __future__ import annotations
 
-import json
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint, project
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.runtime import REFINE
+from manifoldgen.space import ConstrainedSpace
+from manifoldgen.tasks import check_made_for
 
 
 @dataclass
@@ -35,31 +36,23 @@ class SamplerStats:
 class Sampler(ABC):
     """Algorithm 1: pop buffered candidates, return the first valid one, refill when empty."""
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, *, checker: CollisionChecker | None = None,
-                 batch: int = 256, seed: int | np.random.Generator = 0, max_batches: int = 10_000):
-        self.constraint, self.checker = constraint, checker
-        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
+    def __init__(self, space: ConstrainedSpace, *, batch: int = 256, seed: int | np.random.Generator = 0,
+                 max_batches: int = 10_000):
+        self.space = space
         self.batch, self.max_batches = batch, max_batches
         self.rng = np.random.default_rng(seed)
         self.stats = SamplerStats()
-        self._buffer = np.zeros((0, constraint.robot.n))
+        self._buffer = np.zeros((0, space.n))
 
     @abstractmethod
     def candidates(self, count: int) -> np.ndarray:
         """(count, n) new candidate configurations (not yet checked)."""
 
-    def valid(self, q: np.ndarray) -> np.ndarray:
-        """(B,) bool: constraint satisfied and, with a checker, collision-free."""
-        ok = self.constraint.satisfied(q, self.y)
-        if self.checker is not None and ok.any():
-            ok[ok] = ~self.checker.in_collision(q[ok])
-        return ok
-
     def _refill(self) -> None:
         q = self.candidates(self.batch)
         self.stats.generated += len(q)
         self.stats.batches += 1
-        self._buffer = q[self.valid(q)]
+        self._buffer = q[self.space.valid(q)]
 
     def sample(self) -> np.ndarray:
         """One valid configuration (n,)."""
@@ -74,34 +67,36 @@ class Sampler(ABC):
 
     def sample_many(self, count: int) -> np.ndarray:
         """(count, n) valid configurations."""
-        return np.stack([self.sample() for _ in range(count)]) if count else np.zeros((0, self.constraint.robot.n))
+        return np.stack([self.sample() for _ in range(count)]) if count else np.zeros((0, self.space.n))
 
 
 class UniformSampler(Sampler):
     """Rejection sampling: uniform in the joint limits (almost never on a thin manifold)."""
 
     def candidates(self, count):
-        return self.constraint.robot.sample_uniform(count, self.rng)
+        return self.space.robot.sample_uniform(count, self.rng)
 
 
 class ProjectionSampler(Sampler):
     """Uniform seeds projected onto the manifold (the projection-based baseline)."""
 
     def candidates(self, count):
-        q = project(self.constraint, self.constraint.robot.sample_uniform(count, self.rng), self.y).q
+        space = self.space
+        q = project(space.constraint, space.robot.sample_uniform(count, self.rng), space.y).q
         self.stats.refined += count
         return q
 
 
 class DatasetSampler(Sampler):
-    """The paper's PG baseline: draws from a dataset's precomputed rows at this condition."""
+    """The paper's PG baseline: draws from a dataset's precomputed rows ``q (N, n)`` at this
+    condition (``y_rows (N, k)``: the rows' conditions)."""
 
-    def __init__(self, constraint, y, q: np.ndarray, y_rows: np.ndarray, **kwargs):
-        super().__init__(constraint, y, **kwargs)
-        match = np.all(np.isclose(y_rows, self.y, atol=1e-9), axis=1)
+    def __init__(self, space: ConstrainedSpace, q: np.ndarray, y_rows: np.ndarray, **kwargs):
+        super().__init__(space, **kwargs)
+        match = np.all(np.isclose(y_rows, space.y, atol=1e-9), axis=1)
         if not match.any():
             values = sorted({tuple(r) for r in np.round(y_rows, 6).tolist()})
-            raise ManifoldgenError(f"the dataset has no rows at condition {self.y.tolist()}; "
+            raise ManifoldgenError(f"the dataset has no rows at condition {space.y.tolist()}; "
                                    f"its conditions are {values}")
         self.rows = q[match]
 
@@ -109,45 +104,30 @@ class DatasetSampler(Sampler):
         return self.rows[self.rng.integers(0, len(self.rows), size=count)]
 
 
-def check_model_matches(model, constraint: Constraint) -> None:
-    """Refuse a model trained for another robot, joint set or constraint than ``constraint``'s."""
-    robot = constraint.robot
-    meta = model.meta
-    if meta.get("robot") != robot.name or list(meta.get("joints", [])) != list(robot.joints):
-        raise ManifoldgenError(
-            f"the model was trained for robot '{meta.get('robot')}' with joints {meta.get('joints')}, but the "
-            f"task uses robot '{robot.name}' with joints {robot.joints}; train a model on this task's data")
-    spec = constraint.spec()
-    trained = meta.get("constraint")
-    if trained is not None and json.loads(json.dumps(trained)) != json.loads(json.dumps(spec)):
-        raise ManifoldgenError(f"the model was trained for constraint {trained}, but the task's constraint "
-                               f"is {spec}; train a model on this task's data")
-
-
 class ModelSampler(Sampler):
-    """Algorithm 1 with a learned model: batches of model samples at ``y``, optionally refined by at
-    most ``refine`` projection (Levenberg-Marquardt) iterations, checked before they are returned."""
+    """Algorithm 1 with a learned model: batches of model samples at the space's condition,
+    refined by at most ``refine`` projection (Levenberg-Marquardt) iterations, checked before
+    they are returned."""
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, model, *, refine: int = 0,
-                 checker: CollisionChecker | None = None, batch: int = 1024,
+    def __init__(self, space: ConstrainedSpace, model, *, refine: int = REFINE, batch: int = 1024,
                  seed: int | np.random.Generator = 0, max_batches: int = 10_000):
-        super().__init__(constraint, y, checker=checker, batch=batch, seed=seed, max_batches=max_batches)
+        super().__init__(space, batch=batch, seed=seed, max_batches=max_batches)
         if refine < 0:
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
-        check_model_matches(model, constraint)
-        model.check_condition(self.y)
+        check_made_for(model.meta, space.constraint, "the model")
+        model.check_condition(space.y)
         import torch
 
         self.model, self.refine = model, int(refine)
         self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
 
     def candidates(self, count):
-        q = generate(self.model, self.constraint, self.y, count, self.generator, self.refine)[1]
+        q = generate(self.model, self.space.constraint, self.space.y, count, self.generator, self.refine)[1]
         self.stats.refined += count if self.refine else 0
         return q
 
 
-def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = 0,
+def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = REFINE,
              ) -> tuple[np.ndarray, np.ndarray]:
     """Raw model rows (count, n) at ``y (k,)`` and the same rows after at most ``refine`` LM iterations."""
     raw = model.sample(y, count, generator)
@@ -155,7 +135,7 @@ def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator
 
 
 def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out, *, seed: int = 0,
-                   refine: int = 0, source: str = "") -> dict:
+                   refine: int = REFINE, source: str = "") -> dict:
     """Generate ``count`` rows at ``y``, write them in the dataset format (raw rows when refine=0,
     refined rows otherwise, as ``meta['rows']`` says) and return the raw and refined valid rates."""
     import torch
@@ -167,12 +147,12 @@ def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out
     if refine < 0:
         raise ManifoldgenError(f"--refine must be >= 0 projection iterations, got {refine}")
     out = check_output_path(out)
-    check_model_matches(model, constraint)
+    check_made_for(model.meta, constraint, "the model")
     y = np.asarray(y, float).reshape(constraint.condition.k)
     raw, refined = generate(model, constraint, y, count, torch.Generator().manual_seed(seed), refine)
     y_rows = np.broadcast_to(y, (count, len(y))).copy()
-    rates = {"raw_valid_rate": float(constraint.satisfied(raw, y_rows).mean()),
-             "refined_valid_rate": float(constraint.satisfied(refined, y_rows).mean())}
+    space = ConstrainedSpace(constraint, y)
+    rates = {"raw_valid_rate": float(space.valid(raw).mean()), "refined_valid_rate": float(space.valid(refined).mean())}
     meta = {**model.meta, "dataset_seed": model.meta.get("seed"), "seed": seed,
             "rows": "refined" if refine else "raw", "refine": refine,
             "generated_by": {"model": model.name, "source": source}, **rates}

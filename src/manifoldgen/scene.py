@@ -3,16 +3,14 @@
 An obstacle is a box (full extents), sphere, cylinder (along its local z) or mesh, placed
 by a pose (position + quaternion ``[x, y, z, w]``) in the world. A scene is written to
 and read from JSON; :meth:`Scene.to_meta` gives the obstacle list stored in path files,
-enough for an outside checker with pinocchio and coal alone. Named scenes live in
-:data:`SCENES` (pose task: ``wall`` and ``maze`` for panda, ``wall`` for pr2) with start and
-goal configurations computed once by projection and stored as numbers.
+enough for an outside checker with pinocchio and coal alone. Named scenes are the JSON files
+a task file lists (``wall`` and ``maze`` for the panda pose task, ``wall`` for pr2).
 """
 
 from __future__ import annotations
 
 import difflib
 import json
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from manifoldgen.collision import CollisionChecker, touch_links
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot
+from manifoldgen.targets import parse_target, resolve_query
 from manifoldgen.tasks import Task
 
 OBSTACLE_TYPES = ("box", "sphere", "cylinder", "mesh")
@@ -216,15 +215,19 @@ class Attached:
 
 @dataclass
 class Scene:
-    """Obstacles (world poses), an optional held tool, and a query: start, goal (n,) at condition y (k,)."""
+    """Obstacles (world poses), an optional held tool, and a query: start, goal (n,) at condition y (k,).
+
+    start and goal may be end-effector targets (dicts, see :mod:`manifoldgen.targets`) until
+    :func:`get_scene` turns them into configurations; ``targets`` keeps the targets given."""
 
     name: str
     obstacles: list[Obstacle]
     attached: Attached | None
-    start: np.ndarray
-    goal: np.ndarray
+    start: np.ndarray | dict
+    goal: np.ndarray | dict
     condition: np.ndarray
     robot: str = ""
+    targets: dict = field(default_factory=dict)
 
     def checker(self, robot: Robot) -> CollisionChecker:
         """Self, robot-scene and tool collisions for ``robot``."""
@@ -251,7 +254,7 @@ class Scene:
         return json.dumps({"format_version": FORMAT_VERSION, "name": self.name, "robot": self.robot,
                            "obstacles": [o.to_dict() for o in self.obstacles],
                            "attached": None if self.attached is None else self.attached.to_dict(),
-                           "start": self.start.tolist(), "goal": self.goal.tolist(),
+                           **{k: self.targets.get(k, getattr(self, k).tolist()) for k in ("start", "goal")},
                            "condition": self.condition.tolist()}, indent=1)
 
     def save(self, path: str | Path) -> None:
@@ -273,7 +276,9 @@ class Scene:
             raise ManifoldgenError(f"{source}: 'obstacles' must be a list")
         obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(data["obstacles"])]
         attached = Attached.from_dict(data["attached"]) if data.get("attached") else None
-        start, goal, condition = (_floats(data[k], f"{source} {k}") for k in ("start", "goal", "condition"))
+        start, goal = (parse_target(data[k], f"{source} {k}") if isinstance(data[k], dict)
+                       else _floats(data[k], f"{source} {k}") for k in ("start", "goal"))
+        condition = _floats(data["condition"], f"{source} condition")
         return cls(str(data.get("name", Path(source).stem)), obstacles, attached, start, goal, condition,
                    str(data.get("robot", "")))
 
@@ -285,75 +290,32 @@ class Scene:
         return cls.from_json(path.read_text(), str(path))
 
 
-def _box(name: str, center, size) -> Obstacle:
-    return Obstacle(name, "box", Pose(center), size=size)
-
-
-def _down_tool() -> Attached:
-    """A 3 x 3 x 18 cm bar held in the panda gripper, reaching 15 cm below the tool centre point."""
-    return Attached(_box("tool", [0.0, 0.0, 0.06], [0.03, 0.03, 0.18]), "panda_hand_tcp")
-
-
-def panda_wall() -> Scene:
-    """Two 60 cm high walls 50 cm apart; the goal is between them, the start outside the left
-    one (the paper's Fig. 3): the hand has to go round the near end of the wall at 0.5 m."""
-    obstacles = [_box("wall_left", [0.55, 0.25, 0.30], [0.40, 0.04, 0.60]),
-                 _box("wall_right", [0.55, -0.25, 0.30], [0.40, 0.04, 0.60])]
-    start = np.array([0.57916306, 0.29238586, 0.26161449, -1.24711759, -0.07461302, 1.53013675, 1.61250839])
-    goal = np.array([0.00615506, -0.02758752, -0.00604456, -1.6585705, -0.00016702, 1.63089149, 0.78552085])
-    return Scene("wall", obstacles, None, start, goal, np.array([0.5]), "panda")
-
-
-def panda_maze() -> Scene:
-    """A serpentine maze of 43 cm high walls below the hand (the paper's Fig. 4): the held tool,
-    reaching down to 0.35 m, winds through three lanes from the left lane to the right one."""
-    z, h, t = 0.215, 0.43, 0.02
-    obstacles = [_box("outer_near", [0.24, 0.0, z], [t, 0.62, h]),
-                 _box("outer_far", [0.66, 0.0, z], [t, 0.62, h]),
-                 _box("outer_left", [0.45, 0.30, z], [0.44, t, h]),
-                 _box("outer_right", [0.45, -0.30, z], [0.44, t, h]),
-                 _box("inner_left", [0.40, 0.10, z], [0.32, t, h]),
-                 _box("inner_right", [0.50, -0.10, z], [0.32, t, h])]
-    start = np.array([0.11038429, -0.56972495, 0.315987, -2.15011965, 0.16853671, 1.60266251, 1.15899266])
-    goal = np.array([-0.21743064, 0.15937322, -0.1350226, -1.42350497, 0.02133416, 1.58136292, 0.43440827])
-    return Scene("maze", obstacles, _down_tool(), start, goal, np.array([0.5]), "panda")
-
-
-def pr2_wall() -> Scene:
-    """PR2 (torso + right arm), gripper level at 0.8 m: two 95 cm walls 50 cm apart in front of
-    the right arm; the goal is between them, the start outside the right one."""
-    obstacles = [_box("wall_left", [0.75, 0.0, 0.475], [0.40, 0.04, 0.95]),
-                 _box("wall_right", [0.75, -0.5, 0.475], [0.40, 0.04, 0.95])]
-    start = np.array([0.30776986, -0.96784165, 0.55133009, -1.10841467, -0.50089438, -0.18903239, -0.57103583,
-                      1.03272315])
-    goal = np.array([0.30514929, -0.52066061, 0.81869265, -1.06762326, -1.13253237, 2.18470884, -0.39573349,
-                     -1.54070493])
-    return Scene("wall", obstacles, None, start, goal, np.array([0.8]), "pr2")
-
-
-SCENES: dict[tuple[str, str], dict[str, Callable[[], Scene]]] = {
-    ("pose", "panda"): {"wall": panda_wall, "maze": panda_maze},
-    ("pose", "pr2"): {"wall": pr2_wall},
-}
-
-
 def get_scene(task: Task, name: str) -> Scene:
-    """A named scene of ``task`` (``wall``, ``maze``) or a scene JSON file for its robot."""
-    named = SCENES.get((task.name, task.robot.name), {})
-    if name in named:
-        return named[name]()
+    """A scene the task file names (``wall``, ``maze``) or a scene JSON file for its robot."""
+    if name in task.scenes:
+        return _checked(Scene.load(task.scenes[name]), task, name)
     if not (name.endswith(".json") or Path(name).is_file()):
-        known = ", ".join(named) or "none"
+        known = ", ".join(task.scenes) or "none"
         raise ManifoldgenError(f"unknown scene '{name}' for task {task.name} on {task.robot.name}; named scenes: "
                                f"{known}; or give a path to a scene .json file")
-    scene = Scene.load(name)
+    return _checked(Scene.load(name), task, name)
+
+
+def _checked(scene: Scene, task: Task, name: str) -> Scene:
+    """The scene, checked against the task, with end-effector targets turned into configurations."""
     n, k = task.robot.n, task.condition.k
     if scene.robot and scene.robot != task.robot.name:
         raise ManifoldgenError(f"scene {name} is for robot '{scene.robot}', not {task.robot.name}")
-    if scene.start.shape != (n,) or scene.goal.shape != (n,):
-        raise ManifoldgenError(f"scene {name}: start and goal need {n} joint values ({', '.join(task.robot.joints)}), "
-                               f"got {len(scene.start)} and {len(scene.goal)}")
+    for end in ("start", "goal"):
+        value = getattr(scene, end)
+        if not isinstance(value, dict) and value.shape != (n,):
+            raise ManifoldgenError(f"scene {name}: {end} needs {n} joint values ({', '.join(task.robot.joints)}) or an "
+                                   f"end-effector target {{\"position\": [x, y, z]}}, got {len(value)} values")
     if scene.condition.shape != (k,):
         raise ManifoldgenError(f"scene {name}: condition needs {k} value(s) ({', '.join(task.condition.names)}), "
                                f"got {len(scene.condition)}")
+    scene.targets = {end: getattr(scene, end) for end in ("start", "goal") if isinstance(getattr(scene, end), dict)}
+    if scene.targets:
+        scene.start, scene.goal = resolve_query(task.constraint, scene.condition, scene.start, scene.goal,
+                                                scene.checker(task.robot))
     return scene

@@ -25,9 +25,11 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.models.base import ConditionalSampler
 from manifoldgen.progress import progress_bar
+from manifoldgen.tasks import Task
 
 CHECKPOINT_WEIGHTS, CHECKPOINT_STATE = "checkpoint.safetensors", "checkpoint.json"
 MIN_ROWS = 10
+CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
 
 
 @dataclass
@@ -51,8 +53,9 @@ class TrainingLog:
         return {**asdict(self), "seconds": self.seconds}
 
 
-def check_dataset(dataset: Dataset) -> None:
-    """Refuse datasets a conditional model cannot learn from."""
+def check_dataset(dataset: Dataset) -> Task:
+    """Refuse datasets a conditional model cannot learn from, or that do not hold their own task
+    (joint order, condition columns, rows on the constraint); returns the task."""
     q, y = np.asarray(dataset.q), np.asarray(dataset.y)
     if q.ndim != 2 or y.ndim != 2 or len(q) != len(y):
         raise ManifoldgenError(f"dataset has inconsistent shapes q {q.shape}, y {y.shape}")
@@ -63,6 +66,21 @@ def check_dataset(dataset: Dataset) -> None:
     if len(np.unique(y, axis=0)) < 2:
         raise ManifoldgenError(f"dataset has a single condition value {y[0].tolist()}; a conditional model "
                                "needs rows at two or more values (collect with several --condition values)")
+    task = dataset.task()
+    if list(dataset.meta["joints"]) != task.robot.joints:
+        raise ManifoldgenError(f"dataset joints {dataset.meta['joints']} are not its task's planning group "
+                               f"{task.robot.joints} in that order; recollect the dataset")
+    if y.shape[1] != task.condition.k:
+        raise ManifoldgenError(f"dataset has {y.shape[1]} condition columns but its task has {task.condition.k} "
+                               f"({', '.join(task.condition.names)}); recollect the dataset")
+    rows = np.random.default_rng(0).choice(len(q), min(len(q), CHECKED_ROWS), replace=False)
+    bad = rows[~task.constraint.satisfied(q[rows], y[rows])]
+    if len(bad):
+        i = int(bad[0])
+        raise ManifoldgenError(f"dataset row {i} does not satisfy its task's constraint (worst residual "
+                               f"{task.constraint.violation(q[i], y[i])[0]:.3g} x tolerance, or outside the limits); "
+                               f"{len(bad)} of {len(rows)} rows checked fail: recollect the dataset")
+    return task
 
 
 def _fingerprint(dataset: Dataset) -> str:
@@ -71,19 +89,11 @@ def _fingerprint(dataset: Dataset) -> str:
     return digest.hexdigest()[:16]
 
 
-def _residual_module(model: ConditionalSampler, dataset: Dataset):
-    task = dataset.task()
-    if model.config.get("residual_weight", 0.0) <= 0:
-        return task, None
-    from manifoldgen.models.kinematics_torch import TorchResidual
-    return task, TorchResidual(task.constraint)
-
-
 def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
           validation: float = 0.1) -> TrainingLog:
     """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping."""
-    check_dataset(dataset)
+    task = check_dataset(dataset)
     epochs = int(model.config["epochs"] if epochs is None else epochs)
     if epochs <= 0:
         raise ManifoldgenError(f"--epochs must be positive, got {epochs}")
@@ -109,12 +119,11 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     perm = torch.randperm(len(q_all), generator=gen)
     n_val = max(1, int(round(validation * len(q_all))))
     val_idx, train_idx = perm[:n_val], perm[n_val:]
-    task, residual = _residual_module(model, dataset)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model.setup(dataset.meta, dataset.q[train_idx.numpy()], dataset.y[train_idx.numpy()],
                     task.robot.lower, task.robot.upper)
-    model.residual_fn = residual
+    model.residual_fn = task.constraint.penalty if model.config.get("residual_weight", 0.0) > 0 else None
     q_train, y_train = model.normalise_q(q_all[train_idx]), model.normalise_y(y_all[train_idx])
     q_val, y_val = model.normalise_q(q_all[val_idx]), model.normalise_y(y_all[val_idx])
     y_low, y_high = y_train.min(0).values, y_train.max(0).values

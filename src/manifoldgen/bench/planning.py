@@ -3,7 +3,7 @@
 A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
 
 - ``PLANNER``: one of :data:`manifoldgen.planning.PLANNERS` (``rrtconnect``, ``cbirrt``, ...)
-  with a ``LOCAL`` planner (``interpolate`` by default, or ``project``), or an OMPL baseline
+  with a ``LOCAL`` planner (``auto`` by default, ``interpolate`` or ``project``), or an OMPL baseline
   ``ompl-SPACE-PLANNER`` (e.g. ``ompl-projected-rrtconnect``, ``ompl-atlas-prm``; see
   :mod:`manifoldgen.ompl_bridge`);
 - ``SAMPLER``: a sampler spec for :func:`manifoldgen.specs.make_sampler` (``cvae:DIR``,
@@ -15,8 +15,8 @@ Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Ru
 worker processes (each builds its own robot, checker, sampler and planner, with one torch
 thread); each finished run is appended to ``runs.jsonl`` at once, so an interrupted benchmark
 keeps its runs and ``resume=True`` skips them. Every solved path is re-validated here,
-independently of the planner, every 0.005 rad; a run counts as solved only when that check
-passes and the planner answered within the time limit. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
+independently of the planner, by the space's dense check (``ValidationSettings.resolution``); a
+run counts as solved only when that check passes and the planner answered within the time limit. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
 """
 
 from __future__ import annotations
@@ -38,7 +38,6 @@ from manifoldgen.progress import progress_bar
 
 RUNS_FILE = "runs.jsonl"
 CONFIG_FILE = "config.json"
-VALIDATION_RESOLUTION = 0.005
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OMPL_PREFIX = "ompl-"
 
@@ -76,12 +75,11 @@ class Method:
                 raise ManifoldgenError(f"method '{text}': OMPL methods take no local planner (drop ':{local}')")
             local = ""
         else:
-            from manifoldgen.planning import PLANNERS
-            from manifoldgen.planning.local import LOCAL_PLANNERS
+            from manifoldgen.planning import DEFAULT_LOCAL, LOCAL_PLANNERS, PLANNERS
             if planner not in PLANNERS:
                 raise ManifoldgenError(f"method '{text}': unknown planner '{planner}'; known: "
                                        f"{', '.join(PLANNERS)}, or ompl-SPACE-PLANNER")
-            local = local or "interpolate"
+            local = local or DEFAULT_LOCAL
             if local not in LOCAL_PLANNERS:
                 raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
                                        f"{', '.join(LOCAL_PLANNERS)}")
@@ -94,7 +92,8 @@ class Method:
 
 
 def _default_label(planner: str, local: str, sampler: str | None) -> str:
-    label = planner + (f":{local}" if local and local != "interpolate" else "")
+    from manifoldgen.planning import DEFAULT_LOCAL
+    label = planner + (f":{local}" if local and local != DEFAULT_LOCAL else "")
     if sampler:
         kind, _, path = sampler.partition(":")
         label += f"@{kind}" + (f":{Path(path).name}" if path else "")
@@ -149,38 +148,37 @@ class Experiment:
 
 
 def build(experiment: Experiment, method: Method, seed: int):
-    """(planner, task, scene, checker) for one run, built from scratch."""
+    """(planner, scene, space) for one run, built from scratch."""
     from manifoldgen.scene import get_scene
+    from manifoldgen.space import ConstrainedSpace
     from manifoldgen.specs import make_sampler
     from manifoldgen.tasks import get_task
 
     task = get_task(experiment.task, experiment.robot)
     scene = get_scene(task, experiment.scene)
-    checker = scene.checker(task.robot)
-    y = scene.condition
-    sampler = None if method.sampler is None else make_sampler(method.sampler, task, y, checker, seed)
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
-        space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
-        planner = OmplPlanner(task.constraint, y, checker, sampler, space=space, planner=planner_name,
+        ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
+        planner = OmplPlanner(space, sampler, ompl_space=ompl_space, planner=planner_name,
                               resolution=experiment.resolution, seed=seed)
     else:
         from manifoldgen.planning import PLANNERS
-        planner = PLANNERS[method.planner](task.constraint, y, checker, sampler, local=method.local,
-                                           resolution=experiment.resolution, seed=seed)
-    return planner, task, scene, checker
+        cls = PLANNERS[method.planner]
+        planner = cls(space, sampler, local=method.local, seed=seed,
+                      settings=cls.settings_type(resolution=experiment.resolution))
+    return planner, scene, space
 
 
 def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     """One run of ``method`` (seed ``experiment.seed + run``) as a JSON-ready record."""
-    from manifoldgen.planning.validate import validate_path
-
     seed = experiment.seed + run
     record = {"method": method.label, "spec": method.spec, "run": run, "seed": seed, "scene": experiment.scene,
               "time_limit": experiment.time_limit}
     began = time.perf_counter()
     try:
-        planner, task, scene, checker = build(experiment, method, seed)
+        planner, scene, space = build(experiment, method, seed)
         record["build_s"] = time.perf_counter() - began
         cpu = time.process_time()
         result = planner.solve(scene.start, scene.goal, experiment.time_limit)
@@ -189,8 +187,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
         return {**record, "solved": False, "planner_solved": False, "time_s": experiment.time_limit,
                 "iterations": 0, "samples_drawn": 0, "projections": 0, "length": 0.0, "waypoints": 0,
                 "valid": False, "worst_violation": float("nan"), "reason": "", "error": str(exc)}
-    report = validate_path(result.path, task.constraint, scene.condition, checker, VALIDATION_RESOLUTION) \
-        if result.solved else None
+    report = space.validate_path(result.path) if result.solved else None
     summary = result.to_dict()
     late = result.time_s > experiment.time_limit  # a planner may overrun its deadline inside one step
     return {**record, "solved": bool(result.solved and report.valid and not late),
@@ -200,13 +197,13 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "length": summary["length"], "waypoints": summary["waypoints"], "planner": summary["planner"],
             "valid": bool(report.valid) if report else False,
             "worst_violation": report.worst_violation if report else float("nan"),
-            "reason": report.reason if report else "", "extras": summary["extras"]}
+            "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"]}
 
 
 def _init_worker() -> None:
     """One torch thread per worker process (the workers already share the cores)."""
-    import torch
-    torch.set_num_threads(1)
+    from manifoldgen.runtime import set_torch_threads
+    set_torch_threads()
 
 
 def read_records(path: Path) -> list[dict]:

@@ -11,6 +11,7 @@ samples) at training conditions and at unseen ones between and beyond them, and 
 from __future__ import annotations
 
 import json
+import warnings
 import time
 from pathlib import Path
 
@@ -23,8 +24,8 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
-from manifoldgen.sampling import check_model_matches
-from manifoldgen.tasks import get_task
+from manifoldgen.runtime import set_torch_threads
+from manifoldgen.tasks import check_made_for, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
 
@@ -35,7 +36,7 @@ def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, .
 
     The thread count is set here because pinocchio's parallel collision checks reset OpenMP's.
     """
-    torch.set_num_threads(threads)
+    set_torch_threads(threads)
     generator = torch.Generator().manual_seed(seed)
     result = {}
     for n in counts:
@@ -70,9 +71,9 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     out.mkdir(parents=True, exist_ok=True)
     models = {str(d): load_model(d) for d in model_dirs}
     first = next(iter(models.values()))
-    task = get_task(first.meta.get("task", "pose"), first.meta["robot"])
-    for model in models.values():
-        check_model_matches(model, task.constraint)
+    task = task_from_meta(first.meta)
+    for path, model in models.items():
+        check_made_for(model.meta, task.constraint, f"model {path}")
     if task.condition.k != 1:
         raise ManifoldgenError("the sampling benchmark handles one-dimensional conditions only")
     default_seen, default_unseen = default_conditions(task.condition.values)
@@ -83,8 +84,16 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     reference = {}
     with progress_bar("reference sets", total=len(conditions), enabled=progress) as bar:
         for i, y in enumerate(conditions):
-            reference[y] = collect(task, reference_rows, seed + 1000 + i, conditions=[[y]], progress=False).q
+            try:
+                reference[y] = collect(task, reference_rows, seed + 1000 + i, conditions=[[y]], progress=False).q
+            except ManifoldgenError as exc:  # a condition the robot cannot reach is reported and skipped
+                warnings.warn(f"condition {y:g} skipped: {exc}")
             bar.advance(1)
+    seen, unseen = [y for y in seen if y in reference], [y for y in unseen if y in reference]
+    conditions = [*seen, *unseen]
+    if not seen:
+        raise ManifoldgenError("no seen condition is reachable; give --seen values inside the task's range "
+                               f"({task.condition.describe()})")
 
     results: dict = {"task": task.name, "robot": robot.name, "samples": samples, "refine": refine,
                      "reference_rows": reference_rows, "seen": seen, "unseen": unseen,
@@ -138,7 +147,7 @@ def _label(model: ConditionalSampler, label: str, models: dict) -> str:
 def _average(per_condition: dict, ys: list[float]) -> dict:
     keys = ("raw", "refined", "precision", "recall", "density", "coverage", "mmd")
     rows = [per_condition[str(y)] for y in ys]
-    return {k: float(np.mean([r[k] for r in rows])) for k in keys}
+    return {k: float(np.mean([r[k] for r in rows])) if rows else float("nan") for k in keys}
 
 
 def markdown_table(results: dict) -> str:
@@ -157,6 +166,8 @@ def markdown_table(results: dict) -> str:
               "|---|---|---|---|---|---|---|---|---|"]
     for m in names:
         for part, ys in (("seen", results["seen"]), ("unseen", results["unseen"])):
+            if not ys:
+                continue
             a = results["models"][m][part]
             lines.append(f"| {m} | {part} {', '.join(f'{y:g}' for y in ys)} | {a['raw']:.1%} | {a['refined']:.2%} | "
                          f"{a['precision']:.3f} | {a['recall']:.3f} | {a['density']:.3f} | {a['coverage']:.3f} | "

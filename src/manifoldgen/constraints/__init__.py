@@ -1,10 +1,20 @@
-"""Constraints F(q, y) = 0, G(q, y) <= 0 and the projection onto them."""
+"""Constraints F(q, y) = 0, G(q, y) <= 0, their registry and the projection onto them.
+
+``array_namespace`` is re-exported for user constraints (numpy or torch operations alike).
+"""
+
+from array_api_compat import array_namespace
 
 from manifoldgen.constraints.balance import BalanceConstraint
-from manifoldgen.constraints.base import Condition, Constraint, ConstraintSet
+from manifoldgen.constraints.base import (CONSTRAINTS, Condition, Constraint, ConstraintSet, as_like,
+                                          build_constraint)
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
+from manifoldgen.constraints.joint_linear import JointLinearConstraint
+from manifoldgen.constraints.orientation import OrientationConstraint
+from manifoldgen.constraints.plane import PlaneConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.projection import Projection, project
 
-__all__ = ["BalanceConstraint", "ClosedChainConstraint", "Condition", "Constraint", "ConstraintSet",
-           "PoseConstraint", "Projection", "project"]
+__all__ = ["CONSTRAINTS", "BalanceConstraint", "ClosedChainConstraint", "Condition", "Constraint", "ConstraintSet",
+           "JointLinearConstraint", "OrientationConstraint", "PlaneConstraint", "PoseConstraint", "Projection",
+           "array_namespace", "as_like", "build_constraint", "project"]

@@ -8,8 +8,10 @@ projection outside each edge of the feet's convex hull, plus a margin, must be <
 from __future__ import annotations
 
 import numpy as np
+from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import Condition, Constraint
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot
 
 
@@ -32,16 +34,20 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     return np.array(half(pts) + half(pts[::-1]))
 
 
+@CONSTRAINTS.register("balance")
 class BalanceConstraint(Constraint):
     """Feet at ``foot_positions`` (F, 3); the base frame's height is y; CoM inside the feet's hull."""
 
-    def __init__(self, robot: Robot, feet: list[str], foot_positions: np.ndarray, base_frame: str,
-                 values: np.ndarray, margin: float = 0.02, tolerance: float = 0.01):
+    def __init__(self, robot: Robot, feet: list[str], foot_positions, base_frame: str,
+                 values, margin: float = 0.02, tolerance: float = 0.01):
         for f in (*feet, base_frame):
             robot.frame_id(f)
         self.robot, self.feet, self.base_frame, self.margin = robot, list(feet), base_frame, margin
         self.foot_positions = np.asarray(foot_positions, float).reshape(len(feet), 3)
         hull = convex_hull(self.foot_positions[:, :2])
+        if len(hull) < 3:
+            raise ManifoldgenError(f"the feet {self.feet} span no support polygon (fewer than 3 non-collinear "
+                                   "ground points); give at least three feet, or feet not on one line")
         edges = np.roll(hull, -1, axis=0) - hull
         self._normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) / np.linalg.norm(edges, axis=1)[:, None]
         self._offsets = np.einsum("ij,ij->i", self._normals, hull)
@@ -61,14 +67,13 @@ class BalanceConstraint(Constraint):
         return np.concatenate(F, axis=1), np.concatenate(J, axis=1)
 
     def residual(self, q, y):
-        return self.jacobian(q, y)[0]
+        q, y = self.batch(q, y)
+        F = [self.robot.frame_pose(q, foot)[0] - as_like(target, q) for foot, target in
+             zip(self.feet, self.foot_positions)]
+        F.append(self.robot.frame_pose(q, self.base_frame)[0][:, 2:] - y)
+        return array_namespace(q).concat(F, axis=1)
 
     def inequality(self, q, y):
         q, _ = self.batch(q, y)
         com = self.robot.com(q)[:, :2]
-        return com @ self._normals.T - self._offsets + self.margin
-
-    def spec(self) -> dict:
-        return {"type": "balance", "feet": self.feet, "foot_positions": self.foot_positions.tolist(),
-                "base_frame": self.base_frame, "margin": self.margin,
-                "tolerance": {"position": float(self.tolerance[0])}}
+        return com @ as_like(self._normals.T, com) - as_like(self._offsets - self.margin, com)

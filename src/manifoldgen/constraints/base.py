@@ -1,21 +1,33 @@
 """The constraint contract: batched residuals F(q, y) = 0 and inequalities G(q, y) <= 0.
 
-A new constraint subclasses :class:`Constraint`, implements ``residual`` and
-``jacobian`` (and optionally ``inequality``) for batches, and describes itself in
-``spec()``; projection, collection, samplers and planners need nothing else.
+A constraint is written once. A subclass sets ``robot``, ``condition`` and ``tolerance`` in
+its ``__init__`` and implements ``residual`` (and optionally ``inequality``) with array
+operations that work on numpy arrays and on torch tensors alike: ``xp = array_namespace(q)``
+gives the namespace (``xp.concat``, ``xp.sin``, ...), ``Robot.frame_pose`` and ``Robot.com``
+take either, and :func:`as_like` turns a numpy constant into the backend of an array. That
+one residual serves projection and planning (float64 numpy, with a Jacobian from torch
+autograd unless the class gives an analytic one) and the models' training penalty (torch,
+differentiable). The constructor's arguments are recorded, so ``spec()`` describes the
+constraint fully and :func:`build_constraint` rebuilds it from that spec.
 """
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
+from array_api_compat import array_namespace
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.robot import Robot, as_batch
+from manifoldgen.registry import Registry
+from manifoldgen.robot import Robot, as_batch, is_tensor
+
+INEQUALITY_SCALE = 0.01  # G (metres or radians) per unit of the training penalty, like a tolerance
 
 
 @dataclass(frozen=True)
@@ -35,12 +47,17 @@ class Condition:
         return len(self.names)
 
     @property
+    def grid(self) -> np.ndarray:
+        """The training values as (V, k); one empty row when nothing is conditioned (k = 0)."""
+        return np.asarray(self.values, float).reshape(-1, self.k) if self.k else np.zeros((1, 0))
+
+    @property
     def low(self) -> np.ndarray:
-        return np.asarray(self.values, float).reshape(-1, self.k).min(axis=0)
+        return self.grid.min(axis=0)
 
     @property
     def high(self) -> np.ndarray:
-        return np.asarray(self.values, float).reshape(-1, self.k).max(axis=0)
+        return self.grid.max(axis=0)
 
     def describe(self) -> str:
         return ", ".join(f"{n} in [{lo:g}, {hi:g}] {u}"
@@ -64,42 +81,87 @@ class Condition:
         return y
 
 
+def as_like(value, like):
+    """``value`` (a numpy constant) as an array of ``like``'s backend and dtype."""
+    if is_tensor(like):
+        import torch
+        return torch.as_tensor(np.asarray(value), dtype=like.dtype)
+    return np.asarray(value, dtype=float)
+
+
 class Constraint(ABC):
-    """Equality residuals F(q, y) (B, m) with per-component tolerance, inequalities G (B, p)."""
+    """Equality residuals F(q, y) (B, m) with per-component tolerance, inequalities G (B, p).
+
+    Subclasses set ``robot``, ``condition`` and ``tolerance (m,)`` and implement ``residual``
+    for numpy arrays and torch tensors (see the module doc); ``jacobian`` may be overridden
+    with an analytic one for speed.
+    """
 
     robot: Robot
     condition: Condition
     tolerance: np.ndarray  # (m,)
+    arguments: dict  # the constructor's arguments (robot excluded), recorded by __new__
+
+    def __new__(cls, *args, **kwargs):
+        obj = super().__new__(cls)
+        bound = inspect.signature(cls.__init__).bind(obj, *args, **kwargs)
+        bound.apply_defaults()
+        obj.arguments = {k: v for k, v in list(bound.arguments.items())[1:] if not isinstance(v, Robot)}
+        return obj
 
     @abstractmethod
-    def residual(self, q: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """F(q, y): (B, m)."""
+    def residual(self, q, y):
+        """F(q, y): (B, m), for numpy ``q (B, n)``, ``y (B, k)`` or torch tensors of those shapes."""
 
-    @abstractmethod
     def jacobian(self, q: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """F (B, m) and dF/dq (B, m, n) in one pass."""
+        """F (B, m) and dF/dq (B, m, n) in one pass (float64 torch autograd of ``residual``)."""
+        import torch
 
-    def inequality(self, q: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """G(q, y) <= 0: (B, p); none by default."""
-        return np.zeros((len(np.atleast_2d(q)), 0))
+        q, y = self.batch(q, y)
+        qt = torch.as_tensor(q, dtype=torch.float64).requires_grad_(True)
+        F = self.residual(qt, torch.tensor(y, dtype=torch.float64))
+        rows = []
+        for i in range(F.shape[1]):
+            (g,) = torch.autograd.grad(F[:, i].sum(), qt, retain_graph=True, allow_unused=True)
+            rows.append(torch.zeros_like(qt) if g is None else g)
+        J = torch.stack(rows, dim=1) if rows else torch.zeros(len(q), 0, q.shape[1], dtype=torch.float64)
+        return F.detach().numpy(), J.numpy()
 
-    @abstractmethod
+    def inequality(self, q, y):
+        """G(q, y) <= 0: (B, p), numpy or torch like ``q``; none by default."""
+        xp = array_namespace(q)
+        return xp.zeros((q.shape[0], 0), dtype=q.dtype)
+
     def spec(self) -> dict:
-        """JSON-ready full specification (type, frames, targets, tolerances)."""
+        """JSON-ready full specification: ``type`` (registered name or ``module:Class``) and the
+        constructor's arguments; :func:`build_constraint` rebuilds the constraint from it."""
+        return {"type": CONSTRAINTS.name_of(type(self)), **{k: _jsonable(v) for k, v in self.arguments.items()}}
+
+    @classmethod
+    def from_spec(cls, robot: Robot, arguments: dict) -> Constraint:
+        """Rebuild from the constructor arguments ``spec()`` recorded."""
+        return cls(robot, **arguments)
 
     @property
     def m(self) -> int:
         return len(self.tolerance)
 
-    def batch(self, q: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Promote q to (B, n) and broadcast y to (B, k)."""
+    def batch(self, q, y):
+        """Promote q to (B, n) and broadcast y to (B, k), numpy or torch like ``q``."""
+        k = self.condition.k
+        rows = (-1, k) if k else (1, 0)  # (-1, 0) is ambiguous
+        if is_tensor(q):
+            import torch
+            q = q if q.ndim == 2 else q[None]
+            return q, torch.as_tensor(y, dtype=q.dtype).reshape(rows).expand(len(q), k)
         q = as_batch(q, self.robot.n)
-        y = np.asarray(y, dtype=float)
-        y = np.broadcast_to(y.reshape(-1, self.condition.k), (len(q), self.condition.k))
-        return q, y
+        return q, np.broadcast_to(np.asarray(y, dtype=float).reshape(rows), (len(q), k))
 
     def violation(self, q: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(B,) worst ratio |F_i| / tol_i (<= 1 means within tolerance)."""
+        q, y = self.batch(q, y)
+        if not self.m:
+            return np.zeros(len(q))
         return np.max(np.abs(self.residual(q, y)) / self.tolerance, axis=1)
 
     def satisfied(self, q: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -111,41 +173,80 @@ class Constraint(ABC):
             ok &= np.all(G <= 0, axis=1)
         return ok & self.robot.within_limits(q)
 
+    def penalty(self, q, y):
+        """(B,) differentiable ``sum_i (F_i / tol_i)^2 + sum_j (max(G_j, 0) / INEQUALITY_SCALE)^2`` for
+        torch ``q (B, n)``, ``y (B, k)``: the models' training penalty, for every constraint alike."""
+        q, y = self.batch(q, y)
+        F = self.residual(q, y) / as_like(self.tolerance, q)
+        G = self.inequality(q, y)
+        return (F * F).sum(dim=1) + (G.clamp(min=0) / INEQUALITY_SCALE).pow(2).sum(dim=1)
 
+
+CONSTRAINTS: Registry[Constraint] = Registry("constraint", Constraint)
+
+
+def build_constraint(robot: Robot, spec: dict) -> Constraint:
+    """The constraint ``spec`` describes (as :meth:`Constraint.spec` wrote it), on ``robot``."""
+    if not isinstance(spec, dict) or "type" not in spec:
+        raise ManifoldgenError(f"a constraint needs a 'type' (one of {', '.join(CONSTRAINTS.names())} or "
+                               f"'module:Class'), got {spec!r}")
+    cls = CONSTRAINTS.get(str(spec["type"]))
+    arguments = {k: v for k, v in spec.items() if k != "type"}
+    try:
+        return cls.from_spec(robot, arguments)
+    except TypeError as exc:
+        params = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "robot")]
+        raise ManifoldgenError(f"constraint '{spec['type']}': {exc}; its parameters are {', '.join(params)}") from exc
+
+
+def _jsonable(value):
+    if isinstance(value, Constraint):
+        return value.spec()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    return value
+
+
+@CONSTRAINTS.register("set")
 class ConstraintSet(Constraint):
     """Several constraints on one robot, holding together.
 
     y is the parts' conditions concatenated; the training values are their grid (product).
     """
 
-    def __init__(self, constraints: list[Constraint]):
-        if not constraints:
-            raise ManifoldgenError("a ConstraintSet needs at least one constraint")
-        self.parts = list(constraints)
-        self.robot = constraints[0].robot
+    def __init__(self, parts: list[Constraint]):
+        if not parts:
+            raise ManifoldgenError("a constraint set needs at least one constraint")
+        self.parts = list(parts)
+        self.robot = parts[0].robot
         self.condition = Condition(
-            sum((c.condition.names for c in constraints), ()),
-            sum((c.condition.units for c in constraints), ()),
-            np.array([np.concatenate(rows) for rows in itertools.product(
-                *[np.asarray(c.condition.values, float).reshape(-1, c.condition.k) for c in constraints])]))
-        self.tolerance = np.concatenate([c.tolerance for c in constraints])
+            sum((c.condition.names for c in parts), ()), sum((c.condition.units for c in parts), ()),
+            np.array([np.concatenate(rows) for rows in itertools.product(*[c.condition.grid for c in parts])]))
+        self.tolerance = np.concatenate([c.tolerance for c in parts])
+        cuts = np.cumsum([0] + [c.condition.k for c in parts])
+        self._slices = [slice(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]
 
-    def _split(self, y: np.ndarray) -> list[np.ndarray]:
-        cuts = np.cumsum([c.condition.k for c in self.parts])[:-1]
-        return np.split(y, cuts, axis=1)
+    @classmethod
+    def from_spec(cls, robot, arguments):
+        return cls([build_constraint(robot, part) for part in arguments.get("parts", [])])
 
     def residual(self, q, y):
         q, y = self.batch(q, y)
-        return np.concatenate([c.residual(q, yc) for c, yc in zip(self.parts, self._split(y))], axis=1)
+        xp = array_namespace(q)
+        return xp.concat([c.residual(q, y[:, s]) for c, s in zip(self.parts, self._slices)], axis=1)
 
     def jacobian(self, q, y):
         q, y = self.batch(q, y)
-        pairs = [c.jacobian(q, yc) for c, yc in zip(self.parts, self._split(y))]
+        pairs = [c.jacobian(q, y[:, s]) for c, s in zip(self.parts, self._slices)]
         return np.concatenate([F for F, _ in pairs], axis=1), np.concatenate([J for _, J in pairs], axis=1)
 
     def inequality(self, q, y):
         q, y = self.batch(q, y)
-        return np.concatenate([c.inequality(q, yc) for c, yc in zip(self.parts, self._split(y))], axis=1)
-
-    def spec(self) -> dict:
-        return {"type": "set", "parts": [c.spec() for c in self.parts]}
+        xp = array_namespace(q)
+        return xp.concat([c.inequality(q, y[:, s]) for c, s in zip(self.parts, self._slices)], axis=1)

@@ -8,22 +8,28 @@ with two hands: ``d`` is the wrist distance the paper conditions on.
 from __future__ import annotations
 
 import numpy as np
+from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import Condition, Constraint
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.constraints.orientation import unit
+from manifoldgen.constraints.pose import rotation_matrix
 from manifoldgen.constraints.so3 import hat, jlog3, log3
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot
 
 
+@CONSTRAINTS.register("closed_chain")
 class ClosedChainConstraint(Constraint):
     """Keep ``frame_b`` at distance y along ``axis`` of ``frame_a``, with relative rotation ``rotation``."""
 
-    def __init__(self, robot: Robot, frame_a: str, frame_b: str, rotation: np.ndarray, values: np.ndarray,
-                 axis: tuple[float, float, float] = (0.0, 1.0, 0.0), position_tolerance: float = 0.01,
-                 orientation_tolerance: float = 0.01):
+    def __init__(self, robot: Robot, frame_a: str, frame_b: str, rotation, values,
+                 axis=(0.0, 1.0, 0.0), position_tolerance: float = 0.01, orientation_tolerance: float = 0.01):
         robot.frame_id(frame_a), robot.frame_id(frame_b)
+        if frame_a == frame_b:
+            raise ManifoldgenError(f"closed chain frames are both '{frame_a}'; give two different frames")
         self.robot, self.frame_a, self.frame_b = robot, frame_a, frame_b
-        self.rotation = np.asarray(rotation, float)
-        self.axis = np.asarray(axis, float) / np.linalg.norm(axis)
+        self.rotation = rotation_matrix(rotation, "closed chain rotation")
+        self.axis = unit(axis, "closed chain axis")
         self.condition = Condition(("distance",), ("m",), np.asarray(values, float))
         self.tolerance = np.array([position_tolerance] * 3 + [orientation_tolerance] * 3)
 
@@ -40,9 +46,10 @@ class ClosedChainConstraint(Constraint):
         return np.concatenate([rel, err], axis=1), np.concatenate([J_pos, J_rot], axis=1)
 
     def residual(self, q, y):
-        return self.jacobian(q, y)[0]
-
-    def spec(self) -> dict:
-        return {"type": "closed_chain", "frames": [self.frame_a, self.frame_b], "rotation": self.rotation.tolist(),
-                "axis": self.axis.tolist(), "conditioned": "distance along axis of the first frame",
-                "tolerance": {"position": float(self.tolerance[0]), "orientation": float(self.tolerance[-1])}}
+        q, y = self.batch(q, y)
+        pa, Ra = self.robot.frame_pose(q, self.frame_a)
+        pb, Rb = self.robot.frame_pose(q, self.frame_b)
+        RaT = Ra.mT
+        rel = (RaT @ (pb - pa)[:, :, None])[:, :, 0] - y * as_like(self.axis, pa)
+        err = log3(as_like(self.rotation.T, Ra) @ RaT @ Rb)
+        return array_namespace(pa).concat([rel, err], axis=1)

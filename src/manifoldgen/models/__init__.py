@@ -1,6 +1,7 @@
 """Conditional generative models p(q | y) behind one interface, and their registry.
 
-``MODELS`` maps names to classes; :func:`load_model` reads any saved model directory
+``MODELS`` is their registry (names in the package, ``manifoldgen.models`` entry points of
+other packages, ``module:Class``); :func:`load_model` reads any saved model directory
 (validated, never unpickled); :func:`pretrained_model_dir` locates the shipped models.
 """
 
@@ -8,30 +9,31 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from manifoldgen.errors import ManifoldgenError, unknown_name
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models.base import ConditionalSampler, read_model_dir
 from manifoldgen.models.cvae import CVAE
 from manifoldgen.models.flow import ConditionalFlow
 from manifoldgen.models.cgan import CGAN
 from manifoldgen.models.wgan import WGANGP
+from manifoldgen.registry import Registry
 
-MODELS: dict[str, type[ConditionalSampler]] = {cls.name: cls for cls in (CVAE, CGAN, WGANGP, ConditionalFlow)}
+MODELS: Registry[ConditionalSampler] = Registry("model", ConditionalSampler)
+for _cls in (CVAE, CGAN, WGANGP, ConditionalFlow):
+    MODELS.register(_cls.name)(_cls)
 
 
 def get_model_class(name: str) -> type[ConditionalSampler]:
     """The registered class for ``name`` (clear error with suggestions)."""
-    if name not in MODELS:
-        raise unknown_name("model", name, list(MODELS))
-    return MODELS[name]
+    return MODELS.get(name)
 
 
 def load_model(path: str | Path) -> ConditionalSampler:
     """Load a model directory (model.json + model.safetensors) of any registered model."""
     doc, tensors = read_model_dir(path)
-    if doc["model"] not in MODELS:
+    if doc["model"] not in MODELS.names():
         raise ManifoldgenError(f"{path}: unknown model type '{doc['model']}' in model.json; "
-                               f"known models: {', '.join(MODELS)}")
-    return MODELS[doc["model"]].from_files(path, doc, tensors)
+                               f"known models: {', '.join(MODELS.names())}")
+    return MODELS.get(doc["model"]).from_files(path, doc, tensors)
 
 
 def pretrained_model_dir(name: str = "panda-pose-cvae") -> Path:

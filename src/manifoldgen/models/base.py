@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
@@ -71,7 +72,7 @@ class ConditionalSampler(ABC):
         self.d = self.k = 0
         self.norm: dict[str, list[float]] = {}
         self.nets = torch.nn.ModuleDict()
-        self.residual_fn: torch.nn.Module | None = None  # set by training when residual_weight > 0
+        self.residual_fn: Callable | None = None  # Constraint.penalty, set by training when residual_weight > 0
 
     # ------------------------------------------------------------------ subclass hooks
     @abstractmethod

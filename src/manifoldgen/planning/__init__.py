@@ -1,22 +1,22 @@
 """Sampling-based planners on constraint manifolds; ``PLANNERS`` maps names to classes.
 
-Every planner takes ``(constraint, y, checker, sampler, *, local, resolution, seed,
-settings)`` and answers ``solve(start, goal, time_limit) -> PlanResult``.
+Every planner takes ``(space, sampler, *, local, seed, settings)`` (a
+:class:`~manifoldgen.space.ConstrainedSpace`, a :class:`~manifoldgen.sampling.Sampler` at the
+same condition) and answers ``solve(start, goal, time_limit) -> PlanResult``.
 """
 
 from manifoldgen.planning.base import Planner, PlannerSettings
 from manifoldgen.planning.cbirrt import CBiRRT, CBiRRTSettings
 from manifoldgen.planning.kpiece import KPIECE, KPIECESettings
-from manifoldgen.planning.local import LOCAL_PLANNERS, make_local
+from manifoldgen.planning.local import DEFAULT_LOCAL, LOCAL_PLANNERS, make_local
 from manifoldgen.planning.prm import PRM, PRMSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.rrt import RRT, RRTSettings
 from manifoldgen.planning.rrt_connect import RRTConnect, RRTConnectSettings
 from manifoldgen.planning.smoothing import shortcut
-from manifoldgen.planning.validate import PathReport, validate_path
 
 PLANNERS: dict[str, type[Planner]] = {cls.name: cls for cls in (RRTConnect, RRT, PRM, KPIECE, CBiRRT)}
 
-__all__ = ["CBiRRT", "CBiRRTSettings", "KPIECE", "KPIECESettings", "LOCAL_PLANNERS", "PLANNERS", "PRM",
-           "PRMSettings", "PathReport", "PlanResult", "Planner", "PlannerSettings", "RRT", "RRTConnect",
-           "RRTConnectSettings", "RRTSettings", "make_local", "path_length", "shortcut", "validate_path"]
+__all__ = ["CBiRRT", "CBiRRTSettings", "DEFAULT_LOCAL", "KPIECE", "KPIECESettings", "LOCAL_PLANNERS", "PLANNERS",
+           "PRM", "PRMSettings", "PlanResult", "Planner", "PlannerSettings", "RRT", "RRTConnect",
+           "RRTConnectSettings", "RRTSettings", "make_local", "path_length", "shortcut"]

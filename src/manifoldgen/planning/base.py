@@ -1,10 +1,11 @@
 """The planner contract, shared settings, and the tree every tree planner grows.
 
-A planner gets a constraint at condition ``y``, a collision checker, a :class:`Sampler`
-and a local planner name; ``solve(start, goal, time_limit)`` returns a
-:class:`PlanResult` whose path passed :func:`validate_path` at
-``settings.validation_resolution``. A candidate path that fails that dense check loses
-its offending edge (and everything grown from it) and the search goes on.
+A planner works in a :class:`~manifoldgen.space.ConstrainedSpace` (constraint, condition,
+collision checker, validation settings) with a :class:`Sampler` and a local planner;
+``solve(start, goal, time_limit)`` returns a :class:`PlanResult` whose path passed the
+space's dense :meth:`~manifoldgen.space.ConstrainedSpace.validate_path`. A candidate path that
+fails that check loses its offending edge (and everything grown from it) and the search goes
+on. An unsolved result says why in its ``extras`` (see :meth:`PlanResult.why`).
 """
 
 from __future__ import annotations
@@ -17,42 +18,39 @@ from typing import ClassVar
 
 import numpy as np
 
-from manifoldgen.collision import CollisionChecker
-from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.planning.local import make_local
+from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.planning.validate import PathReport, check_query_state, validate_path
 from manifoldgen.sampling import Sampler
+from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
 
 @dataclass
 class PlannerSettings:
     """Knobs every planner shares.
 
-    range: longest extension (rad, joint-space Euclidean); margin: intermediate states of
-    a checked segment must stay within (1 - margin) x tolerance; step: longest distance
-    between projected states (``project``, halved where a segment fails); partial: ``interpolate`` keeps the valid part of a
-    blocked extension; pool / pool_batch: ``interpolate`` stepping stones drawn up front /
-    whenever a tree has none within range (see :class:`SamplePool`); candidates: stepping
-    stones checked (in one batch) per extension; validation_resolution: the final dense
-    check of a found path.
+    range: longest extension (rad, joint-space Euclidean); resolution: spacing of the checked
+    states along a straight segment while planning (the final check of a path uses the space's
+    finer ``ValidationSettings.resolution``); step: longest distance between projected states
+    (walks, halved where a segment fails); partial: a blocked straight extension keeps its valid
+    part; pool / pool_batch: stepping stones drawn up front / whenever a tree has none within
+    range (see :class:`SamplePool`); candidates: stepping stones checked (in one batch) per
+    extension.
     """
 
     range: float = 0.6
-    margin: float = 0.05
+    resolution: float = 0.05
     step: float = 0.4
     partial: bool = True
     pool: int = 2048
     pool_batch: int = 256
     candidates: int = 8
-    validation_resolution: float = 0.005
 
     def check(self) -> None:
-        if (self.range <= 0 or self.step <= 0 or self.validation_resolution <= 0 or not 0 <= self.margin < 1
-                or self.pool < 0 or self.pool_batch <= 0 or self.candidates <= 0):
-            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, step, pool_batch, candidates "
-                                   "and validation_resolution must be positive, pool >= 0, margin in [0, 1)")
+        if (self.range <= 0 or self.step <= 0 or self.resolution <= 0 or self.pool < 0 or self.pool_batch <= 0
+                or self.candidates <= 0):
+            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, resolution, step, pool_batch "
+                                   "and candidates must be positive, pool >= 0")
 
 
 class SamplerFailed(Exception):
@@ -111,13 +109,13 @@ class Tree:
 
 
 class Planner(ABC):
-    """Plans on the manifold of ``constraint`` at ``y`` with samples from ``sampler``."""
+    """Plans in ``space`` with samples from ``sampler`` (at the same condition) and the local
+    planner named ``local`` (see :mod:`manifoldgen.planning.local`)."""
 
     name: ClassVar[str]
     settings_type: ClassVar[type[PlannerSettings]] = PlannerSettings
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None, sampler: Sampler,
-                 *, local: str = "interpolate", resolution: float = 0.05, seed: int = 0,
+    def __init__(self, space: ConstrainedSpace, sampler: Sampler, *, local: str = DEFAULT_LOCAL, seed: int = 0,
                  settings: PlannerSettings | None = None):
         self.settings = self.settings_type() if settings is None else settings
         if not isinstance(self.settings, self.settings_type):
@@ -126,12 +124,14 @@ class Planner(ABC):
         self.settings.check()
         if sampler is None:
             raise ManifoldgenError(f"{self.name} needs a sampler (uniform, project, pg:DATASET or MODEL:DIR)")
-        self.constraint, self.checker, self.sampler = constraint, checker, sampler
-        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
-        self.local = make_local(local, constraint, self.y, checker, resolution, margin=self.settings.margin,
-                                partial=self.settings.partial, step=self.settings.step)
+        if not np.array_equal(sampler.space.y, space.y):
+            raise ManifoldgenError(f"the sampler serves condition {sampler.space.y.tolist()}, the planner "
+                                   f"{space.y.tolist()}; make both for the same condition")
+        self.space, self.sampler = space, sampler
+        self.local = make_local(local, space, resolution=self.settings.resolution, partial=self.settings.partial,
+                                step=self.settings.step)
         self.rng = np.random.default_rng(seed)
-        self.iterations = self.samples = self.rejected = 0
+        self.iterations = self.samples = self.rejected = self.out_of_reach = 0
         self.trees: list[Tree] = []
         self.pool: SamplePool | None = None
 
@@ -140,11 +140,10 @@ class Planner(ABC):
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
         if not np.isfinite(time_limit) or time_limit <= 0:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
-        start, goal = (check_query_state(q, what, self.constraint, self.y, self.checker)
-                       for q, what in ((start, "start"), (goal, "goal")))
+        start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         before = self.sampler.stats.to_dict()
-        local_before = (self.local.states_checked, self.local.projections)
-        self.iterations = self.samples = self.rejected = 0
+        counts, projections = self.space.counts(), self.local.projections
+        self.iterations = self.samples = self.rejected = self.out_of_reach = 0
         self.trees, self.pool = [], None
         began = time.perf_counter()
         failure = ""
@@ -157,14 +156,17 @@ class Planner(ABC):
         elapsed = time.perf_counter() - began
         after = self.sampler.stats.to_dict()
         sampler = {k: after[k] - before[k] for k in after}
+        now = self.space.counts()
+        rejected = {reason: now["stopped"][reason] - counts["stopped"][reason] for reason in REASONS}
         extras = {"local": self.local.name, "resolution": self.local.resolution, "sampler": sampler,
-                  "states_checked": self.local.states_checked - local_before[0],
-                  "rejected_paths": self.rejected, "nodes": [len(t) for t in self.trees], **self._extras()}
+                  "nodes": [len(t) for t in self.trees], "rejected": {**rejected, "range": self.out_of_reach},
+                  "rejected_paths": self.rejected, "evaluations": now["evaluations"] - counts["evaluations"],
+                  "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
         if failure:
             extras["failure"] = failure
         path = np.zeros((0, len(start))) if path is None else path
         return PlanResult(len(path) > 0, path, elapsed, self.iterations, self.samples,
-                          self.local.projections - local_before[1] + sampler["refined"], self.name,
+                          self.local.projections - projections + sampler["refined"], self.name,
                           path_length(path), extras)
 
     @abstractmethod
@@ -183,9 +185,9 @@ class Planner(ABC):
         return path if self._accept(path).valid else None
 
     def _start_pool(self, trees: list[Tree], deadline: float) -> None:
-        """Stepping stones for ``interpolate`` (drawn batch by batch until the deadline at the
-        latest); ``project`` steers toward any target."""
-        if self.local.name != "interpolate":
+        """Stepping stones for local planners that use them (drawn batch by batch until the
+        deadline at the latest); ``project`` steers toward any target."""
+        if not self.local.stones:
             self.pool = None
             return
         self.pool = SamplePool(self._draw_many, trees, self.settings.range, self.settings.pool_batch)
@@ -197,9 +199,9 @@ class Planner(ABC):
     def _grow(self, k: int, target: np.ndarray, keep: bool = True) -> int | None:
         """Extend tree ``k`` toward ``target`` from its nearest node: the new node or None.
 
-        With the pool (``interpolate``) a target out of range is replaced by the pooled
-        samples within range of the tree that are closest to it (the target joins the pool
-        when ``keep``); with none in range the pool draws a batch and the step is skipped."""
+        With the pool a target out of range is reached for through the pool (see :meth:`_far`;
+        the target joins the pool when ``keep``); when no pooled sample lies within range of the
+        tree and that did not help, the pool draws a batch."""
         tree = self.trees[k]
         near = tree.nearest(target)
         if self.pool is None or np.linalg.norm(target - tree.q[near]) <= self.settings.range:
@@ -207,18 +209,27 @@ class Planner(ABC):
             return tree.add(near, waypoints) if len(waypoints) else None
         if keep:
             self.pool.add(target[None])
-        new = self._step_through_pool(k, target)
+        new = self._far(k, near, target)
         if new is None and not self.pool.reachable(k):
             self.pool.draw(self.pool.batch)
         return new
 
-    def _step_through_pool(self, k: int, target: np.ndarray, than: float = np.inf) -> int | None:
-        """Join tree ``k`` to the first valid of the ``candidates`` pooled samples within range of
-        it that are closest to ``target`` (and closer than ``than``); the tried ones leave the pool."""
+    def _far(self, k: int, near: int, target: np.ndarray, than: float = np.inf) -> int | None:
+        """Extend tree ``k`` toward a ``target`` out of range: to the first valid of the
+        ``candidates`` pooled samples within range of it that are closest to ``target`` (and closer
+        than ``than``; the tried ones leave the pool). When no pooled sample at all lies within
+        range of the tree (samples too sparse for stepping stones), a walk from node ``near`` if
+        the local planner walks. The new node or None."""
         tree = self.trees[k]
         slots = self.pool.closest(k, target, self.settings.candidates, than)
         if not len(slots):
-            return None
+            if self.pool.reachable(k):
+                return None
+            self.out_of_reach += 1
+            if not self.local.walks:
+                return None
+            waypoints, _ = self.local.walk(tree.q[near], target, self.settings.range)
+            return tree.add(near, waypoints) if len(waypoints) else None
         stones = self.pool.q[slots]
         nodes = tree.nearest_many(stones)
         i = self.local.first_valid(tree.q[nodes], stones)
@@ -243,7 +254,7 @@ class Planner(ABC):
 
     def _accept(self, path: np.ndarray) -> PathReport:
         """The final dense validation of a candidate path (counts rejections)."""
-        report = validate_path(path, self.constraint, self.y, self.checker, self.settings.validation_resolution)
+        report = self.space.validate_path(path)
         self.rejected += not report.valid
         return report
 
@@ -269,10 +280,10 @@ class Planner(ABC):
 
 
 class SamplePool:
-    """Samples drawn but not yet in a tree: the stepping stones of ``interpolate`` extensions.
+    """Samples drawn but not yet in a tree: the stepping stones of straight extensions.
 
     A straight segment toward a far sample leaves the manifold at once, so a tree grown with
-    ``interpolate`` cannot step "toward" a random sample the way RRT truncates. Instead it
+    straight segments cannot step "toward" a random sample the way RRT truncates. Instead it
     steps to the pooled sample, among those within ``radius`` of the tree, that lies
     closest to the random sample: steering on the manifold, through samples. The planner
     fills the pool first, and it draws ``batch`` more whenever no sample is within reach of

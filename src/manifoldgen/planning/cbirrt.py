@@ -6,12 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manifoldgen.collision import CollisionChecker
-from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import PlannerSettings
 from manifoldgen.planning.rrt_connect import RRTConnect
 from manifoldgen.sampling import Sampler, UniformSampler
+from manifoldgen.space import ConstrainedSpace
 
 
 @dataclass
@@ -35,13 +34,11 @@ class CBiRRT(RRTConnect):
     name = "cbirrt"
     settings_type = CBiRRTSettings
 
-    def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
-                 sampler: Sampler | None = None, *, local: str = "project", resolution: float = 0.05, seed: int = 0,
-                 settings: CBiRRTSettings | None = None):
-        sampler = UniformSampler(constraint, y, seed=seed) if sampler is None else sampler
-        super().__init__(constraint, y, checker, sampler, local="project", resolution=resolution, seed=seed,
-                         settings=settings)
-        self._raw = np.zeros((0, constraint.robot.n))
+    def __init__(self, space: ConstrainedSpace, sampler: Sampler | None = None, *, local: str = "project",
+                 seed: int = 0, settings: CBiRRTSettings | None = None):
+        sampler = UniformSampler(space, seed=seed) if sampler is None else sampler
+        super().__init__(space, sampler, local="project", seed=seed, settings=settings)
+        self._raw = np.zeros((0, space.n))
 
     def _target(self) -> np.ndarray:
         if not len(self._raw):

@@ -39,7 +39,7 @@ class KPIECE(Planner):
     settings_type = KPIECESettings
 
     def _solve(self, start, goal, deadline):
-        robot, settings = self.constraint.robot, self.settings
+        robot, settings = self.space.robot, self.settings
         dims = settings.dimensions or max(2, int(np.ceil(np.log2(robot.n))))
         axes = self.rng.normal(size=(dims, robot.n))
         axes /= np.linalg.norm(axes, axis=1, keepdims=True)
@@ -69,15 +69,22 @@ class KPIECE(Planner):
         return None
 
     def _extend(self, tree: Tree, node: int, target: np.ndarray, keep: bool) -> int | None:
-        """Grow ``node`` toward ``target`` (through the pool with ``interpolate``)."""
+        """Grow ``node`` toward ``target``: through the pooled sample within range of it closest to
+        the target when the local planner uses stepping stones, walking when there is none."""
         origin = tree.q[node]
+        steer = self.local.steer
         if self.pool is not None and np.linalg.norm(target - origin) > self.settings.range:
             if keep:
                 self.pool.add(target[None])
-            target = self.pool.take_near(origin, target)
-            if target is None:
-                return None
-        waypoints, _ = self.local.steer(origin, target, self.settings.range)
+            stone = self.pool.take_near(origin, target)
+            if stone is None:
+                self.out_of_reach += 1
+                if not self.local.walks:
+                    return None
+                steer = self.local.walk
+            else:
+                target = stone
+        waypoints, _ = steer(origin, target, self.settings.range)
         return tree.add(node, waypoints) if len(waypoints) else None
 
 

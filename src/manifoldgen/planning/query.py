@@ -16,13 +16,14 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError, unknown_name
 from manifoldgen.io import check_output_path, save_npz
 from manifoldgen.planning.base import Planner
+from manifoldgen.planning.local import DEFAULT_LOCAL
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.smoothing import shortcut
-from manifoldgen.planning.validate import validate_path
 from manifoldgen.scene import Scene
+from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task
 
-PATH_FORMAT_VERSION = 1
+PATH_FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 
 
 def get_planner(name: str) -> type[Planner]:
@@ -35,23 +36,22 @@ def get_planner(name: str) -> type[Planner]:
 
 
 def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int, time_limit: float,
-              local: str = "interpolate", smooth: bool = False) -> tuple[PlanResult, dict]:
+              local: str = DEFAULT_LOCAL, smooth: bool = False) -> tuple[PlanResult, dict]:
     """Plan the scene's query; returns the result (path re-validated, optionally smoothed) and
-    the path file's ``meta``."""
+    the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used)."""
     from manifoldgen.specs import make_sampler
 
     if not np.isfinite(time_limit) or time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
     planner_type = get_planner(planner)
     y = task.condition.check(scene.condition)[0]
-    checker = scene.checker(task.robot)
-    samples = make_sampler(sampler, task, y, checker, seed)
-    solver = planner_type(task.constraint, y, checker, samples, local=local, seed=seed)
+    space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))
+    solver = planner_type(space, make_sampler(sampler, space, seed), local=local, seed=seed)
     result = solver.solve(scene.start, scene.goal, time_limit)
     if result.solved and smooth:
         result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
         result.length = path_length(result.path)
-    report = validate_path(result.path, task.constraint, y, checker) if result.solved else None
+    report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
     meta = {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
@@ -60,7 +60,7 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
             "start": scene.start.tolist(), "goal": scene.goal.tolist(),
             "planner": planner, "sampler": sampler, "local": solver.local.name, "seed": seed,
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
-            "validation": {"resolution": 0.005, **(report.to_dict() if report else {})}}
+            "validation": report.to_dict() if report else {"resolution": space.settings.resolution}}
     return result, meta
 
 

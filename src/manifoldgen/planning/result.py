@@ -7,6 +7,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+REFUSALS = {"range": "no sample within range", "constraint": "constraint", "collision": "collision",
+            "limits": "joint limits", "inequality": "inequality"}  # extras["rejected"] keys, in words
+
+
 def path_length(path: np.ndarray) -> float:
     """Joint-space length of a waypoint array ``(K, n)`` (sum of Euclidean segment lengths)."""
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
@@ -19,7 +23,11 @@ class PlanResult:
     time_s: wall time of ``solve``; iterations: planner loop iterations; samples_drawn:
     configurations taken from the sampler; projections: configurations projected onto the
     manifold (by the planner's local planner and by the sampler); length: joint-space path
-    length; extras: planner-specific figures (nodes, sampler stats, validation, ...).
+    length; extras: planner-specific figures. Ours give ``nodes`` (tree sizes), ``rejected``
+    (extensions refused, by reason: see ``REFUSALS``), ``rejected_paths`` (candidates that failed
+    the dense validation), ``sampler`` (its stats over the query), ``evaluations`` and
+    ``collision_checks`` (configurations checked) and ``failure`` (why the sampler gave up);
+    :meth:`why` puts them in one line.
     """
 
     solved: bool
@@ -31,6 +39,33 @@ class PlanResult:
     planner: str
     length: float
     extras: dict = field(default_factory=dict)
+
+    def why(self) -> str:
+        """One line for people: the outcome and, when unsolved, what held the search back (read
+        from ``extras``: tree sizes, refused extensions by reason, samples, sampler failure)."""
+        if self.solved:
+            return (f"solved in {self.time_s:.3f} s: {len(self.path)} waypoints, length {self.length:.2f} rad, "
+                    f"{self.samples_drawn} samples drawn")
+        x, parts = self.extras, []
+        if x.get("failure"):
+            parts.append(f"the sampler failed: {x['failure']}")
+        if x.get("nodes"):
+            parts.append(f"{'trees' if len(x['nodes']) > 1 else 'tree'} of "
+                         f"{' and '.join(str(n) for n in x['nodes'])} nodes")
+        if "roadmap" in x:
+            parts.append(f"roadmap of {x['roadmap']['nodes']} nodes, {x['roadmap']['edges']} edges")
+        if "ompl_status" in x:
+            parts.append(f"OMPL says {x['ompl_status']} with {x['vertices']} vertices")
+        if x.get("reason"):
+            parts.append(f"the path failed validation: {x['reason']}")
+        parts.append(f"{self.samples_drawn} samples drawn")
+        refused = sorted(((count, REFUSALS.get(reason, reason)) for reason, count in x.get("rejected", {}).items()
+                          if count), reverse=True)
+        if refused:
+            parts.append("refused extensions: " + ", ".join(f"{what} {count}" for count, what in refused))
+        if x.get("rejected_paths"):
+            parts.append(f"{x['rejected_paths']} candidate paths failed the dense validation")
+        return f"not solved in {self.time_s:.3f} s after {self.iterations} iterations: " + "; ".join(parts)
 
     def to_dict(self) -> dict:
         """JSON-ready summary, without the path array."""

@@ -12,7 +12,7 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 @dataclass
 class RRTConnectSettings(PlannerSettings):
-    """RRT-Connect has only the shared settings (range, margin, step, partial, pool, validation)."""
+    """RRT-Connect has only the shared settings (range, resolution, step, partial, pool, candidates)."""
 
 
 class RRTConnect(Planner):
@@ -46,13 +46,13 @@ class RRTConnect(Planner):
 
     def _connect(self, k: int, target: np.ndarray, deadline: float) -> int | None:
         """Grow tree ``k`` toward ``target`` until it reaches it (returns that node) or is stuck;
-        with the pool, through the pooled samples that bring it closer."""
+        with the pool, through the pooled samples that bring it closer (see :meth:`_far`)."""
         tree = self.trees[k]
         while time.perf_counter() < deadline:
             node = tree.nearest(target)
             gap = float(np.linalg.norm(target - tree.q[node]))
             if self.pool is not None and gap > self.settings.range:
-                if self._step_through_pool(k, target, than=gap) is None:
+                if self._far(k, node, target, than=gap) is None:
                     return None
                 continue
             waypoints, reached = self.local.steer(tree.q[node], target, self.settings.range)

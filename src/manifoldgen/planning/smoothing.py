@@ -1,5 +1,5 @@
 """Shortcut smoothing that keeps the constraint: random shortcuts through the local planner,
-then the whole path re-validated densely (the input comes back unchanged if it fails)."""
+then the whole path re-validated densely by the space (the input comes back unchanged if it fails)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,10 @@ import numpy as np
 
 from manifoldgen.planning.local import LocalPlanner
 from manifoldgen.planning.result import path_length
-from manifoldgen.planning.validate import validate_path
 
 
 def shortcut(path: np.ndarray, local: LocalPlanner, rng: np.random.Generator, *, attempts: int = 100,
-             time_limit: float = 1.0, validation_resolution: float = 0.005) -> np.ndarray:
+             time_limit: float = 1.0) -> np.ndarray:
     """Shorter path (K', n) with the same ends: ``attempts`` random pairs of waypoints are
     joined by ``local`` (a straight checked segment or a projected walk) when that is valid
     and shorter than the stretch it replaces."""
@@ -30,5 +29,4 @@ def shortcut(path: np.ndarray, local: LocalPlanner, rng: np.random.Generator, *,
             continue
         if path_length(np.concatenate([out[i:i + 1], waypoints])) < path_length(out[i:j + 1]):
             out = np.concatenate([out[:i + 1], waypoints, out[j + 1:]])
-    report = validate_path(out, local.constraint, local.y, local.checker, validation_resolution)
-    return out if report.valid else np.asarray(path, dtype=float)
+    return out if local.space.validate_path(out).valid else np.asarray(path, dtype=float)

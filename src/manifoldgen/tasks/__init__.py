@@ -1,72 +1,266 @@
-"""Named tasks: a robot, its planning group, a constraint and its condition values.
+"""Tasks are data: a TOML task file names the robot, its planning group, locked joints, the
+constraint(s) with their parameters and training condition values, and the scenes.
 
-``TASKS[name][robot]`` is a factory returning a :class:`Task`; :func:`get_task` resolves
-names with clear errors. Pose tasks for panda, pr2 and centauro live in ``pose.py``.
+The built-in tasks are such files, beside this module (``pose-panda.toml``, ...). Wherever a
+command takes a task name it takes a task file path too. A :class:`Task` describes itself
+fully in :meth:`Task.spec` (robot by name and URDF hash, every locked joint, the constraint's
+full spec), which every dataset, model and path file stores, and :func:`task_from_spec`
+rebuilds it from that alone. The task file format is documented in ``docs/tasks.md``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+import re
+import sys
+import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.constraints import Condition, Constraint
+from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
 from manifoldgen.errors import ManifoldgenError, unknown_name
-from manifoldgen.robot import Robot, resolve_robot
+from manifoldgen.robot import Robot, find_robot, resolve_robot
+
+BUILTIN_DIR = Path(__file__).resolve().parent
+TASK_KEYS = {"name": "task name", "description": "one line for `manifoldgen tasks`",
+             "default": "this robot is the default for the task name", "robot": "example-robot-data name or URDF path",
+             "srdf": "SRDF path", "group": "planning group joints", "floating_base": "true for a free-flying base",
+             "base_bounds": "[[x, y, z low], [x, y, z high]] of a floating base", "locked": "joint = value table",
+             "home": "a configuration near the manifold (projected)", "home_condition": "the condition of home",
+             "constraints": "[[constraints]] tables", "scenes": "name = scene file table"}
+HOME_SEEDS = 256  # uniform seeds projected when a task gives no home
 
 
 @dataclass
 class Task:
-    """A robot with a constraint; ``home`` is a valid configuration used as an example."""
+    """A robot with a constraint; ``home (n,)`` satisfies it at ``home_condition (k,)``; ``scenes``
+    maps scene names to scene files."""
 
     name: str
     robot: Robot
     constraint: Constraint
-    home: np.ndarray  # (n,) a configuration that satisfies the constraint at home_condition
-    home_condition: np.ndarray  # (k,)
+    home: np.ndarray
+    home_condition: np.ndarray
     notes: str = ""
-    extras: dict = field(default_factory=dict)
+    scenes: dict[str, Path] = field(default_factory=dict)
+    file: Path | None = None  # the task file it was read from
 
     @property
     def condition(self) -> Condition:
         return self.constraint.condition
 
+    def spec(self) -> dict:
+        """Everything that defines the task, JSON-ready: :func:`task_from_spec` rebuilds it."""
+        r = self.robot
+        return {"name": self.name, "description": self.notes, "robot": r.identity, "robot_source": r.source,
+                "srdf_source": None if r.srdf is None else str(r.srdf),
+                "group": [j for j in r.joints if j not in _base_joints(r)], "floating_base": r.floating_base,
+                "base_bounds": r.base_bounds.tolist(), "locked": r.locked, "constraint": self.constraint.spec(),
+                "home": self.home.tolist(), "home_condition": self.home_condition.tolist(),
+                "task_file": None if self.file is None else str(self.file)}
+
     def meta(self) -> dict:
-        """The dataset ``meta`` fields that let an outside checker recompute everything."""
-        return {"task": self.name, "robot": self.robot.name, "joints": self.robot.joints,
+        """The ``meta`` fields every file made for this task carries (an outside checker needs only these)."""
+        return {"task": self.spec(), "robot": self.robot.name, "joints": self.robot.joints,
                 "locked": self.robot.locked, "floating_base": self.robot.floating_base,
-                "constraint": self.constraint.spec(),
+                "constraint": self.constraint.spec(), "tolerance": self.constraint.tolerance.tolist(),
                 "condition": {"names": list(self.condition.names), "units": list(self.condition.units),
-                              "values": np.asarray(self.condition.values).tolist()}}
+                              "values": self.condition.grid.tolist()}}
 
 
-TASKS: dict[str, dict[str, Callable[[], Task]]] = {}
+def _base_joints(robot: Robot) -> list[str]:
+    return robot.joints[:6] if robot.floating_base else []
 
 
-def register(name: str, robot: str):
-    """Decorator registering a task factory under (name, robot)."""
-    def wrap(factory: Callable[[], Task]) -> Callable[[], Task]:
-        TASKS.setdefault(name, {})[robot] = factory
-        return factory
-    return wrap
+def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
+    """Rebuild the task :meth:`Task.spec` described (no registry lookup, no task file)."""
+    if spec.get("task_file"):  # a user's module:Class constraint is importable from the task file's folder
+        _importable_from(Path(spec["task_file"]).parent)
+    robot_field = spec["robot"]
+    source = find_robot(robot_field, robot_hint or spec.get("robot_source")) if isinstance(robot_field, dict) \
+        else robot_field
+    srdf = spec.get("srdf_source")
+    robot = Robot.load(source, list(spec["group"]), reference=spec.get("locked") or {},
+                       floating_base=bool(spec.get("floating_base", False)),
+                       srdf=srdf if srdf and Path(srdf).is_file() else None,
+                       **({"base_bounds": spec["base_bounds"]} if spec.get("base_bounds") else {}))
+    constraint = build_constraint(robot, spec["constraint"])
+    task = _finish(spec["name"], robot, constraint, spec.get("home"), spec.get("home_condition"),
+                   spec.get("description", ""), {})
+    task.file = Path(spec["task_file"]) if spec.get("task_file") else None
+    return task
+
+
+def task_from_meta(meta: dict, robot_hint: str | None = None) -> Task:
+    """The task a dataset, model or path file was made for, from its ``meta`` alone."""
+    spec = meta.get("task")
+    if not isinstance(spec, dict):
+        raise ManifoldgenError("the file's meta has no task specification (made by manifoldgen before 0.2); "
+                               "recollect the dataset or retrain the model with this version")
+    return task_from_spec(spec, robot_hint)
+
+
+def _finish(name: str, robot: Robot, constraint: Constraint, home, home_condition, notes: str,
+            scenes: dict[str, Path]) -> Task:
+    """A task with a home on the manifold: ``home`` projected, else the first of HOME_SEEDS uniform seeds that converges."""
+    grid = constraint.condition.grid
+    y = grid[0] if home_condition is None else constraint.condition.check(home_condition)[0]
+    seeds = (np.asarray(home, float)[None] if home is not None
+             else robot.sample_uniform(HOME_SEEDS, np.random.default_rng(0)))
+    if seeds.shape[1] != robot.n:
+        raise ManifoldgenError(f"home has {seeds.shape[1]} values but the group has {robot.n} joints "
+                               f"({', '.join(robot.joints)}); give one value per joint")
+    res = project(constraint, seeds, y)
+    if not res.converged.any():
+        where = "home" if home is not None else f"{HOME_SEEDS} uniform configurations"
+        raise ManifoldgenError(f"task '{name}': projecting {where} onto the constraint at condition {y.tolist()} "
+                               "failed; give a home configuration closer to the manifold, or check the constraint")
+    return Task(name, robot, constraint, res.q[int(np.argmax(res.converged))], y, notes, scenes)
+
+
+def check_made_for(meta: dict, constraint: Constraint, what: str) -> None:
+    """Refuse a file (``what``: e.g. "model runs/cvae") whose ``meta`` was made for another robot (by URDF
+    content), planning group, locked joints or constraint than ``constraint``'s."""
+    robot = constraint.robot
+    spec = meta.get("task") if isinstance(meta.get("task"), dict) else {}
+    made = spec.get("robot", {}) if isinstance(spec.get("robot"), dict) else {}
+    differences = []
+    if made.get("urdf_sha256") != robot.identity["urdf_sha256"]:
+        differences.append(f"robot {made.get('name', meta.get('robot'))} (URDF {str(made.get('urdf_sha256'))[:12]}) "
+                           f"vs {robot.name} (URDF {robot.identity['urdf_sha256'][:12]})")
+    if list(meta.get("joints", [])) != list(robot.joints):
+        differences.append(f"joints {meta.get('joints')} vs {robot.joints}")
+    locked = meta.get("locked", {})
+    if set(locked) != set(robot.locked) or any(abs(locked[j] - v) > 1e-9 for j, v in robot.locked.items()):
+        differences.append("locked joint values")
+    made_spec, spec = json.loads(json.dumps(meta.get("constraint") or {})), json.loads(json.dumps(constraint.spec()))
+    if made_spec != spec:
+        keys = sorted(k for k in set(made_spec) | set(spec) if made_spec.get(k) != spec.get(k))
+        differences.append(f"constraint {made_spec.get('type')} vs {spec.get('type')}" if "type" in keys
+                           else f"constraint {spec.get('type')} differs in {', '.join(keys)}")
+    if differences:
+        raise ManifoldgenError(f"{what} was made for another task: {'; '.join(differences)}; use one made for this "
+                               "task (collect / train on this task)")
+
+
+# ---------------------------------------------------------------------- task files
+def _line(text: str, key: str) -> int:
+    """The 1-based line where ``key`` is set or opens a table in TOML ``text`` (0 if not found)."""
+    pattern = re.compile(rf"^[ \t]*(\[\[?[ \t]*{re.escape(key)}[ \t]*\]\]?|{re.escape(key)}[ \t]*=)", re.M)
+    found = pattern.search(text)
+    return text.count("\n", 0, found.start()) + 1 if found else 0
+
+
+def _nth_table_line(text: str, key: str, index: int) -> int:
+    lines = [text.count("\n", 0, m.start()) + 1
+             for m in re.finditer(rf"^[ \t]*\[\[[ \t]*{re.escape(key)}[ \t]*\]\]", text, re.M)]
+    return lines[index] if index < len(lines) else 0
+
+
+def load_task_file(path: str | Path) -> Task:
+    """Read a TOML task file (see the module doc and docs/tasks.md)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ManifoldgenError(f"task file not found: {path}; give a .toml task file or a built-in task name")
+    text = path.read_text(errors="replace")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ManifoldgenError(f"{path}: not valid TOML ({exc}); fix the file") from exc
+
+    def where(key: str) -> str:
+        return f"{path}, line {_line(text, key)}"
+
+    unknown = [k for k in data if k not in TASK_KEYS]
+    if unknown:
+        raise ManifoldgenError(f"{where(unknown[0])}: unknown key '{unknown[0]}'; known keys: {', '.join(TASK_KEYS)}")
+    for key in ("name", "robot", "constraints"):
+        if key not in data:
+            raise ManifoldgenError(f"{path}: missing '{key}' ({TASK_KEYS[key]}); every task file needs name, robot "
+                                   "and at least one [[constraints]] table")
+    base = path.resolve().parent
+    _importable_from(base)
+    source = str(data["robot"])
+    if source.endswith(".urdf") or "/" in source:
+        source = str((base / source).resolve())
+    try:
+        robot_obj = Robot.load(source, data.get("group"), reference=_floats_table(data.get("locked", {}), where),
+                               floating_base=bool(data.get("floating_base", False)),
+                               srdf=str(base / data["srdf"]) if "srdf" in data else None,
+                               **({"base_bounds": data["base_bounds"]} if "base_bounds" in data else {}))
+    except ManifoldgenError as exc:
+        named = [k for k in ("group", "locked") if any(f"'{j}'" in str(exc) for j in data.get(k, []))]
+        raise ManifoldgenError(f"{where(named[0] if named else 'robot')}: {exc}") from None
+    tables = data["constraints"]
+    if not isinstance(tables, list) or not tables:
+        raise ManifoldgenError(f"{where('constraints')}: write each constraint as a [[constraints]] table with a 'type'")
+    parts = []
+    for i, table in enumerate(tables):
+        try:
+            parts.append(build_constraint(robot_obj, table))
+        except ManifoldgenError as exc:
+            raise ManifoldgenError(f"{path}, line {_nth_table_line(text, 'constraints', i)}: constraint {i + 1}: "
+                                   f"{exc}") from None
+    constraint = parts[0] if len(parts) == 1 else ConstraintSet(parts)
+    scenes = {str(k): (base / str(v)).resolve() for k, v in data.get("scenes", {}).items()}
+    try:
+        task = _finish(str(data["name"]), robot_obj, constraint, data.get("home"), data.get("home_condition"),
+                       str(data.get("description", "")), scenes)
+    except ManifoldgenError as exc:
+        raise ManifoldgenError(f"{where('home')}: {exc}") from None
+    task.file = path.resolve()
+    return task
+
+
+def _importable_from(folder: Path) -> None:
+    """Let ``module:Class`` names import modules that sit in ``folder`` (a task file's)."""
+    if folder.is_dir() and str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
+
+
+def _floats_table(table, where) -> dict[str, float]:
+    if not isinstance(table, dict) or not all(isinstance(v, (int, float)) for v in table.values()):
+        raise ManifoldgenError(f"{where('locked')}: 'locked' must be a table of joint = number")
+    return {str(k): float(v) for k, v in table.items()}
+
+
+# ---------------------------------------------------------------------- built-in tasks
+@lru_cache(maxsize=None)
+def builtin_tasks() -> dict[str, dict[str, Path]]:
+    """Task name -> robot -> built-in task file; each name's default robot first."""
+    found: dict[str, list[tuple[bool, str, Path]]] = {}
+    for file in sorted(BUILTIN_DIR.glob("*.toml")):
+        data = tomllib.loads(file.read_text())
+        found.setdefault(data["name"], []).append((not data.get("default", False), str(data["robot"]), file))
+    return {name: {robot: file for _, robot, file in sorted(rows)} for name, rows in found.items()}
+
+
+def is_task_file(task: str) -> bool:
+    return task.endswith(".toml") or Path(task).is_file()
 
 
 @lru_cache(maxsize=None)
-def get_task(name: str, robot: str | None = None) -> Task:
-    """The task ``name`` for ``robot`` (default: the task's first robot)."""
-    if name not in TASKS:
-        raise unknown_name("task", name, list(TASKS))
-    robots = TASKS[name]
+def get_task(task: str, robot: str | None = None) -> Task:
+    """A built-in task by name (for ``robot``, default: the task's default robot) or a task file."""
+    if is_task_file(task):
+        loaded = load_task_file(task)
+        if robot is not None and robot not in (loaded.robot.name, loaded.robot.source):
+            raise ManifoldgenError(f"task file {task} is for robot '{loaded.robot.name}', not '{robot}'; drop "
+                                   "--robot (a task file names its robot) or edit the file's 'robot'")
+        return loaded
+    tasks = builtin_tasks()
+    if task not in tasks:
+        raise unknown_name("task", task, list(tasks))
+    robots = tasks[task]
     robot = robot or next(iter(robots))
     if robot not in robots:
         resolve_robot(robot)  # an unknown robot is reported as such
-        raise ManifoldgenError(f"task '{name}' is not defined for robot '{robot}'; "
-                               f"robots with it: {', '.join(robots)}")
-    return robots[robot]()
+        raise ManifoldgenError(f"task '{task}' is not defined for robot '{robot}'; robots with it: "
+                               f"{', '.join(robots)}; or write a task file for it (see docs/tasks.md)")
+    return load_task_file(robots[robot])
 
 
-from manifoldgen.tasks import pose  # noqa: E402,F401  (registers the pose tasks)
-
-__all__ = ["TASKS", "Task", "get_task", "register"]
+__all__ = ["Task", "builtin_tasks", "check_made_for", "get_task", "load_task_file", "task_from_meta", "task_from_spec"]

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints.balance import convex_hull
-from manifoldgen.planning.validate import densify
 from manifoldgen.robot import Robot
 from manifoldgen.scene import Obstacle, Scene
+from manifoldgen.space import densify
 from manifoldgen.viz.losses import save_figure
 
 VIEWS = (("top view", 0, 1, "x (m)", "y (m)"), ("side view", 0, 2, "x (m)", "z (m)"))

@@ -1,0 +1,35 @@
+"""Linear constraints in joint space: ``A q = y`` (coupled joints, a fixed sum, a joint held at y).
+
+``coefficients`` is (r, n) over the planning group's joints, in the group's order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.robot import Robot
+
+
+@CONSTRAINTS.register("joint_linear")
+class JointLinearConstraint(Constraint):
+    """``coefficients (r, n) @ q = y (r,)`` within ``tolerance`` (rad or m) per row."""
+
+    def __init__(self, robot: Robot, coefficients, values, tolerance: float = 0.01):
+        A = np.atleast_2d(np.asarray(coefficients, dtype=float))
+        if A.ndim != 2 or A.shape[1] != robot.n or not np.all(np.isfinite(A)) or np.any(np.all(A == 0, axis=1)):
+            raise ManifoldgenError(f"joint_linear coefficients must be rows of {robot.n} numbers (one per joint "
+                                   f"of {', '.join(robot.joints)}), none all zero; got shape {A.shape}")
+        self.robot, self.coefficients = robot, A
+        self.condition = Condition(tuple(f"joint_linear{i}" for i in range(len(A))), ("",) * len(A),
+                                   np.asarray(values, float))
+        self.tolerance = np.full(len(A), float(tolerance))
+
+    def residual(self, q, y):
+        q, y = self.batch(q, y)
+        return q @ as_like(self.coefficients.T, q) - y
+
+    def jacobian(self, q, y):
+        q, y = self.batch(q, y)
+        return q @ self.coefficients.T - y, np.broadcast_to(self.coefficients, (len(q), *self.coefficients.shape))

@@ -1,0 +1,54 @@
+"""``--set KEY=VALUE`` and ``--config FILE`` settings for models and planners.
+
+Values are read as JSON (``0.5``, ``true``, ``[64, 64]``), else taken as a string, and must fit
+the type of the known default; unknown keys are refused with the list of known ones. A config
+file is a TOML table of the same keys; ``--set`` wins over the file.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+from manifoldgen.errors import ManifoldgenError
+
+
+def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, what: str) -> dict:
+    """``["lr=1e-3", ...]`` and a TOML file -> ``{key: value}``, checked against ``known`` (key -> default)."""
+    values: dict = {}
+    if config is not None:
+        if not Path(config).is_file():
+            raise ManifoldgenError(f"config file not found: {config}; give a TOML file of KEY = VALUE lines")
+        try:
+            values.update(tomllib.loads(Path(config).read_text()))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ManifoldgenError(f"{config}: not valid TOML ({exc}); fix the file") from exc
+    for pair in pairs or []:
+        key, eq, text = pair.partition("=")
+        if not eq or not key.strip():
+            raise ManifoldgenError(f"--set '{pair}' is not KEY=VALUE; write e.g. --set {next(iter(known), 'key')}=1")
+        try:
+            values[key.strip()] = json.loads(text)
+        except ValueError:
+            values[key.strip()] = text
+    for key, value in values.items():
+        if key not in known:
+            raise ManifoldgenError(f"unknown {what} setting '{key}'; known: {', '.join(sorted(known))}")
+        values[key] = _fit(key, value, known[key], what)
+    return values
+
+
+def _fit(key: str, value, default, what: str):
+    """``value`` converted to the type of ``default`` (int -> float allowed), or a clear error."""
+    if default is None:
+        return value
+    if isinstance(value, bool) or isinstance(default, bool):
+        if isinstance(value, bool) and isinstance(default, bool):
+            return value
+    elif isinstance(default, float) and isinstance(value, (int, float)):
+        return float(value)
+    elif isinstance(value, type(default)):
+        return value
+    kind = type(default).__name__
+    raise ManifoldgenError(f"{what} setting {key} must be a {kind} (like its default {default!r}), got {value!r}")

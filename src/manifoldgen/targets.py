@@ -1,0 +1,98 @@
+"""Queries by pose: a scene's start or goal given as an end-effector target instead of joint values.
+
+A target is ``{"position": [x, y, z], "quaternion": [x, y, z, w], "frame": name}`` (quaternion optional:
+position only; frame optional: the task constraint's own frame). It is turned into configurations
+on the task's manifold at the scene's condition that reach the target, by projecting uniform seeds
+onto the task constraint and the target together, keeping the collision-free ones; when both ends are
+targets, the pair of solutions closest in joint space is chosen (one IK branch, no flip on the way).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.constraints import Constraint, ConstraintSet, PoseConstraint, project
+from manifoldgen.errors import ManifoldgenError
+
+SEEDS = 512  # uniform seeds projected per target
+TARGET_KEYS = ("position", "quaternion", "frame")
+
+
+def parse_target(data, what: str) -> dict:
+    """Validate a target dict (see the module doc)."""
+    unknown = [k for k in data if k not in TARGET_KEYS]
+    if unknown or "position" not in data:
+        raise ManifoldgenError(f"{what} target needs 'position' [x, y, z] and optionally 'quaternion' [x, y, z, w] "
+                               f"and 'frame'; got keys {sorted(data)}")
+    position = np.asarray(data["position"], float)
+    if position.shape != (3,) or not np.all(np.isfinite(position)):
+        raise ManifoldgenError(f"{what} target position must be 3 finite numbers, got {data['position']!r}")
+    out = {"position": position.tolist()}
+    if "quaternion" in data:
+        quat = np.asarray(data["quaternion"], float)
+        if quat.shape != (4,) or abs(np.linalg.norm(quat) - 1) > 1e-3:
+            raise ManifoldgenError(f"{what} target quaternion must be a unit [x, y, z, w], got {data['quaternion']!r}")
+        out["quaternion"] = (quat / np.linalg.norm(quat)).tolist()
+    if "frame" in data:
+        out["frame"] = str(data["frame"])
+    return out
+
+
+def constrained_frame(constraint: Constraint) -> str | None:
+    """The frame a task constraint holds (its own, or its first part's), if any."""
+    if isinstance(constraint, ConstraintSet):
+        return next((f for f in map(constrained_frame, constraint.parts) if f), None)
+    return getattr(constraint, "frame", None)
+
+
+def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: CollisionChecker | None,
+                 what: str, seed: int = 0) -> np.ndarray:
+    """(S, n) distinct collision-free configurations on ``constraint`` at ``y`` that reach ``target``."""
+    robot = constraint.robot
+    frame = target.get("frame") or constrained_frame(constraint)
+    if frame is None:
+        raise ManifoldgenError(f"{what} target names no 'frame' and the task's constraint holds none; add \"frame\"")
+    rotation = np.eye(3)
+    if "quaternion" in target:
+        x, y_, z, w = target["quaternion"]
+        rotation = _quaternion_matrix(x, y_, z, w)
+    reach = PoseConstraint(robot, frame, rotation, [target["position"]], position_axes=("x", "y", "z"),
+                           orientation_axes=("x", "y", "z") if "quaternion" in target else ())
+    both = ConstraintSet([constraint, reach])
+    yy = np.concatenate([np.asarray(y, float).reshape(-1), target["position"]])
+    res = project(both, robot.sample_uniform(SEEDS, np.random.default_rng(seed)), yy, max_iters=100)
+    q = res.q[res.converged]
+    q = q[both.satisfied(q, yy)]
+    if checker is not None and len(q):
+        q = q[~checker.in_collision(q)]
+    if not len(q):
+        raise ManifoldgenError(f"no collision-free configuration on the task's manifold at condition "
+                               f"{np.round(y, 4).tolist()} puts {frame} at the {what} target {target} "
+                               f"({SEEDS} projected seeds); move the target within reach, or away from obstacles")
+    return _distinct(q)
+
+
+def resolve_query(constraint: Constraint, y: np.ndarray, start, goal, checker: CollisionChecker | None,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Start and goal as configurations (n,): joint vectors are kept; targets solved, on consistent branches."""
+    ends = {"start": start, "goal": goal}
+    options = {k: (solve_target(constraint, y, v, checker, k) if isinstance(v, dict) else np.asarray(v)[None])
+               for k, v in ends.items()}
+    d = np.linalg.norm(options["start"][:, None] - options["goal"][None], axis=2)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    return options["start"][i], options["goal"][j]
+
+
+def _distinct(q: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    keep = []
+    for row in q:
+        if all(np.linalg.norm(row - k) > tol for k in keep):
+            keep.append(row)
+    return np.array(keep)
+
+
+def _quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])

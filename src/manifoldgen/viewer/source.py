@@ -1,0 +1,166 @@
+"""What a file shows: its kind, task (robot + constraint), configurations and scene.
+
+Kinds: ``path`` (an .npz with ``path (K, n)``), ``dataset`` (an .npz with ``q (N, n)`` and
+``y (N, k)``: datasets and sample files), ``scene`` (a scene .json: start and goal) and
+``task`` (a task .toml: its first scene's start and goal, else its home configuration).
+The task is rebuilt from the file's meta alone (:func:`task_of`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import load_npz
+from manifoldgen.scene import Attached, Obstacle, Scene
+from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
+
+KINDS = "a path or dataset/sample .npz, a scene .json or a task .toml"
+
+
+@dataclass
+class ViewSource:
+    """A file to show. ``q (N, n)``: path waypoints, dataset rows, or start and goal (or home);
+    ``y (N, k)``: the condition of each row; ``scene``: obstacles and held tool (may be empty)."""
+
+    kind: str
+    file: Path
+    meta: dict
+    task: Task
+    q: np.ndarray
+    y: np.ndarray
+    scene: Scene
+    title: str
+
+
+def robot_name(meta: dict) -> str:
+    """The robot of a file's meta: ``meta["robot"]`` as a name or as ``{"name": ...}``."""
+    robot = meta.get("robot")
+    return str(robot["name"] if isinstance(robot, dict) else robot)
+
+
+def task_of(meta: dict) -> Task:
+    """The task a file was made for: its full spec (``meta["task"]`` a dict) or a built-in task name."""
+    if isinstance(meta.get("task"), dict):
+        return task_from_meta(meta)
+    return get_task(str(meta.get("task", "pose")), robot_name(meta))
+
+
+def scene_from_meta(meta: dict, name: str = "") -> Scene:
+    """The obstacles and held tool a path file records (``meta["scene"]``), with its start, goal and condition."""
+    items = meta.get("scene") or []
+    obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(items) if "attached_to" not in o]
+    tools = [Attached.from_dict(o) for o in items if "attached_to" in o]
+    return Scene(name or str(meta.get("scene_name", "")), obstacles, tools[0] if tools else None,
+                 np.asarray(meta.get("start", []), float), np.asarray(meta.get("goal", []), float),
+                 np.asarray(meta.get("condition", []), float), robot_name(meta))
+
+
+def read_source(file: str | Path, task: str | None = None) -> ViewSource:
+    """Read ``file``; ``task`` names the task of a scene .json (default: the built-in task that lists
+    the scene, else ``pose`` for the scene's robot)."""
+    file = Path(file)
+    if not file.is_file():
+        raise ManifoldgenError(f"file not found: {file}")
+    suffix = file.suffix.lower()
+    if suffix == ".npz":
+        return _read_npz(file)
+    if suffix == ".json":
+        return _read_scene(file, task)
+    if suffix == ".toml":
+        return _read_task(file)
+    raise ManifoldgenError(f"cannot show {file}: unknown file kind '{suffix or file.name}'; give {KINDS}")
+
+
+def _read_npz(file: Path) -> ViewSource:
+    meta, arrays = load_npz(file, ())
+    if "path" in arrays:
+        path = np.asarray(arrays["path"], float)
+        t = task_of(meta)
+        _check_width(path, t, file)
+        if len(path) == 0:
+            raise ManifoldgenError(f"{file} holds an empty path (the query was not solved); nothing to show")
+        y = np.broadcast_to(np.asarray(meta["condition"], float), (len(path), t.condition.k))
+        scene = scene_from_meta(meta)
+        return ViewSource("path", file, meta, t, path, y, scene,
+                          f"{t.robot.name} {t.name}, scene {scene.name or '?'}: {len(path)} waypoints")
+    if "q" in arrays and "y" in arrays:
+        t = task_of(meta)
+        q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
+        _check_width(q, t, file)
+        what = "samples" if "generated_by" in meta else "dataset"
+        return ViewSource("dataset", file, meta, t, q, y, Scene("", [], None, q[:0], q[:0], y[:0]),
+                          f"{t.robot.name} {t.name} {what}: {len(q)} rows")
+    raise ManifoldgenError(f"cannot show {file}: an .npz without 'path' or 'q' and 'y'; give {KINDS}")
+
+
+def _read_scene(file: Path, task: str | None) -> ViewSource:
+    try:
+        data = json.loads(file.read_text())
+    except ValueError as exc:
+        raise ManifoldgenError(f"{file} is not valid JSON ({exc}); fix the file") from exc
+    if not isinstance(data, dict) or "obstacles" not in data:
+        raise ManifoldgenError(f"cannot show {file}: a .json without 'obstacles' is not a scene; give {KINDS}")
+    scene = Scene.from_json(file.read_text(), str(file))
+    if not scene.robot and task is None:
+        raise ManifoldgenError(f"scene {file} names no robot; add \"robot\": \"<name>\" or pass --task")
+    try:
+        t = get_task(task or _task_listing(file) or "pose", scene.robot or None)
+    except ManifoldgenError as exc:
+        raise ManifoldgenError(f"{exc}; for a scene of another task pass --task TASK.toml" if task is None
+                               else str(exc)) from exc
+    q = np.stack([scene.start, scene.goal])
+    _check_width(q, t, file)
+    return ViewSource("scene", file, {"robot": t.robot.name}, t, q, np.stack([scene.condition] * 2), scene,
+                      f"{t.robot.name} {t.name}, scene {scene.name}: start and goal")
+
+
+def _read_task(file: Path) -> ViewSource:
+    t = get_task(str(file))
+    if t.scenes:
+        name, scene_file = next(iter(t.scenes.items()))
+        scene = Scene.load(scene_file)
+        q, y = np.stack([scene.start, scene.goal]), np.stack([scene.condition] * 2)
+        what = f"scene {name}: start and goal"
+    else:
+        scene = Scene("", [], None, t.home[:0], t.home[:0], t.home_condition)
+        q, y, what = t.home[None], t.home_condition[None], "home configuration"
+    _check_width(q, t, file)
+    return ViewSource("task", file, {"robot": t.robot.name}, t, q, y, scene, f"{t.robot.name} {t.name}, {what}")
+
+
+def _task_listing(scene_file: Path) -> str | None:
+    """The built-in task file that names ``scene_file`` among its scenes, if any."""
+    for robots in builtin_tasks().values():
+        for task_file in robots.values():
+            if any(Path(s).resolve() == scene_file.resolve() for s in get_task(str(task_file)).scenes.values()):
+                return str(task_file)
+    return None
+
+
+def _check_width(q: np.ndarray, task: Task, file: Path) -> None:
+    if q.ndim != 2 or q.shape[1] != task.robot.n:
+        raise ManifoldgenError(f"{file}: configurations of shape {q.shape} do not fit the {task.robot.n} joints of "
+                               f"task {task.name} on {task.robot.name}")
+
+
+def traced_frames(task: Task, limit: int = 2) -> list[str]:
+    """The robot frames the task's constraint names (its end effectors), at most ``limit``."""
+    found: list[str] = []
+
+    def walk(value) -> None:
+        if isinstance(value, dict):
+            for v in value.values():
+                walk(v)
+        elif isinstance(value, list):
+            for v in value:
+                walk(v)
+        elif isinstance(value, str) and task.robot.model.existFrame(value) and value not in found:
+            found.append(value)
+
+    walk(task.constraint.spec())
+    return found[:limit]

@@ -1,0 +1,108 @@
+"""Task files: built-in tasks are files, tasks rebuild from file meta alone, bad task files are one clear line."""
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.scene import get_scene
+from manifoldgen.settings import parse_settings
+from manifoldgen.tasks import builtin_tasks, get_task, load_task_file, task_from_spec
+
+runner = CliRunner()
+GOOD = """\
+name = "mine"
+robot = "panda"
+group = ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6",
+         "panda_joint7"]
+
+[[constraints]]
+type = "pose"
+frame = "panda_hand_tcp"
+rotation = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]
+values = [[0.3], [0.5]]
+"""
+
+
+def test_builtin_tasks_are_files_and_rebuild_from_their_spec():
+    assert set(builtin_tasks()["pose"]) == {"panda", "pr2", "centauro"}
+    for robot in builtin_tasks()["pose"]:
+        task = get_task("pose", robot)
+        rebuilt = task_from_spec(json.loads(json.dumps(task.spec())))
+        assert rebuilt.spec() == task.spec()
+        q = task.robot.sample_uniform(5, np.random.default_rng(0))
+        np.testing.assert_array_equal(rebuilt.constraint.residual(q, task.home_condition),
+                                      task.constraint.residual(q, task.home_condition))
+        assert task.constraint.satisfied(task.home, task.home_condition)[0]
+
+
+def test_a_task_file_loads_like_a_builtin(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text(GOOD)
+    task = get_task(str(path))
+    assert task.name == "mine" and task.robot.name == "panda" and task.condition.grid.tolist() == [[0.3], [0.5]]
+    assert task.constraint.spec() == {**get_task("pose").constraint.spec(), "values": [[0.3], [0.5]]}
+    result = runner.invoke(app, ["tasks", str(path)])
+    assert result.exit_code == 0 and "mine" in result.output and "0.3; 0.5" in result.output
+
+
+BAD = [
+    ("colour = 3\n" + GOOD, "line 1: unknown key 'colour'"),
+    (GOOD.replace('type = "pose"', 'type = "posse"'), "line 6: constraint 1: unknown constraint 'posse'; did you mean pose"),
+    (GOOD.replace('frame = "panda_hand_tcp"', 'frame = "hand"'), "line 6: constraint 1: unknown frame 'hand'"),
+    (GOOD.replace('"panda_joint7"]', '"panda_joint77"]'), "line 3: unknown joint 'panda_joint77'"),
+    (GOOD.replace('"panda_joint7"]', '"panda_joint7", "panda_joint7"]'), "panda_joint7"),
+    (GOOD.replace('"panda_joint7"]', '"panda_hand_joint"]'), "panda_hand_joint"),
+    (GOOD.replace('robot = "panda"', 'robot = "pandas"'), "line 2: unknown robot 'pandas'"),
+    (GOOD.replace('type = "pose"', 'type = "no_such_module:Thing"'), "cannot import module 'no_such_module'"),
+    (GOOD.replace('type = "pose"', 'type = "json:JSONDecoder"'), "is not a Constraint subclass"),
+    (GOOD + "colour = 1\n", "line 6: constraint 1: constraint 'pose': got an unexpected keyword argument 'colour'"),
+    (GOOD.replace("name = ", "nam = "), "unknown key 'nam'"),
+    ("robot = [", "not valid TOML"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD)
+def test_bad_task_files_are_one_clear_line(text, message, tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ManifoldgenError, match=None) as info:
+        load_task_file(path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+    result = runner.invoke(app, ["collect", str(path), "-o", str(tmp_path / "d.npz")])
+    assert result.exit_code == 2 and message in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "d.npz").exists()
+
+
+def test_end_effector_targets_become_configurations_on_one_branch(tmp_path):
+    task = get_task("pose")
+    scene = {"name": "t", "robot": "panda", "obstacles": [], "condition": [0.5],
+             "start": {"position": [0.45, 0.3, 0.5]}, "goal": {"position": [0.4, -0.3, 0.5], "quaternion": [1, 0, 0, 0]}}
+    (tmp_path / "t.json").write_text(json.dumps(scene))
+    resolved = get_scene(task, str(tmp_path / "t.json"))
+    for end, target in (("start", [0.45, 0.3, 0.5]), ("goal", [0.4, -0.3, 0.5])):
+        q = getattr(resolved, end)
+        assert task.constraint.satisfied(q, [0.5])[0]
+        np.testing.assert_allclose(task.robot.frame_pose(q, "panda_hand_tcp")[0][0], target, atol=0.01)
+    assert json.loads(resolved.to_json())["start"] == {"position": [0.45, 0.3, 0.5]}
+    (tmp_path / "far.json").write_text(json.dumps({**scene, "goal": {"position": [3.0, 0.0, 0.5]}}))
+    with pytest.raises(ManifoldgenError, match="no collision-free configuration .* goal target"):
+        get_scene(task, str(tmp_path / "far.json"))
+
+
+def test_settings_are_checked_against_the_known_keys(tmp_path):
+    known = {"lr": 1e-3, "hidden": [256, 256], "epochs": 60, "spectral": False}
+    assert parse_settings(["lr=1", "hidden=[64,64]", "spectral=true"], None, known, "cvae") == \
+        {"lr": 1.0, "hidden": [64, 64], "spectral": True}
+    (tmp_path / "c.toml").write_text("epochs = 5\nlr = 0.01\n")
+    assert parse_settings(["lr=0.1"], tmp_path / "c.toml", known, "cvae") == {"epochs": 5, "lr": 0.1}
+    with pytest.raises(ManifoldgenError, match="unknown cvae setting 'width'; known: epochs, hidden, lr, spectral"):
+        parse_settings(["width=3"], None, known, "cvae")
+    with pytest.raises(ManifoldgenError, match="epochs must be a int"):
+        parse_settings(["epochs=fast"], None, known, "cvae")
+    with pytest.raises(ManifoldgenError, match="is not KEY=VALUE"):
+        parse_settings(["epochs"], None, known, "cvae")
