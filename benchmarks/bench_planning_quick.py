@@ -56,7 +56,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     task = get_task("pose", "panda")
-    cls = PLANNERS[args.planner]
+    cls = PLANNERS.get(args.planner)
     defaults = cls.settings_type()
     overrides = {k: type(getattr(defaults, k))(v == "True" if isinstance(getattr(defaults, k), bool) else v)
                  for k, v in (item.split("=") for item in args.set)}

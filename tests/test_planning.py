@@ -17,7 +17,7 @@ from manifoldgen.scene import get_scene
 from manifoldgen.space import ConstrainedSpace, densify
 from planning_problems import BoxChecker, corridor_problem, sphere_problem
 
-CASES = [(name, local) for name in PLANNERS for local in ("auto", "interpolate", "project")
+CASES = [(name, local) for name in PLANNERS.names() for local in ("auto", "interpolate", "project")
          if not (name == "cbirrt" and local != "project")]
 
 
@@ -25,7 +25,7 @@ def _planner(name, local, problem, seed=0, **settings):
     constraint, y, checker, start, goal = problem()
     if local == "interpolate" and problem is sphere_problem:
         settings.setdefault("range", 0.25)  # chords of the unit sphere sag L^2 / 8 < 0.0095
-    cls = PLANNERS[name]
+    cls = PLANNERS.get(name)
     space = ConstrainedSpace(constraint, y, checker)
     sampler = (UniformSampler if name == "cbirrt" else ProjectionSampler)(space, seed=seed)
     planner = cls(space, sampler, local=local, seed=seed, settings=cls.settings_type(**settings))
@@ -72,7 +72,7 @@ def test_same_seed_same_path_and_json_summary():
 def test_unsolvable_query_ends_at_the_time_limit_and_says_why():
     constraint, y, _, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, BoxChecker([([-0.05, -2.5, -0.5], [0.05, 2.5, 0.5])]))  # sealed
-    result = PLANNERS["rrtconnect"](space, ProjectionSampler(space), seed=0).solve(start, goal, 0.3)
+    result = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space), seed=0).solve(start, goal, 0.3)
     assert not result.solved and result.path.shape == (0, 3) and result.length == 0.0
     assert 0.3 <= result.time_s < 1.5
     x = result.extras
@@ -91,7 +91,7 @@ class FailingSampler(ProjectionSampler):
 def test_a_sampler_that_gives_up_ends_the_query_with_its_reason():
     constraint, y, checker, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, checker)
-    result = PLANNERS["rrtconnect"](space, FailingSampler(space, batch=8, max_batches=3), seed=0).solve(
+    result = PLANNERS.get("rrtconnect")(space, FailingSampler(space, batch=8, max_batches=3), seed=0).solve(
         start, goal, 5.0)
     assert not result.solved and result.time_s < 1.0
     assert "found no valid configuration in 3 batches of 8" in result.extras["failure"]
@@ -110,10 +110,10 @@ def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     seeds = project(constraint, robot.sample_uniform(8, rng), space.y).q
     start = seeds[space.valid(seeds)][0]
     goal = project(constraint, start + rng.normal(0, 1.0, 7), space.y).q[0]
-    result = PLANNERS["rrtconnect"](space, ProjectionSampler(space, seed=0), seed=0).solve(start, goal, 10.0)
+    result = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), seed=0).solve(start, goal, 10.0)
     _check(result, space, start, goal)
     assert result.extras["local"] == "auto" and result.length > 1.0
-    stuck = PLANNERS["rrtconnect"](space, ProjectionSampler(space, seed=0), local="interpolate", seed=0,
+    stuck = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), local="interpolate", seed=0,
                                    settings=RRTConnectSettings(pool=256)).solve(start, goal, 1.0)
     assert not stuck.solved and stuck.extras["rejected"]["range"] > 0
     assert "refused extensions: no sample within range" in stuck.why()
@@ -124,7 +124,7 @@ def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validatio
     refuse such paths (the offending edge is cut and the search goes on)."""
     constraint, y, _, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, BoxChecker([([-0.01, -2.5, -0.5], [0.01, 1.9, 0.5])]))
-    planner = PLANNERS["rrtconnect"](space, ProjectionSampler(space, seed=0), seed=0,
+    planner = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), seed=0,
                                      settings=RRTConnectSettings(range=1.0, resolution=0.5))
     result = planner.solve(start, goal, 20.0)
     assert result.extras["rejected_paths"] > 0
@@ -145,8 +145,8 @@ def test_pg_and_cbirrt_solve_the_wall_scene(panda_task):
     scene = get_scene(panda_task, "wall")
     space = ConstrainedSpace(panda_task.constraint, scene.condition, scene.checker(panda_task.robot))
     data = collect(panda_task, 10_000, seed=2, conditions=[scene.condition], progress=False)
-    pg = PLANNERS["rrtconnect"](space, DatasetSampler(space, data.q, data.y), seed=0)
-    cbirrt = PLANNERS["cbirrt"](space, UniformSampler(space), seed=0)
+    pg = PLANNERS.get("rrtconnect")(space, DatasetSampler(space, data.q, data.y), seed=0)
+    cbirrt = PLANNERS.get("cbirrt")(space, UniformSampler(space), seed=0)
     for planner in (pg, cbirrt):
         result = planner.solve(scene.start, scene.goal, 30.0)
         _check(result, space, scene.start, scene.goal)
@@ -156,7 +156,7 @@ def test_pg_and_cbirrt_solve_the_wall_scene(panda_task):
 def test_bad_queries_are_refused_with_the_reason():
     constraint, y, checker, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, checker)
-    planner = PLANNERS["rrt"](space, ProjectionSampler(space), seed=0)
+    planner = PLANNERS.get("rrt")(space, ProjectionSampler(space), seed=0)
     with pytest.raises(ManifoldgenError, match="time limit must be a positive number of seconds, got 0"):
         planner.solve(start, goal, 0.0)
     with pytest.raises(ManifoldgenError, match=r"start configuration violates the constraint: .* 30.00 times"):
@@ -164,19 +164,19 @@ def test_bad_queries_are_refused_with_the_reason():
     with pytest.raises(ManifoldgenError, match="goal configuration is in collision: point with box0"):
         planner.solve(start, np.zeros(3), 1.0)
     with pytest.raises(ManifoldgenError, match="rrt takes RRTSettings, got RRTConnectSettings"):
-        PLANNERS["rrt"](space, ProjectionSampler(space), settings=RRTConnectSettings())
+        PLANNERS.get("rrt")(space, ProjectionSampler(space), settings=RRTConnectSettings())
     with pytest.raises(ManifoldgenError, match="goal_bias"):
-        PLANNERS["rrt"](space, ProjectionSampler(space), settings=RRTSettings(goal_bias=2))
+        PLANNERS.get("rrt")(space, ProjectionSampler(space), settings=RRTSettings(goal_bias=2))
     with pytest.raises(ManifoldgenError, match="rrtconnect needs a sampler"):
-        PLANNERS["rrtconnect"](space, None)
+        PLANNERS.get("rrtconnect")(space, None)
     with pytest.raises(ManifoldgenError, match=r"the sampler serves condition \[0.5\], the planner \[0.0\]"):
-        PLANNERS["rrtconnect"](space, ProjectionSampler(ConstrainedSpace(constraint, [0.5])))
+        PLANNERS.get("rrtconnect")(space, ProjectionSampler(ConstrainedSpace(constraint, [0.5])))
     with pytest.raises(ManifoldgenError, match="unknown local planner 'straight'; known: auto, interpolate, project"):
-        PLANNERS["rrtconnect"](space, ProjectionSampler(space), local="straight")
+        PLANNERS.get("rrtconnect")(space, ProjectionSampler(space), local="straight")
 
 
 def test_cbirrt_without_a_sampler_draws_uniform_targets():
     constraint, y, checker, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, checker)
-    result = PLANNERS["cbirrt"](space, None, seed=0).solve(start, goal, 20.0)
+    result = PLANNERS.get("cbirrt")(space, None, seed=0).solve(start, goal, 20.0)
     _check(result, space, start, goal)

@@ -46,7 +46,7 @@ def _names(registry: str) -> list[str]:
         return MODELS.names()
     if registry == "planners":
         from manifoldgen.planning import PLANNERS
-        return list(PLANNERS)
+        return PLANNERS.names()
     from manifoldgen.constraints import CONSTRAINTS
     return CONSTRAINTS.names()
 
@@ -140,17 +140,22 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          seed: int = typer.Option(0),
          time_limit: float = typer.Option(30.0, "--time", help="Planning time limit in seconds"),
          smooth: bool = typer.Option(False, help="Shortcut the path (re-validated) after planning"),
+         settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE (repeatable), e.g. "
+                                            "--set range=0.8; unknown keys list the known ones"),
+         config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
-    from manifoldgen.planning.query import run_query, save_path
+    from manifoldgen.planning.query import planner_settings, run_query, save_path
     from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
+    from manifoldgen.settings import parse_settings
     from manifoldgen.viz.path import plot_path
     set_torch_threads()
+    values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = _task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
-                             local=local, smooth=smooth)
+                             local=local, smooth=smooth, settings=values)
     save_path(output, result, meta)
     picture = output.with_suffix(".png")
     plot_path(result.path, task_obj.robot, meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name),
@@ -243,7 +248,8 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
 
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
-                    baseline: str | None, task: str, robot: str | None) -> None:
+                    baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
+                    config: Path | None = None) -> None:
     from manifoldgen.bench.planning import (OTHER_LIMITS, PAPER_LIMITS, Experiment, default_baseline,
                                             default_methods, run_bench)
     from manifoldgen.scene import get_scene
@@ -252,8 +258,13 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR
     paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS
+    from manifoldgen.planning import PLANNERS
+    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.settings import parse_settings
+    known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
     experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,
-                            paper["time_limit"] if time_limit is None else time_limit, seed)
+                            paper["time_limit"] if time_limit is None else time_limit, seed,
+                            planner_settings=parse_settings(settings, config, known, "planner"))
     if not methods and not models and not builtin:
         raise ManifoldgenError(f"give --methods or --model for task {task_obj.name}: the shipped model is for the "
                                "panda pose task; e.g. -m rrtconnect@project -m cbirrt@uniform -m cvae=rrtconnect@cvae:DIR")
@@ -279,10 +290,13 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
-               baseline: str = typer.Option(None, help="Method label for the speed-up column")):
+               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
+               settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE for our planners "
+                                                  "(repeatable; each planner takes those it has)"),
+               config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)")):
     """Any task's scene (a task file's or a scene .json): every method on the same query and seeds."""
     _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot)
+                    task, robot, settings, config)
 
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "

@@ -63,7 +63,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     sampler = f"cvae:{output / 'cvae'},refine={REFINE}"
     result, meta = run_query(task, scene, sampler, "rrtconnect", seed=seed, time_limit=30.0, smooth=True)
     save_path(output / "wall-path.npz", result, meta)
-    report = meta["validation"]  # run_query re-checked the path every 0.005 rad
+    report = meta["validation"]  # run_query re-checked the path densely
     plot_path(result.path, task.robot, task.constraint.frame, scene, output / "wall-path.png",
               f"wall scene: RRT-Connect + CVAE sampler, shortcut, seed {seed}")
     figures.update(solved=result.solved, plan_s=result.time_s, waypoints=len(result.path),
@@ -80,7 +80,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     table.add_row("plan", f"RRT-Connect, sampler {sampler}: "
                   f"{'solved' if result.solved else 'NOT solved'} in {result.time_s:.3f} s, "
                   f"{len(result.path)} waypoints, {result.samples_drawn} samples drawn")
-    table.add_row("path check", f"{'valid' if figures['path_valid'] else 'INVALID'} at 0.005 rad: worst constraint "
+    table.add_row("path check", f"{'valid' if figures['path_valid'] else 'INVALID'} at {report['resolution']} rad: worst constraint "
                   f"use {figures['worst_violation']:.2f} of tolerance, limits and collisions checked")
     table.add_row("files", f"{output / 'pose.npz'}, {output / 'cvae'}/, {output / 'wall-path.npz'}, "
                   f"{output / 'wall-path.png'}")

@@ -14,6 +14,7 @@ import numpy as np
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Constraint, ConstraintSet, PoseConstraint, project
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.space import ConstrainedSpace
 
 SEEDS = 512  # uniform seeds projected per target
 TARGET_KEYS = ("position", "quaternion", "frame")
@@ -63,9 +64,7 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
     yy = np.concatenate([np.asarray(y, float).reshape(-1), target["position"]])
     res = project(both, robot.sample_uniform(SEEDS, np.random.default_rng(seed)), yy, max_iters=100)
     q = res.q[res.converged]
-    q = q[both.satisfied(q, yy)]
-    if checker is not None and len(q):
-        q = q[~checker.in_collision(q)]
+    q = q[ConstrainedSpace(both, yy, checker).valid(q)]
     if not len(q):
         raise ManifoldgenError(f"no collision-free configuration on the task's manifold at condition "
                                f"{np.round(y, 4).tolist()} puts {frame} at the {what} target {target} "

@@ -15,6 +15,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import safetensors.torch
@@ -23,9 +24,11 @@ import torch
 from manifoldgen.data import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
-from manifoldgen.models.base import ConditionalSampler
 from manifoldgen.progress import progress_bar
 from manifoldgen.tasks import Task
+
+if TYPE_CHECKING:  # the models call train(); training needs them only as a type
+    from manifoldgen.models.base import ConditionalSampler
 
 CHECKPOINT_WEIGHTS, CHECKPOINT_STATE = "checkpoint.safetensors", "checkpoint.json"
 MIN_ROWS = 10

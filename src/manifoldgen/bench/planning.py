@@ -26,7 +26,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -76,9 +76,9 @@ class Method:
             local = ""
         else:
             from manifoldgen.planning import DEFAULT_LOCAL, LOCAL_PLANNERS, PLANNERS
-            if planner not in PLANNERS:
+            if planner not in PLANNERS.names():
                 raise ManifoldgenError(f"method '{text}': unknown planner '{planner}'; known: "
-                                       f"{', '.join(PLANNERS)}, or ompl-SPACE-PLANNER")
+                                       f"{', '.join(PLANNERS.names())}, or ompl-SPACE-PLANNER")
             local = local or DEFAULT_LOCAL
             if local not in LOCAL_PLANNERS:
                 raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
@@ -120,7 +120,7 @@ def default_methods(models: list[str | Path] | None = None) -> list[str]:
         methods += [f"{name}=rrtconnect:interpolate@{kind}:{model}",
                     f"{name}-project=rrtconnect:project@{kind}:{model}"]
     methods += ["pg=rrtconnect:interpolate@pg"]
-    if "cbirrt" in PLANNERS:
+    if "cbirrt" in PLANNERS.names():
         methods += ["cbirrt=cbirrt:project@uniform"]
     methods += ["ompl-projected=ompl-projected-rrtconnect", "ompl-atlas=ompl-atlas-rrtconnect",
                 "ompl-tangent=ompl-tangent-rrtconnect", "uniform=rrtconnect:interpolate@uniform"]
@@ -142,6 +142,7 @@ class Experiment:
     time_limit: float = 200.0
     seed: int = 0
     resolution: float = 0.05
+    planner_settings: dict = field(default_factory=dict)  # our planners' settings (each takes those it has)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -165,9 +166,11 @@ def build(experiment: Experiment, method: Method, seed: int):
                               resolution=experiment.resolution, seed=seed)
     else:
         from manifoldgen.planning import PLANNERS
-        cls = PLANNERS[method.planner]
-        planner = cls(space, sampler, local=method.local, seed=seed,
-                      settings=cls.settings_type(resolution=experiment.resolution))
+        cls = PLANNERS.get(method.planner)
+        known = {f.name for f in fields(cls.settings_type)}
+        values = {"resolution": experiment.resolution,
+                  **{k: v for k, v in experiment.planner_settings.items() if k in known}}
+        planner = cls(space, sampler, local=method.local, seed=seed, settings=cls.settings_type(**values))
     return planner, scene, space
 
 

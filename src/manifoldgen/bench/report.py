@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.space import ValidationSettings
 
 
 @dataclass
@@ -136,7 +137,8 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "solved runs: samples are configurations taken from our samplers (OMPL's internal sampling is not "
             "counted), projections are configurations projected onto the manifold (OMPL: calls of its "
             "Constraint::project; Atlas and TangentBundle project through charts and count 0). The worst "
-            "violation is max |F_i| / tol_i over every state of every solved path, checked every 0.005 rad."
+            "violation is max |F_i| / tol_i over every state of every solved path, checked every "
+            f"{ValidationSettings.resolution} rad."
             "\n\n" + table + "\n![time](time.png)\n\n![length](length.png)\n")
     atomic_write_text(out_dir / "results.md", text)
     atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",

@@ -23,10 +23,10 @@ import torch
 from manifoldgen.constraints import Condition
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.training import TrainingLog, train
 
 if TYPE_CHECKING:
     from manifoldgen.data import Dataset
-    from manifoldgen.training import TrainingLog
 
 MODEL_FORMAT_VERSION = 1
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
@@ -150,7 +150,6 @@ class ConditionalSampler(ABC):
             out: str | Path | None = None, resume: bool = False) -> TrainingLog:
         """Train on ``dataset`` (see :func:`manifoldgen.training.train`); with ``out``, checkpoints
         are written there every epoch and the final model is saved there."""
-        from manifoldgen.training import train
         return train(self, dataset, epochs=epochs, seed=seed, progress=progress, out=out, resume=resume)
 
     def sample(self, y: np.ndarray, n: int, generator: torch.Generator | None = None) -> np.ndarray:

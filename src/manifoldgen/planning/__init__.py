@@ -1,4 +1,5 @@
-"""Sampling-based planners on constraint manifolds; ``PLANNERS`` maps names to classes.
+"""Sampling-based planners on constraint manifolds; ``PLANNERS`` is their registry (names in the
+package, ``manifoldgen.planners`` entry points of other packages, ``module:Class``).
 
 Every planner takes ``(space, sampler, *, local, seed, settings)`` (a
 :class:`~manifoldgen.space.ConstrainedSpace`, a :class:`~manifoldgen.sampling.Sampler` at the
@@ -14,8 +15,11 @@ from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.rrt import RRT, RRTSettings
 from manifoldgen.planning.rrt_connect import RRTConnect, RRTConnectSettings
 from manifoldgen.planning.smoothing import shortcut
+from manifoldgen.registry import Registry
 
-PLANNERS: dict[str, type[Planner]] = {cls.name: cls for cls in (RRTConnect, RRT, PRM, KPIECE, CBiRRT)}
+PLANNERS: Registry[Planner] = Registry("planner", Planner)
+for _cls in (RRTConnect, RRT, PRM, KPIECE, CBiRRT):
+    PLANNERS.register(_cls.name)(_cls)
 
 __all__ = ["CBiRRT", "CBiRRTSettings", "DEFAULT_LOCAL", "KPIECE", "KPIECESettings", "LOCAL_PLANNERS", "PLANNERS",
            "PRM", "PRMSettings", "PlanResult", "Planner", "PlannerSettings", "RRT", "RRTConnect",

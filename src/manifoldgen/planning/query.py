@@ -9,11 +9,12 @@ placement and touch links).
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, unknown_name
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, save_npz
 from manifoldgen.planning.base import Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
@@ -30,15 +31,15 @@ def get_planner(name: str) -> type[Planner]:
     """The planner class registered as ``name`` (clear error listing the known ones)."""
     from manifoldgen.planning import PLANNERS
 
-    if name not in PLANNERS:
-        raise unknown_name("planner", name, list(PLANNERS))
-    return PLANNERS[name]
+    return PLANNERS.get(name)
 
 
 def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int, time_limit: float,
-              local: str = DEFAULT_LOCAL, smooth: bool = False) -> tuple[PlanResult, dict]:
-    """Plan the scene's query; returns the result (path re-validated, optionally smoothed) and
-    the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used)."""
+              local: str = DEFAULT_LOCAL, smooth: bool = False, settings: dict | None = None,
+              ) -> tuple[PlanResult, dict]:
+    """Plan the scene's query with the planner's ``settings`` (field -> value; see :func:`planner_settings`);
+    returns the result (path re-validated, optionally smoothed) and the path file's ``meta``
+    (``meta["validation"]`` holds the check and the resolution it used)."""
     from manifoldgen.specs import make_sampler
 
     if not np.isfinite(time_limit) or time_limit <= 0:
@@ -46,7 +47,8 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     planner_type = get_planner(planner)
     y = task.condition.check(scene.condition)[0]
     space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))
-    solver = planner_type(space, make_sampler(sampler, space, seed), local=local, seed=seed)
+    solver = planner_type(space, make_sampler(sampler, space, seed), local=local, seed=seed,
+                          settings=planner_type.settings_type(**(settings or {})))
     result = solver.solve(scene.start, scene.goal, time_limit)
     if result.solved and smooth:
         result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
@@ -58,10 +60,16 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
             "condition": y.tolist(), "condition_names": list(task.condition.names),
             "scene_name": scene.name, "scene": scene.to_meta(task.robot),
             "start": scene.start.tolist(), "goal": scene.goal.tolist(),
-            "planner": planner, "sampler": sampler, "local": solver.local.name, "seed": seed,
+            "planner": planner, "planner_settings": asdict(solver.settings), "sampler": sampler,
+            "local": solver.local.name, "seed": seed,
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
             "validation": report.to_dict() if report else {"resolution": space.settings.resolution}}
     return result, meta
+
+
+def planner_settings(planner: str) -> dict:
+    """The settings ``planner`` takes (field -> default), for ``--set`` checking."""
+    return asdict(get_planner(planner).settings_type())
 
 
 def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
