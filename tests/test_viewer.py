@@ -45,8 +45,6 @@ def maze(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def browser():
-    if not CHROMIUM.exists():
-        pytest.skip(f"{CHROMIUM} is not installed (Debian: apt-get install -y chromium)")
     with Browser(width=640, height=480) as b:
         yield b
 

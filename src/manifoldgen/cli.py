@@ -143,6 +143,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE (repeatable), e.g. "
                                             "--set range=0.8; unknown keys list the known ones"),
          config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
+         snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
     from manifoldgen.planning.query import planner_settings, run_query, save_path
@@ -160,6 +161,10 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     picture = output.with_suffix(".png")
     plot_path(result.path, task_obj.robot, meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name),
               scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+    if snapshots is not None and result.solved:
+        from manifoldgen.viz.snapshots import draw_snapshots
+        draw_snapshots(result.path, task_obj, scene_obj, snapshots)
+        picture = f"{picture}, {snapshots}"
     status = "[green]solved[/]" if result.solved else "[red]not solved[/]"
     console.print(f"{status} in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations -> {output}, {picture}")

@@ -23,6 +23,7 @@ from manifoldgen.runtime import REFINE, set_torch_threads
 from manifoldgen.tasks import get_task
 from manifoldgen.training import CHECKPOINT_STATE
 from manifoldgen.viz.path import plot_path
+from manifoldgen.viz.snapshots import draw_snapshots
 
 PER_CONDITION = 1000
 EPOCHS = 20
@@ -66,6 +67,8 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     report = meta["validation"]  # run_query re-checked the path densely
     plot_path(result.path, task.robot, task.constraint.frame, scene, output / "wall-path.png",
               f"wall scene: RRT-Connect + CVAE sampler, shortcut, seed {seed}")
+    if result.solved:
+        draw_snapshots(result.path, task, scene, output / "wall-snapshots.png")
     figures.update(solved=result.solved, plan_s=result.time_s, waypoints=len(result.path),
                    path_valid=bool(report.get("valid")), worst_violation=float(report.get("worst_violation", "nan")))
 
@@ -83,6 +86,6 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     table.add_row("path check", f"{'valid' if figures['path_valid'] else 'INVALID'} at {report['resolution']} rad: worst constraint "
                   f"use {figures['worst_violation']:.2f} of tolerance, limits and collisions checked")
     table.add_row("files", f"{output / 'pose.npz'}, {output / 'cvae'}/, {output / 'wall-path.npz'}, "
-                  f"{output / 'wall-path.png'}")
+                  f"{output / 'wall-path.png'}, {output / 'wall-snapshots.png'}")
     console.print(table)
     return figures
