@@ -290,7 +290,9 @@ class RobotModel:
     def frame(self, name: str) -> int:
         if not isinstance(name, str) or not self.model.existFrame(name):
             raise CannotRecheck(f"frame '{name}' named by the constraint is not in {self.files.urdf}")
-        return self.model.getFrameId(name)
+        matches = [i for i, f in enumerate(self.model.frames) if f.name == name]
+        bodies = [i for i in matches if self.model.frames[i].type == pin.FrameType.BODY]
+        return (bodies or matches)[0]  # a link's frame where a joint shares its name, as manifoldgen reads it
 
     def limit_problem(self, q: np.ndarray) -> str | None:
         bad = np.flatnonzero((q < self.lower - LIMIT_MARGIN) | (q > self.upper + LIMIT_MARGIN))

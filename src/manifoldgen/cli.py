@@ -254,7 +254,7 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
                     baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
-                    config: Path | None = None) -> None:
+                    config: Path | None = None, snapshots: bool = False) -> None:
     from manifoldgen.bench.planning import (OTHER_LIMITS, PAPER_LIMITS, Experiment, default_baseline,
                                             default_methods, run_bench)
     from manifoldgen.scene import get_scene
@@ -276,7 +276,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     methods = methods or default_methods(models or None)
     table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
                          workers=workers, resume=resume, pg_rows=pg_rows,
-                         baseline=baseline or default_baseline(methods))
+                         baseline=baseline or default_baseline(methods), snapshots=snapshots)
     console.print(table)
     console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")
 
@@ -298,10 +298,12 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE for our planners "
                                                   "(repeatable; each planner takes those it has)"),
-               config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)")):
+               config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
+               snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "
+                                              "method's run-0 path, when solved")):
     """Any task's scene (a task file's or a scene .json): every method on the same query and seeds."""
     _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot, settings, config)
+                    task, robot, settings, config, snapshots)
 
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "

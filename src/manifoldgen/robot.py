@@ -310,13 +310,16 @@ class Robot:
         return out
 
     def frame_id(self, frame: str) -> int:
-        """Pinocchio frame id, with a clear error for an unknown frame."""
-        if not self.model.existFrame(frame):
+        """Pinocchio frame id, with a clear error for an unknown frame; where a joint and a link share
+        the name (z1's gripperStator), the link's (BODY) frame."""
+        matches = [i for i, f in enumerate(self.model.frames) if f.name == frame]
+        if not matches:
             names = [f.name for f in self.model.frames]
-            close = difflib.get_close_matches(frame, names, n=3)
+            close = difflib.get_close_matches(str(frame), names, n=3)
             raise ManifoldgenError(f"unknown frame '{frame}' for robot {self.name}; "
                                    f"did you mean {', '.join(close) or 'one of its links'}?")
-        return self.model.getFrameId(frame)
+        bodies = [i for i in matches if self.model.frames[i].type == pin.FrameType.BODY]
+        return (bodies or matches)[0]
 
     def within_limits(self, q: np.ndarray, margin: float = 1e-9) -> np.ndarray:
         """(B,) bool: every coordinate inside its limits."""

@@ -2,8 +2,9 @@
 
 A target is ``{"position": [x, y, z], "quaternion": [x, y, z, w], "frame": name}`` (quaternion optional:
 position only; frame optional: the task constraint's own frame). It is turned into configurations
-on the task's manifold at the scene's condition that reach the target, by projecting uniform seeds
-onto the task constraint and the target together, keeping the collision-free ones; when both ends are
+on the task's manifold at the scene's condition that reach the target (within the pose tolerances,
+0.01 m and 0.01 rad), by projecting uniform seeds onto the task constraint and the target together,
+then onto the task constraint alone, keeping the collision-free ones; when both ends are
 targets, the pair of solutions closest in joint space is chosen (one IK branch, no flip on the way).
 """
 
@@ -62,8 +63,9 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
                            orientation_axes=("x", "y", "z") if "quaternion" in target else ())
     both = ConstraintSet([constraint, reach])
     yy = np.concatenate([np.asarray(y, float).reshape(-1), target["position"]])
-    res = project(both, robot.sample_uniform(SEEDS, np.random.default_rng(seed)), yy, max_iters=100)
-    q = res.q[res.converged]
+    near = project(both, robot.sample_uniform(SEEDS, np.random.default_rng(seed)), yy, max_iters=100).q
+    on = project(constraint, near, y)  # tight on the task's manifold; the target need not lie exactly on it
+    q = on.q[on.converged]
     q = q[ConstrainedSpace(both, yy, checker).valid(q)]
     if not len(q):
         raise ManifoldgenError(f"no collision-free configuration on the task's manifold at condition "

@@ -39,6 +39,7 @@ from manifoldgen.progress import progress_bar
 RUNS_FILE = "runs.jsonl"
 CONFIG_FILE = "config.json"
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
+OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
 
 
@@ -200,7 +201,20 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "length": summary["length"], "waypoints": summary["waypoints"], "planner": summary["planner"],
             "valid": bool(report.valid) if report else False,
             "worst_violation": report.worst_violation if report else float("nan"),
-            "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"]}
+            "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"],
+            **({"path": result.path.tolist()} if run == 0 and result.solved else {})}  # run 0's path, for pictures
+
+
+def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) -> None:
+    """``LABEL-snapshots.png``: robot snapshots along each method's run-0 path."""
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import get_task
+    from manifoldgen.viz.snapshots import draw_snapshots
+
+    task = get_task(experiment.task, experiment.robot)
+    scene = get_scene(task, experiment.scene)
+    for record in records:
+        draw_snapshots(np.asarray(record["path"]), task, scene, out_dir / f"{record['method']}-snapshots.png")
 
 
 def _init_worker() -> None:
@@ -274,7 +288,7 @@ def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
 
 def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *, runs: int, workers: int = 1,
               resume: bool = False, pg_rows: int = 10_000, baseline: str | None = None,
-              progress: bool = True) -> tuple[str, list[MethodSummary]]:
+              progress: bool = True, snapshots: bool = False) -> tuple[str, list[MethodSummary]]:
     """Run ``runs`` runs of every method (skipping finished ones with ``resume``); write
     ``runs.jsonl``, ``config.json``, ``results.md``, ``time.png``, ``length.png`` in ``out_dir``;
     return the Markdown table and the summaries."""
@@ -324,6 +338,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
                 future.cancel()
             raise
     kept = [r for r in records if r["method"] in labels and r["run"] < runs]
+    if snapshots:
+        _draw_snapshots(experiment, [r for r in kept if r["run"] == 0 and "path" in r], out_dir)
     notes = (f"Scene `{experiment.scene}` ({experiment.task} task, {experiment.robot}), {runs} runs per method "
              f"(seeds {experiment.seed}..{experiment.seed + runs - 1}), {workers} worker process(es). Methods:\n\n"
              + "\n".join(f"- `{m.label}`: `{m.spec}`" for m in parsed))
