@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
-                     exit_status, read_npz)
+                     print_reports, read_npz)
 
 
 def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, show: int = 5) -> dict:
@@ -94,14 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--show", type=int, default=5, help="invalid rows to explain per file (default 5)")
     args = parser.parse_args(argv)
-    statuses = []
-    for path in args.files:
-        report = check(path, args.urdf, args.srdf, args.show)
-        for line in report["details"]:
-            print("  " + line)
-        print(report["line"])
-        statuses.append(report["status"])
-    return exit_status(statuses)
+    return print_reports(check(path, args.urdf, args.srdf, args.show) for path in args.files)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
-                     exit_status, read_npz)
+                     print_reports, read_npz)
 
 DEFAULT_RESOLUTION = 0.005  # what manifoldgen used before paths recorded their resolution
 ENDPOINT_TOLERANCE = 1e-6
@@ -127,14 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float,
                         help="state spacing along segments (default: the file's meta.validation.resolution)")
     args = parser.parse_args(argv)
-    statuses = []
-    for path in args.files:
-        report = outside_check(path, args.urdf, args.srdf, args.resolution)
-        for line in report["details"]:
-            print("  " + line)
-        print(report["line"])
-        statuses.append(report["status"])
-    return exit_status(statuses)
+    return print_reports(outside_check(path, args.urdf, args.srdf, args.resolution) for path in args.files)
 
 
 if __name__ == "__main__":

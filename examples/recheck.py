@@ -808,3 +808,14 @@ def exit_status(statuses: list[int]) -> int:
     if EXIT_INVALID in statuses:
         return EXIT_INVALID
     return EXIT_CANNOT if EXIT_CANNOT in statuses else EXIT_VALID
+
+
+def print_reports(reports) -> int:
+    """Print each file's details and verdict line; return the combined exit status."""
+    statuses = []
+    for report in reports:
+        for line in report["details"]:
+            print("  " + line)
+        print(report["line"])
+        statuses.append(report["status"])
+    return exit_status(statuses)
