@@ -28,31 +28,7 @@ LEGS = ", ".join(f'"{j}_{i}"' for i in range(1, 5) for j in ("hip_pitch", "knee_
 CENTAURO_HOME = ("[0.0, 0.0, 0.687, 0.0, 0.0, 0.0, -1.25409, -1.55576, -0.301666, 1.25409, 1.55576, 0.301666, "
                  "1.25409, 1.55576, 0.301667, -1.25409, -1.55576, -0.301667]")
 
-USER_MODULE = '''
-import numpy as np
-from manifoldgen.constraints import Condition, Constraint, array_namespace
-
-
-class ToolDownAtX(Constraint):
-    """The tool points straight down at world x = y."""
-
-    def __init__(self, robot, frame="panda_hand_tcp", values=((0.4,), (0.5,)), tolerance=0.01):
-        self.robot, self.frame = robot, frame
-        self.condition = Condition(("x",), ("m",), np.asarray(values, float))
-        self.tolerance = np.full(3, tolerance)
-
-    def residual(self, q, y):
-        q, y = self.batch(q, y)
-        p, R = self.robot.frame_pose(q, self.frame)
-        return array_namespace(q).concat([p[:, :1] - y, R[:, :2, 2]], axis=1)
-
-    def jacobian(self, q, y):  # analytic, for speed (autograd would do)
-        q, y = self.batch(q, y)
-        p, R, J = self.robot.frame_jacobian(q, self.frame)
-        z = R[:, :, 2]
-        dz = np.cross(J[:, 3:].transpose(0, 2, 1), z[:, None, :]).transpose(0, 2, 1)
-        return np.concatenate([p[:, :1] - y, z[:, :2]], axis=1), np.concatenate([J[:, :1], dz[:, :2]], axis=1)
-'''
+USER_MODULE = Path(__file__).resolve().parent.parent / "examples" / "user_task" / "tool_down.py"  # the docs' example
 
 # type -> (task file body after name, rows per condition)
 TASKS = {
@@ -129,6 +105,8 @@ home = {PANDA_HOME}
 home_condition = [0.4]
 [[constraints]]
 type = "usercon:ToolDownAtX"
+frame = "panda_hand_tcp"
+values = [[0.4], [0.5]]
 ''',
     "user_in_set": f'''robot = "panda"
 group = [{PANDA}]
@@ -136,6 +114,7 @@ home = {PANDA_HOME}
 home_condition = [0.45, 0.4]
 [[constraints]]
 type = "usercon:ToolDownAtX"
+frame = "panda_hand_tcp"
 values = [[0.45]]
 [[constraints]]
 type = "plane"
@@ -153,7 +132,7 @@ def folder(tmp_path_factory):
     """Task files, the user's constraint module, and a fake ``manifoldgen`` package that fails on import
     (put first on the checkers' PYTHONPATH: they must not import manifoldgen)."""
     base = tmp_path_factory.mktemp("checkers")
-    (base / "usercon.py").write_text(USER_MODULE)
+    (base / "usercon.py").write_text(USER_MODULE.read_text())
     for kind, body in TASKS.items():
         (base / f"{kind}.toml").write_text(f'name = "check-{kind}"\n{body}')
     fake = base / "no_manifoldgen" / "manifoldgen"
