@@ -89,6 +89,9 @@ def test_end_effector_targets_become_configurations_on_one_branch(tmp_path):
         assert task.constraint.satisfied(q, [0.5])[0]
         np.testing.assert_allclose(task.robot.frame_pose(q, "panda_hand_tcp")[0][0], target, atol=0.01)
     assert json.loads(resolved.to_json())["start"] == {"position": [0.45, 0.3, 0.5]}
+    from manifoldgen.viewer.source import read_source
+    shown = read_source(tmp_path / "t.json", "pose")  # the viewer resolves targets the same way
+    np.testing.assert_allclose(shown.q, np.stack([resolved.start, resolved.goal]))
     (tmp_path / "far.json").write_text(json.dumps({**scene, "goal": {"position": [3.0, 0.0, 0.5]}}))
     with pytest.raises(ManifoldgenError, match="no collision-free configuration .* goal target"):
         get_scene(task, str(tmp_path / "far.json"))

@@ -250,6 +250,17 @@ class Scene:
             out.append(tool)
         return out
 
+    @classmethod
+    def from_meta(cls, meta: dict) -> Scene:
+        """The scene a path file records (the inverse of :meth:`to_meta`): obstacles, held tool, and the
+        query's start, goal and condition."""
+        items = meta.get("scene") or []
+        obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(items) if "attached_to" not in o]
+        tools = [Attached.from_dict(o) for o in items if "attached_to" in o]
+        return cls(str(meta.get("scene_name", "")), obstacles, tools[0] if tools else None,
+                   np.asarray(meta.get("start", []), float), np.asarray(meta.get("goal", []), float),
+                   np.asarray(meta.get("condition", []), float), str(meta.get("robot", "")))
+
     def to_json(self) -> str:
         return json.dumps({"format_version": FORMAT_VERSION, "name": self.name, "robot": self.robot,
                            "obstacles": [o.to_dict() for o in self.obstacles],

@@ -86,11 +86,9 @@ def resolve_query(constraint: Constraint, y: np.ndarray, start, goal, checker: C
 
 
 def _distinct(q: np.ndarray, tol: float = 1e-3) -> np.ndarray:
-    keep = []
-    for row in q:
-        if all(np.linalg.norm(row - k) > tol for k in keep):
-            keep.append(row)
-    return np.array(keep)
+    """Rows of ``q (S, n)`` with duplicates (equal on a ``tol`` grid) dropped, in their first order."""
+    first = np.unique(np.round(q / tol), axis=0, return_index=True)[1]
+    return q[np.sort(first)]
 
 
 def _quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:

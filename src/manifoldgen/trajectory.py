@@ -132,7 +132,8 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
 def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale: float = 1.0,
                        dt: float = 0.01) -> Trajectory:
     """The time-parameterised trajectory of a path file, every sample rechecked (``info["check"]``)."""
-    from manifoldgen.viewer.source import scene_from_meta, task_of
+    from manifoldgen.scene import Scene
+    from manifoldgen.tasks import task_from_meta
 
     vel_scale, acc_scale = check_scale(vel_scale, "--vel-scale"), check_scale(acc_scale, "--acc-scale")
     if not (np.isfinite(dt) and dt > 0):
@@ -142,7 +143,7 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
         raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array); give a file written by "
                                "`manifoldgen plan`")
     path = np.asarray(arrays["path"], float)
-    task = task_of(meta)
+    task = task_from_meta(meta)
     robot = task.robot
     if path.ndim != 2 or len(path) == 0 or path.shape[1] != robot.n:
         raise ManifoldgenError(f"{path_file}: path of shape {path.shape} is empty or does not fit the {robot.n} "
@@ -152,7 +153,7 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
     t, q, qd, qdd, stretch = time_parameterize(path, velocity, acceleration, dt)
     clipped = np.clip(q, robot.lower, robot.upper)
     space = ConstrainedSpace(task.constraint, np.asarray(meta["condition"], float),
-                             scene_from_meta(meta).checker(robot))
+                             Scene.from_meta(meta).checker(robot))
     valid = space.valid(clipped)
     first = None if valid.all() else int(np.argmin(valid))
     check = {"states": len(t), "valid": int(valid.sum()), "worst_violation": float(space.violation(clipped).max()),

@@ -3,7 +3,7 @@
 Kinds: ``path`` (an .npz with ``path (K, n)``), ``dataset`` (an .npz with ``q (N, n)`` and
 ``y (N, k)``: datasets and sample files), ``scene`` (a scene .json: start and goal) and
 ``task`` (a task .toml: its first scene's start and goal, else its home configuration).
-The task is rebuilt from the file's meta alone (:func:`task_of`).
+The task is rebuilt from the file's meta alone (:func:`~manifoldgen.tasks.task_from_meta`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import load_npz
-from manifoldgen.scene import Attached, Obstacle, Scene
+from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
 
 KINDS = "a path or dataset/sample .npz, a scene .json or a task .toml"
@@ -35,29 +35,6 @@ class ViewSource:
     y: np.ndarray
     scene: Scene
     title: str
-
-
-def robot_name(meta: dict) -> str:
-    """The robot of a file's meta: ``meta["robot"]`` as a name or as ``{"name": ...}``."""
-    robot = meta.get("robot")
-    return str(robot["name"] if isinstance(robot, dict) else robot)
-
-
-def task_of(meta: dict) -> Task:
-    """The task a file was made for: its full spec (``meta["task"]`` a dict) or a built-in task name."""
-    if isinstance(meta.get("task"), dict):
-        return task_from_meta(meta)
-    return get_task(str(meta.get("task", "pose")), robot_name(meta))
-
-
-def scene_from_meta(meta: dict, name: str = "") -> Scene:
-    """The obstacles and held tool a path file records (``meta["scene"]``), with its start, goal and condition."""
-    items = meta.get("scene") or []
-    obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(items) if "attached_to" not in o]
-    tools = [Attached.from_dict(o) for o in items if "attached_to" in o]
-    return Scene(name or str(meta.get("scene_name", "")), obstacles, tools[0] if tools else None,
-                 np.asarray(meta.get("start", []), float), np.asarray(meta.get("goal", []), float),
-                 np.asarray(meta.get("condition", []), float), robot_name(meta))
 
 
 def read_source(file: str | Path, task: str | None = None) -> ViewSource:
@@ -80,16 +57,16 @@ def _read_npz(file: Path) -> ViewSource:
     meta, arrays = load_npz(file, ())
     if "path" in arrays:
         path = np.asarray(arrays["path"], float)
-        t = task_of(meta)
+        t = task_from_meta(meta)
         _check_width(path, t, file)
         if len(path) == 0:
             raise ManifoldgenError(f"{file} holds an empty path (the query was not solved); nothing to show")
         y = np.broadcast_to(np.asarray(meta["condition"], float), (len(path), t.condition.k))
-        scene = scene_from_meta(meta)
+        scene = Scene.from_meta(meta)
         return ViewSource("path", file, meta, t, path, y, scene,
                           f"{t.robot.name} {t.name}, scene {scene.name or '?'}: {len(path)} waypoints")
     if "q" in arrays and "y" in arrays:
-        t = task_of(meta)
+        t = task_from_meta(meta)
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         _check_width(q, t, file)
         what = "samples" if "generated_by" in meta else "dataset"
@@ -113,8 +90,8 @@ def _read_scene(file: Path, task: str | None) -> ViewSource:
     except ManifoldgenError as exc:
         raise ManifoldgenError(f"{exc}; for a scene of another task pass --task TASK.toml" if task is None
                                else str(exc)) from exc
+    scene = get_scene(t, str(file))  # checked against the task; end-effector targets solved
     q = np.stack([scene.start, scene.goal])
-    _check_width(q, t, file)
     return ViewSource("scene", file, {"robot": t.robot.name}, t, q, np.stack([scene.condition] * 2), scene,
                       f"{t.robot.name} {t.name}, scene {scene.name}: start and goal")
 
@@ -122,8 +99,8 @@ def _read_scene(file: Path, task: str | None) -> ViewSource:
 def _read_task(file: Path) -> ViewSource:
     t = get_task(str(file))
     if t.scenes:
-        name, scene_file = next(iter(t.scenes.items()))
-        scene = Scene.load(scene_file)
+        name = next(iter(t.scenes))
+        scene = get_scene(t, name)
         q, y = np.stack([scene.start, scene.goal]), np.stack([scene.condition] * 2)
         what = f"scene {name}: start and goal"
     else:

@@ -16,9 +16,9 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, load_npz
 from manifoldgen.scene import Scene
 from manifoldgen.space import densify
-from manifoldgen.tasks import Task
+from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.viewer.meshes import Part, part_poses, robot_parts, scene_parts
-from manifoldgen.viewer.source import scene_from_meta, task_of, traced_frames
+from manifoldgen.viewer.source import traced_frames
 from manifoldgen.viz.losses import save_figure
 
 HULL_POINTS = 60
@@ -31,8 +31,7 @@ def write_snapshots(path: str | Path | np.ndarray, out: str | Path, meta: dict |
     if meta is None:
         meta, arrays = load_npz(path, ("path",))
         path = arrays["path"]
-    scene = scene_from_meta(meta)
-    return draw_snapshots(path, task_of(meta), scene, out, count)
+    return draw_snapshots(path, task_from_meta(meta), Scene.from_meta(meta), out, count)
 
 
 def draw_snapshots(path: np.ndarray, task: Task, scene: Scene, out: str | Path, count: int = 6) -> Path:
