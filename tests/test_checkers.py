@@ -148,25 +148,8 @@ def datasets(folder):
     for kind in TASKS:
         task = get_task(str(folder / f"{kind}.toml"))
         path = folder / f"{kind}.npz"
-        if task.condition.k:
-            out[kind] = path, collect(task, ROWS.get(kind, 8), seed=0, out=path, batch=256, progress=False)
-        else:  # collect() cannot take a constraint without condition values yet: the same steps by hand
-            out[kind] = path, _collect_unconditioned(task, ROWS.get(kind, 8), path)
+        out[kind] = path, collect(task, ROWS.get(kind, 8), seed=0, out=path, batch=256, progress=False)
     return out
-
-
-def _collect_unconditioned(task, count: int, path: Path) -> Dataset:
-    from manifoldgen.collision import CollisionChecker
-    from manifoldgen.constraints import project
-    from manifoldgen.data import FORMAT_VERSION, valid_rows
-
-    y = np.zeros((256, 0))
-    res = project(task.constraint, task.robot.sample_uniform(256, np.random.default_rng(0)), y)
-    q = res.q[valid_rows(task, res.q, y, CollisionChecker(task.robot))][:count]
-    assert len(q) == count
-    dataset = Dataset(q, np.zeros((count, 0)), {"format_version": FORMAT_VERSION, **task.meta(), "seed": 0})
-    dataset.save(path)
-    return dataset
 
 
 def run(folder, script: str, *args) -> subprocess.CompletedProcess:

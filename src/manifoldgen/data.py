@@ -67,18 +67,6 @@ class Dataset:
                 "conditions": {json.dumps(v.tolist()): int(c) for v, c in zip(values, counts)}}
 
 
-def valid_rows(task: Task, q: np.ndarray, y: np.ndarray, checker: CollisionChecker | None) -> np.ndarray:
-    """(B,) bool: row ``q[i] (n,)`` valid at its own condition ``y[i] (k,)`` (``y (B, k)``) by the
-    :class:`ConstrainedSpace` rule, with ``checker`` (e.g. self-collision only) or none."""
-    q, y = np.asarray(q, float), np.asarray(y, float).reshape(len(q), task.condition.k)
-    ok = np.zeros(len(q), dtype=bool)
-    values, which = np.unique(y, axis=0, return_inverse=True)
-    for c, value in enumerate(values):
-        rows = which.ravel() == c
-        ok[rows] = ConstrainedSpace(task.constraint, value, checker).valid(q[rows])
-    return ok
-
-
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
             give_up: int = 20, progress: bool = True) -> Dataset:
