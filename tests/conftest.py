@@ -21,3 +21,26 @@ def panda_task():
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+@pytest.fixture(scope="session")
+def planned_path(tmp_path_factory):
+    """``planned_path(scene) -> Path``: a path file of the panda pose task's ``scene`` planned once through the
+    CLI with the shipped CVAE (seed 0)."""
+    from typer.testing import CliRunner
+
+    from manifoldgen.cli import app
+    from manifoldgen.models import pretrained_model_dir
+
+    made = {}
+
+    def plan(scene: str):
+        if scene not in made:
+            out = tmp_path_factory.mktemp("planned") / f"{scene}.npz"
+            result = CliRunner().invoke(app, ["plan", "pose", "--robot", "panda", "--scene", scene, "--sampler",
+                                              f"cvae:{pretrained_model_dir()}", "--seed", "0", "--time", "60",
+                                              "-o", str(out)])
+            assert result.exit_code == 0, result.output
+            made[scene] = out
+        return made[scene]
+    return plan

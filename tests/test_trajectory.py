@@ -18,18 +18,13 @@ from manifoldgen.io import load_npz, save_npz
 
 runner = CliRunner()
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-MODEL = Path(__file__).resolve().parents[1] / "src/manifoldgen/data/pretrained/panda-pose-cvae"
 sys.path.insert(0, str(EXAMPLES))
 from check_path import outside_check  # noqa: E402  (the standalone checker users run)
 
 
 @pytest.fixture(scope="module")
-def wall(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("trajectory") / "wall.npz"
-    result = runner.invoke(app, ["plan", "pose", "--robot", "panda", "--scene", "wall", "--sampler", f"cvae:{MODEL}",
-                                 "--seed", "0", "--time", "60", "-o", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
+def wall(planned_path) -> Path:
+    return planned_path("wall")
 
 
 def test_trajectory_is_within_limits_and_on_the_manifold(wall, tmp_path, panda_task):

@@ -27,20 +27,15 @@ from manifoldgen.viewer.meshes import robot_parts
 from manifoldgen.viewer.server import free_port, open_viewer, start_server, stop_server
 
 runner = CliRunner()
-MODEL = Path(__file__).resolve().parents[1] / "src/manifoldgen/data/pretrained/panda-pose-cvae"
 SCENES = Path(__file__).resolve().parents[1] / "src/manifoldgen/tasks/scenes"
 needs_chromium = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"{CHROMIUM} is not installed "
                                     "(Debian: apt-get install -y chromium); the browser tests need it")
 
 
 @pytest.fixture(scope="module")
-def maze(tmp_path_factory) -> Path:
+def maze(planned_path) -> Path:
     """A planned path of the panda maze scene (obstacles and a held tool)."""
-    out = tmp_path_factory.mktemp("viewer") / "maze.npz"
-    result = runner.invoke(app, ["plan", "pose", "--robot", "panda", "--scene", "maze", "--sampler", f"cvae:{MODEL}",
-                                 "--seed", "0", "--time", "60", "-o", str(out)])
-    assert result.exit_code == 0, result.output
-    return out
+    return planned_path("maze")
 
 
 @pytest.fixture(scope="module")
