@@ -1,0 +1,1 @@
+"""manifoldgen: constrained motion planning with learned samplers."""
