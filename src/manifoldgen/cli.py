@@ -120,11 +120,12 @@ def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to 
 
 @app.command()
 @friendly
-def demo(output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
+def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene)"),
+         output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
          seed: int = typer.Option(0)):
-    """The whole pipeline on the embedded default (panda pose task)."""
-    from manifoldgen.demo import run_demo
-    run_demo(output, seed, console)
+    """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""
+    from manifoldgen.demos import run
+    run(name, output, seed, console)
 
 
 @app.command()

@@ -1,4 +1,4 @@
-"""``manifoldgen demo``: the whole pipeline on the embedded default (panda, pose task, wall scene).
+"""``manifoldgen demo pose``: the whole pipeline on the embedded default (panda, pose task, wall scene).
 
 Collect a small dataset, train a CVAE briefly, measure its samples' accuracy, plan the wall
 scene's query with the learned sampler (refined by a few projection steps), validate the
