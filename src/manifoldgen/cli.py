@@ -176,6 +176,29 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
 
 @app.command()
 @friendly
+def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base robot (a balance task's path)"),
+            duration_scale: float = typer.Option(2.0, help="Seconds per rad (or m) of each segment's largest move"),
+            settle: float = typer.Option(0.5, help="Seconds holding the first state before moving"),
+            hold: float = typer.Option(1.0, help="Seconds holding the last state"),
+            friction: float = typer.Option(0.8, help="Foot-ground sliding friction coefficient"),
+            tilt: float = typer.Option(10.0, help="Upright: max base tilt from the plan, degrees"),
+            feet: list[str] = typer.Option(None, "--feet", help="Foot frames (default: the balance constraint's)"),
+            output: Path = typer.Option(None, "-o", "--output", help="Also write the report as JSON")):
+    """Execute the path quasi-statically in MuJoCo (feet on the ground, base free, joints servoed): upright?"""
+    from manifoldgen.io import atomic_write_text, check_output_path
+    from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
+    settings = PhysicsSettings(seconds_per_unit=duration_scale, settle_s=settle, hold_s=hold, friction=friction,
+                               tilt_threshold_deg=tilt)
+    if output is not None:
+        check_output_path(output)
+    result = check_path_file(path, settings, feet=feet, progress=True)
+    console.print(summary(result), markup=False, highlight=False)
+    if output is not None:
+        atomic_write_text(output, to_json(result))
+
+
+@app.command()
+@friendly
 def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
           model: str = typer.Option("cvae", "--model", help=f"Model: {', '.join(_names('models'))}, or module:Class"),
           settings: list[str] = typer.Option(None, "--set", help="Hyper-parameter KEY=VALUE (repeatable), e.g. "

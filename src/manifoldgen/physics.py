@@ -1,0 +1,461 @@
+"""Physics check of a planned path: does a floating-base robot stay upright when it executes it?
+
+The path is played back quasi-statically in MuJoCo: the robot's own URDF, the floating base
+free (a free joint, not fixed), gravity on, a ground plane under its feet, every joint
+position-controlled towards the path's values linearly interpolated between waypoints, slowly,
+then held. What the base and the feet do is measured: base tilt from the planned orientation,
+foot slip along the ground, base drift from the planned position. This is the paper's Gazebo
+test made a number.
+
+Why MuJoCo (not pybullet): one ~20 MB wheel per platform with no build step, a URDF importer
+(``MjSpec.from_string``) that we can edit before compiling (free joint, ground, actuators,
+contact filters, sites) instead of rewriting the URDF, implicit integration of actuator damping
+(stiff position servos at a 1 ms step), exact soft contacts with a pyramidal/elliptic friction
+cone, and ``mj_geomDistance`` to place the feet on the ground; it loads centauro's and talos's
+example-robot-data URDFs and meshes as they are.
+
+The model (see docs/physics.md):
+
+- links, joints and inertias from the URDF (``inertiafromgeom=false``: the URDF's inertials only,
+  as pinocchio; the total mass is checked against pinocchio's); visual geometry is discarded;
+- contacts: the feet only. A foot is a frame of the balance constraint; its collision geometry is
+  every collision geometry rigidly attached to that frame's link. Every other collision geometry
+  is dropped (the planner already checked self-collision). A foot mesh in a format MuJoCo cannot
+  read is rebuilt from the vertices pinocchio (coal) loaded;
+- joints: each one a critically damped PD servo (MuJoCo ``general`` actuator, damping integrated
+  implicitly) whose stiffness is ``(2 pi f)^2 M_jj`` with ``M_jj`` the joint's diagonal of the joint-space
+  inertia at the first state (armature included): every joint has natural frequency ``f``. Joints
+  outside the planning group are held at their locked values;
+- time: each path segment lasts ``seconds_per_unit`` times its largest coordinate change (rad or m),
+  at least ``min_segment_s``; the first state is held ``settle_s`` before, the last ``hold_s`` after.
+
+Shapes: a path is ``(K, n)`` in the planning group's coordinates (floating base first).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import load_npz
+from manifoldgen.progress import progress_bar
+from manifoldgen.robot import Robot, robots_dir
+
+_MESH_FORMATS = (".stl", ".obj", ".msh")  # what MuJoCo reads itself
+
+
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """How the path is played back, and the verdict's thresholds."""
+
+    seconds_per_unit: float = 2.0  # s per rad (or m) of a segment's largest coordinate change: 0.5 rad/s
+    min_segment_s: float = 0.01  # s, shortest segment
+    settle_s: float = 0.5  # s holding the first state before moving
+    hold_s: float = 1.0  # s holding the last state after moving
+    timestep: float = 0.001  # s, physics step
+    control_period: float = 0.005  # s between servo target updates (and measurements)
+    frequency_hz: float = 25.0  # natural frequency of every joint servo
+    damping_ratio: float = 1.0
+    armature: float = 0.01  # kg m^2 added to every joint (a geared motor's rotor)
+    friction: float = 0.8  # sliding friction coefficient of foot-ground contacts (rubber on concrete ~0.8)
+    tilt_threshold_deg: float = 10.0  # upright: the base tilts less than this from the plan, throughout
+    fall_tilt_deg: float = 45.0  # fell: the base tilts more than this ...
+    fall_drop_m: float = 0.25  # ... or sinks this far below the plan
+    slip_threshold_m: float = 0.02  # stable: upright and no foot slides further than this
+
+    def __post_init__(self):
+        for name, value in asdict(self).items():
+            if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s",
+                                                                                 "min_segment_s", "armature")):
+                raise ManifoldgenError(f"physics setting {name} must be a positive number, got {value}")
+        if self.control_period < self.timestep:
+            raise ManifoldgenError(f"control_period ({self.control_period} s) must be at least the timestep "
+                                   f"({self.timestep} s)")
+
+
+@dataclass
+class PhysicsResult:
+    """What the robot did when the path was executed in the physics engine."""
+
+    upright: bool  # never fell and max_tilt_deg < tilt_threshold_deg
+    stable: bool  # upright and max_slip_m <= slip_threshold_m
+    fell: bool
+    fell_at_s: float | None  # simulated time of the fall (the run stops there)
+    max_tilt_deg: float  # largest angle between the simulated and the planned base z axes
+    max_slip_m: float  # largest horizontal displacement of a foot from where it started
+    foot_slip_m: dict[str, float]  # per foot frame
+    base_drift_m: float  # largest distance between the simulated and the planned base origin
+    final_drift_m: float  # the same at the end
+    max_tracking_error_rad: float  # largest |joint - servo target| (how well the servos held the path)
+    start_foot_gap_m: dict[str, float]  # per foot: its distance to the ground at the first state
+    simulated_s: float
+    wall_s: float
+    cpu_s: float
+    engine: dict  # engine name and version, model facts (mass, bodies, contact geometries, what was dropped)
+    settings: dict = field(default_factory=dict)  # PhysicsSettings, thresholds included
+    path_file: str | None = None
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+# ---------------------------------------------------------------------- entry points
+def check_path_file(path_file: str | Path, settings: PhysicsSettings | None = None, *,
+                    feet: list[str] | None = None, progress: bool = False) -> PhysicsResult:
+    """Rebuild the task from the path file's meta and execute its ``path (K, n)`` (see :func:`check_path`)."""
+    from manifoldgen.tasks import task_from_meta
+
+    meta, arrays = load_npz(path_file, ("path",))
+    if not meta.get("floating_base"):
+        raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the physics "
+                               "check needs a floating-base robot standing on its feet (a balance task's path)")
+    task = task_from_meta(meta)
+    feet = list(feet) if feet else balance_feet(meta.get("constraint") or {})
+    if not feet:
+        raise ManifoldgenError(f"{path_file}: its constraint ({(meta.get('constraint') or {}).get('type')}) names no "
+                               "feet; give the foot frames (--feet), or check a balance task's path")
+    result = check_path(task.robot, arrays["path"], feet, settings, progress=progress)
+    result.path_file = str(path_file)
+    return result
+
+
+def balance_feet(spec: dict) -> list[str]:
+    """The foot frames of the first ``balance`` constraint in a constraint spec (nested sets searched)."""
+    if spec.get("type") == "balance":
+        return list(spec["feet"])
+    for part in spec.get("parts", []):
+        if found := balance_feet(part):
+            return found
+    return []
+
+
+def check_path(robot: Robot, path: np.ndarray, feet: list[str], settings: PhysicsSettings | None = None, *,
+               progress: bool = False) -> PhysicsResult:
+    """Execute ``path (K, n)`` of a floating-base ``robot`` standing on ``feet`` (frame names) in MuJoCo."""
+    settings = settings or PhysicsSettings()
+    path = np.asarray(path, float)
+    if not robot.floating_base:
+        raise ManifoldgenError(f"robot {robot.name} has a fixed base; the physics check needs a floating base")
+    if path.ndim != 2 or path.shape[1] != robot.n or len(path) < 1 or not np.isfinite(path).all():
+        raise ManifoldgenError(f"the path must be a finite (K, {robot.n}) array for {robot.name}, got {path.shape}")
+    wall, cpu = time.perf_counter(), time.process_time()
+    sim = _Simulation(robot, feet, settings)
+    result = sim.run(path, progress)
+    result.wall_s, result.cpu_s = time.perf_counter() - wall, time.process_time() - cpu
+    return result
+
+
+# ---------------------------------------------------------------------- the model
+def _mujoco():
+    try:
+        import mujoco
+    except ImportError as exc:
+        raise ManifoldgenError("the physics check needs MuJoCo: run `pip install mujoco`") from exc
+    return mujoco
+
+
+def _urdf_text(robot: Robot) -> str:
+    """The robot's URDF with ``package://`` mesh URIs made absolute (pinocchio's package dirs) and
+    MuJoCo's compiler options: keep every link a body, URDF inertials only, no visuals."""
+    text = robot.urdf_path.read_text()
+    roots = [robots_dir().parent.parent, robot.urdf_path.parent.parent]
+
+    def absolute(match: re.Match) -> str:
+        rel = match.group(1)
+        found = next((root / rel for root in roots if (root / rel).is_file()), roots[0] / rel)
+        return f'filename="{found}"'
+
+    text = re.sub(r'filename="package://([^"]+)"', absolute, text)
+    text = re.sub(r'filename="(?!/)([^"]+\.[A-Za-z]+)"',
+                  lambda m: f'filename="{(robot.urdf_path.parent / m.group(1)).resolve()}"', text)
+    options = ('<mujoco><compiler strippath="false" discardvisual="true" fusestatic="false" '
+               'inertiafromgeom="false" balanceinertia="true"/></mujoco>')
+    text, count = re.subn(r"(<robot\b[^>]*>)", lambda m: m.group(1) + options, text, count=1)
+    if not count:
+        raise ManifoldgenError(f"{robot.urdf_path} has no <robot> element; give a valid URDF")
+    return text
+
+
+def _foot_links(robot: Robot, feet: list[str]) -> dict[str, tuple[str, np.ndarray]]:
+    """Foot frame -> (URDF link it is on, frame placement in that link (4, 4))."""
+    model = robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    out = {}
+    for foot in feet:
+        fid = robot.frame_id(foot)
+        frame = model.frames[fid]
+        if frame.type == pin.FrameType.BODY:
+            link = fid
+        else:  # a joint's frame: the link that joint carries
+            link = next((i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY and f.parentFrame == fid),
+                        None)
+            if link is None:
+                raise ManifoldgenError(f"foot frame '{foot}' of {robot.name} carries no link; name a link as the foot")
+        out[foot] = (model.frames[link].name, (data.oMf[link].inverse() * data.oMf[fid]).homogeneous)
+    return out
+
+
+def _welded(spec, body) -> list:
+    """The bodies rigidly attached to ``body`` (no joint between them), ``body`` included."""
+    top = body
+    while not top.joints and top.parent is not None and top.parent.name != "world":
+        top = top.parent
+    group, stack = [], [top]
+    while stack:
+        b = stack.pop()
+        group.append(b)
+        stack.extend(c for c in b.bodies if not c.joints)
+    return group
+
+
+def _weld_locked(spec, mujoco, robot: Robot, group: set[str]) -> int:
+    """Remove every hinge or slide joint outside ``group``, its child body fixed at the joint's locked value
+    (as rigid as pinocchio's locked joints); returns how many were welded."""
+    welded = 0
+    for body in spec.bodies:
+        for joint in list(body.joints):
+            if joint.name in group or joint.type not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+                continue
+            if len(body.joints) > 1:
+                raise ManifoldgenError(f"link {body.name} of {robot.name} has several joints; the physics check "
+                                       "takes one joint per link")
+            value, axis = robot.locked.get(joint.name, 0.0), np.asarray(joint.axis, float)
+            axis = axis / np.linalg.norm(axis)
+            motion = pin.SE3.Identity()
+            if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
+                R = pin.AngleAxis(value, axis).matrix()
+                motion = pin.SE3(R, np.asarray(joint.pos, float) - R @ np.asarray(joint.pos, float))
+            else:
+                motion.translation = value * axis
+            w, x, y, z = np.asarray(body.quat, float) / np.linalg.norm(body.quat)
+            pose = pin.SE3(pin.Quaternion(w, x, y, z).matrix(), np.asarray(body.pos, float)) * motion
+            qx, qy, qz, qw = pin.Quaternion(pose.rotation).coeffs()
+            body.pos, body.quat = pose.translation, [qw, qx, qy, qz]
+            spec.delete(joint)
+            welded += 1
+    return welded
+
+
+class _Simulation:
+    """The MuJoCo model of ``robot`` on a ground plane, with servos and foot sites."""
+
+    def __init__(self, robot: Robot, feet: list[str], settings: PhysicsSettings):
+        mujoco = _mujoco()
+        self.mujoco, self.robot, self.feet, self.settings = mujoco, robot, list(feet), settings
+        try:
+            spec = mujoco.MjSpec.from_string(_urdf_text(robot))
+        except ValueError as exc:
+            raise ManifoldgenError(f"MuJoCo cannot read the URDF of {robot.name}: {str(exc).splitlines()[0]}") from exc
+        root = spec.worldbody.first_body()
+        root.add_freejoint(name="floating_base")
+        spec.option.timestep = settings.timestep
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        links = _foot_links(robot, feet)
+        foot_geoms, dropped, converted = set(), 0, []
+        by_name = {b.name: b for b in spec.bodies}
+        foot_bodies = {}
+        for foot, (link, placement) in links.items():
+            if link not in by_name:
+                raise ManifoldgenError(f"MuJoCo's model of {robot.name} has no link '{link}' (foot '{foot}')")
+            body = by_name[link]
+            foot_bodies[foot] = [b.name for b in _welded(spec, body)]
+            body.add_site(name=f"foot:{foot}", pos=placement[:3, 3],
+                          quat=pin.Quaternion(placement[:3, :3]).coeffs()[[3, 0, 1, 2]])
+        contact_bodies = {name for names in foot_bodies.values() for name in names}
+        meshes = {m.name: m for m in spec.meshes}
+        for body in spec.bodies:
+            for geom in list(body.geoms):
+                if body.name in contact_bodies:
+                    geom.contype, geom.conaffinity, geom.condim = 0, 1, 3
+                    geom.friction = [settings.friction, 0.005, 0.0001]
+                    geom.name = geom.name or f"{body.name}:contact{len(foot_geoms)}"
+                    foot_geoms.add(geom.name)
+                    if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+                        converted += self._convert_mesh(spec, meshes[geom.meshname])
+                else:
+                    spec.delete(geom)
+                    dropped += 1
+        spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
+                                contype=1, conaffinity=1, friction=[settings.friction, 0.005, 0.0001])
+        if not foot_geoms:
+            raise ManifoldgenError(f"the feet {feet} of {robot.name} have no collision geometry to stand on; "
+                                   "name foot frames on links with <collision> shapes")
+        for mesh in list(spec.meshes):
+            if not any(g.meshname == mesh.name for g in spec.geoms):
+                spec.delete(mesh)
+        self.joint_names = list(robot.joints[6:])  # servoed, in the group's order
+        welded = _weld_locked(spec, mujoco, robot, set(self.joint_names))
+        for j in spec.joints:
+            if j.name in self.joint_names:
+                j.armature = settings.armature
+                j.limited = mujoco.mjtLimited.mjLIMITED_FALSE  # the servos hold the path; limits were planned
+        for name in self.joint_names:
+            spec.add_actuator(name=f"servo:{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                              gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE)
+        try:
+            self.model = spec.compile()
+        except ValueError as exc:
+            raise ManifoldgenError(f"MuJoCo cannot compile {robot.name}: {str(exc).splitlines()[0]}") from exc
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self.foot_sites = [m.site(f"foot:{f}").id for f in self.feet]
+        self.foot_geom_ids = {f: [m.geom(g).id for g in foot_geoms if int(m.geom_bodyid[m.geom(g).id]) in
+                                  {m.body(b).id for b in foot_bodies[f]}] for f in self.feet}
+        self.root = m.body(root.name).id
+        self.ground = m.geom("ground").id
+        self.qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in self.joint_names])
+        self.dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in self.joint_names])
+        mass = float(m.body_subtreemass[0])
+        self.engine = {"engine": "mujoco", "version": mujoco.__version__, "bodies": int(m.nbody - 1),
+                       "servoed_joints": len(self.joint_names), "welded_joints": welded, "mass_kg": mass, "pinocchio_mass_kg": robot.mass,
+                       "contact_geoms": sorted(foot_geoms), "dropped_geoms": dropped,
+                       "meshes_from_pinocchio": converted}
+        if abs(mass - robot.mass) > 1e-6 * max(1.0, robot.mass):
+            raise ManifoldgenError(f"MuJoCo's model of {robot.name} weighs {mass:.3f} kg but pinocchio's "
+                                   f"{robot.mass:.3f} kg; the URDF's inertials were not read alike")
+
+    def _convert_mesh(self, spec, mesh) -> list[str]:
+        """Replace a mesh MuJoCo cannot read by the vertices pinocchio loaded (MuJoCo takes their convex hull)."""
+        if Path(mesh.file).suffix.lower() in _MESH_FORMATS:
+            return []
+        for obj in self.robot.collision_model.geometryObjects:
+            if Path(obj.meshPath).resolve() == Path(mesh.file).resolve() and hasattr(obj.geometry, "vertices"):
+                mesh.uservert = np.asarray(obj.geometry.vertices(), float).ravel()
+                mesh.file, mesh.scale = "", [1.0, 1.0, 1.0]
+                return [Path(obj.meshPath).name]
+        raise ManifoldgenError(f"MuJoCo cannot read the foot mesh {mesh.file} and pinocchio loaded no vertices for it; "
+                               "convert it to STL or OBJ")
+
+    # ------------------------------------------------------------------ state
+    def _qpos(self, q: np.ndarray) -> np.ndarray:
+        """MuJoCo qpos (nq,) of a group configuration q (n,): base pose, group and locked joints."""
+        qpos = self.model.qpos0.copy()
+        qpos[:3] = q[:3]
+        R = pin.rpy.rpyToMatrix(q[5], q[4], q[3])
+        x, y, z, w = pin.Quaternion(R).coeffs()
+        qpos[3:7] = w, x, y, z
+        qpos[self.qadr] = q[6:]
+        return qpos
+
+    def _place(self, q0: np.ndarray) -> tuple[float, dict[str, float]]:
+        """Put the robot at q0 with its lowest foot on the ground; returns the height shift and each foot's gap."""
+        mujoco, m, d = self.mujoco, self.model, self.data
+        d.qpos[:] = self._qpos(q0)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        gaps = {f: min(mujoco.mj_geomDistance(m, d, g, self.ground, 10.0, None) for g in ids)
+                for f, ids in self.foot_geom_ids.items()}
+        shift = -min(gaps.values())
+        d.qpos[2] += shift
+        d.qvel[:] = 0
+        mujoco.mj_forward(m, d)
+        lifted = q0 + np.eye(len(q0))[2] * shift
+        feet = np.stack([self.robot.frame_pose(lifted, f)[0][0] for f in self.feet])
+        error = max(np.abs(d.site_xpos[self.foot_sites] - feet).max(),
+                    np.abs(d.subtree_com[self.root] - self.robot.com(lifted)[0]).max())
+        if error > 1e-4:
+            raise RuntimeError(f"internal error: MuJoCo's and pinocchio's models of {self.robot.name} differ by "
+                               f"{error:.2e} m at the first state (feet or centre of mass)")
+        self.engine["model_error_m"] = float(error)
+        return shift, {f: gap - min(gaps.values()) for f, gap in gaps.items()}
+
+    def _set_gains(self) -> None:
+        """Servo j: stiffness (2 pi f)^2 M_jj and damping 2 zeta (2 pi f) M_jj, at the current state."""
+        m, s = self.model, self.settings
+        M = np.zeros((m.nv, m.nv))
+        self.mujoco.mj_fullM(m, self.data, M)
+        inertia = np.diag(M)[self.dadr]
+        omega = 2 * np.pi * s.frequency_hz
+        kp, kv = omega ** 2 * inertia, 2 * s.damping_ratio * omega * inertia
+        m.actuator_gainprm[:, 0] = kp
+        m.actuator_biasprm[:, :3] = np.stack([np.zeros_like(kp), -kp, -kv], axis=1)
+
+    # ------------------------------------------------------------------ run
+    def schedule(self, path: np.ndarray) -> np.ndarray:
+        """Waypoint times (K,) in s, settling included: segment k lasts seconds_per_unit * max |dq|."""
+        s = self.settings
+        steps = np.abs(np.diff(path, axis=0)).max(axis=1) if len(path) > 1 else np.zeros(0)
+        return s.settle_s + np.concatenate([[0.0], np.cumsum(np.maximum(s.seconds_per_unit * steps, s.min_segment_s))])
+
+    def run(self, path: np.ndarray, progress: bool) -> PhysicsResult:
+        mujoco, m, d, s = self.mujoco, self.model, self.data, self.settings
+        shift, gaps = self._place(path[0])
+        self._set_gains()
+        times = self.schedule(path)
+        total = times[-1] + s.hold_s
+        substeps = max(1, int(round(s.control_period / s.timestep)))
+        ticks = int(np.ceil(total / (substeps * s.timestep)))
+        start_feet = d.site_xpos[self.foot_sites].copy()
+        max_tilt = max_drift = drift = tracking = 0.0
+        slip = np.zeros(len(self.feet))
+        fell_at = None
+        with progress_bar("physics", ticks, enabled=progress) as bar:
+            for tick in range(ticks):
+                t = d.time
+                q_plan = _interpolate(path, times, t)
+                d.ctrl[:] = q_plan[6:]
+                mujoco.mj_step(m, d, substeps)
+                q_plan = _interpolate(path, times, d.time)
+                base_plan = q_plan[:3] + [0.0, 0.0, shift]
+                R_plan = pin.rpy.rpyToMatrix(q_plan[5], q_plan[4], q_plan[3])
+                tilt = np.degrees(np.arccos(np.clip(R_plan[:, 2] @ d.xmat[self.root].reshape(3, 3)[:, 2], -1, 1)))
+                drift = float(np.linalg.norm(d.qpos[:3] - base_plan))
+                max_tilt, max_drift = max(max_tilt, tilt), max(max_drift, drift)
+                slip = np.maximum(slip, np.linalg.norm((d.site_xpos[self.foot_sites] - start_feet)[:, :2], axis=1))
+                tracking = max(tracking, float(np.abs(d.qpos[self.qadr] - q_plan[6:]).max()))
+                bar.advance()
+                if tilt > s.fall_tilt_deg or d.qpos[2] < base_plan[2] - s.fall_drop_m:
+                    fell_at = float(d.time)
+                    break
+        fell = fell_at is not None
+        upright = not fell and max_tilt < s.tilt_threshold_deg
+        return PhysicsResult(
+            upright=bool(upright), stable=bool(upright and slip.max() <= s.slip_threshold_m), fell=fell,
+            fell_at_s=fell_at, max_tilt_deg=float(max_tilt), max_slip_m=float(slip.max()),
+            foot_slip_m={f: float(v) for f, v in zip(self.feet, slip)}, base_drift_m=float(max_drift),
+            final_drift_m=float(drift), max_tracking_error_rad=float(tracking),
+            start_foot_gap_m={f: float(g) for f, g in gaps.items()}, simulated_s=float(d.time),
+            wall_s=0.0, cpu_s=0.0, engine=self.engine, settings=asdict(s))
+
+
+def _interpolate(path: np.ndarray, times: np.ndarray, t: float) -> np.ndarray:
+    """The path's configuration (n,) at time t: linear between waypoints, held before and after."""
+    if t <= times[0] or len(path) == 1:
+        return path[0]
+    if t >= times[-1]:
+        return path[-1]
+    k = int(np.searchsorted(times, t, side="right")) - 1
+    a = (t - times[k]) / (times[k + 1] - times[k])
+    return (1 - a) * path[k] + a * path[k + 1]
+
+
+def summary(result: PhysicsResult) -> str:
+    """A few lines for the terminal."""
+    s = result.settings
+    verdict = ("FELL" + (f" at {result.fell_at_s:.2f} s" if result.fell_at_s is not None else "") if result.fell
+               else "upright" if result.upright else "tilted")
+    lines = [f"{result.path_file or 'path'}: {verdict}; {'stable' if result.stable else 'not stable'} "
+             f"(upright: tilt < {s['tilt_threshold_deg']} deg; stable: slip <= {s['slip_threshold_m']} m; fell: tilt > "
+             f"{s['fall_tilt_deg']} deg or base {s['fall_drop_m']} m below plan)",
+             f"  max base tilt {result.max_tilt_deg:.2f} deg, base drift {result.base_drift_m:.4f} m "
+             f"(final {result.final_drift_m:.4f} m), joint tracking error {result.max_tracking_error_rad:.4f} rad",
+             "  foot slip " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.foot_slip_m.items()),
+             "  foot gap at start " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.start_foot_gap_m.items()),
+             f"  {result.engine['engine']} {result.engine['version']}: {result.engine['mass_kg']:.2f} kg, "
+             f"{len(result.engine['contact_geoms'])} contact geometries, {result.engine['dropped_geoms']} other "
+             f"collision geometries dropped; {result.simulated_s:.2f} s simulated in {result.wall_s:.2f} s wall, "
+             f"{result.cpu_s:.2f} s CPU"]
+    return "\n".join(lines)
+
+
+def to_json(result: PhysicsResult) -> str:
+    return json.dumps(result.to_dict(), indent=2)

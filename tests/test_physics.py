@@ -1,0 +1,132 @@
+"""Physics check: a statically balanced centauro path stays upright in MuJoCo, an unbalanced one falls."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.constraints.base import ConstraintSet
+from manifoldgen.constraints.joint_linear import JointLinearConstraint
+from manifoldgen.constraints.projection import project
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import save_npz
+from manifoldgen.physics import PhysicsSettings, check_path_file
+from manifoldgen.tasks import load_task_file
+
+pytest.importorskip("mujoco")
+
+FEET = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
+LEGS = [f"{j}_{i}" for i in range(1, 5) for j in ("hip_yaw", "hip_pitch", "knee_pitch", "ankle_pitch")]
+# centauro's SRDF stance with the front legs turned inwards (hip yaw 1 by -1, 2 by +1): the front wheels stand
+# 0.115 m ahead of the pelvis, the centre of mass 0.04 m ahead: inside the support polygon by 0.076 m
+HOME = [0.0, 0.0, 0.687, 0.0, 0.0, 0.0,
+        -1.746874, -1.25409, -1.55576, -0.301666, 1.746874, 1.25409, 1.55576, 0.301666,
+        0.746874, 1.25409, 1.55576, 0.301667, -0.746874, -1.25409, -1.55576, -0.301667]
+FAST = PhysicsSettings(settle_s=0.2, hold_s=0.5, seconds_per_unit=1.0)
+
+
+@pytest.fixture(scope="module")
+def balance_task(tmp_path_factory):
+    """A balance task file for centauro (floating base + 16 leg joints), feet where HOME puts them."""
+    from manifoldgen.robot import Robot
+
+    robot = Robot.load("centauro", LEGS, floating_base=True)
+    feet = [robot.frame_pose(np.array(HOME), f)[0][0].tolist() for f in FEET]
+    text = f"""name = "balance-test"
+robot = "centauro"
+floating_base = true
+base_bounds = [[-0.5, -0.5, 0.4], [0.5, 0.5, 1.0]]
+group = {json.dumps(["base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll", *LEGS])}
+home = {json.dumps(HOME)}
+home_condition = [0.687]
+[[constraints]]
+type = "balance"
+feet = {json.dumps(FEET)}
+foot_positions = {json.dumps(feet)}
+base_frame = "pelvis"
+values = [[0.62], [0.687]]
+margin = 0.02
+"""
+    file = tmp_path_factory.mktemp("physics") / "balance.toml"
+    file.write_text(text)
+    return load_task_file(file)
+
+
+def _save(task, folder, name, waypoints):
+    file = folder / f"{name}.npz"
+    save_npz(file, {**task.meta(), "kind": "path"}, path=np.asarray(waypoints))
+    return file
+
+
+def _shift_base(task, x_end, z_end, level, count=7):
+    """(count, n): the task's home with the base moved to x_end, z_end in steps, the feet kept where they stand (each
+    state projected onto the balance equalities, base_x = x and, when ``level``, base_pitch = 0, from the last)."""
+    rows = [0, 4] if level else [0]
+    fixed = np.eye(task.robot.n)[rows]
+    feet_and_base = ConstraintSet([task.constraint, JointLinearConstraint(task.robot, fixed, [[0.0] * len(rows)])])
+    states = [task.home]
+    for x, z in zip(np.linspace(0.0, x_end, count)[1:], np.linspace(0.687, z_end, count)[1:]):
+        res = project(feet_and_base, states[-1], [z, x, 0.0][:1 + len(rows)])
+        assert res.converged[0]
+        states.append(res.q[0])
+    return np.array(states)
+
+
+@pytest.fixture(scope="module")
+def paths(balance_task, tmp_path_factory):
+    """name -> path file: "balanced" moves the base 8 cm back and 3.7 cm down, level (every state satisfies the
+    balance constraint, CoM margin included); "unbalanced" pushes the base 0.3 m forward, feet kept, CoM far out.
+    (The base stays level in the balanced path: centauro's wheels are locked and the constraint fixes the wheel
+    centres only, so pitching a leg rolls its wheel, which the check counts as foot slip: see docs/physics.md.)"""
+    task, folder = balance_task, tmp_path_factory.mktemp("paths")
+    c = task.constraint
+    balanced = _shift_base(task, -0.08, 0.65, level=True)
+    assert c.satisfied(balanced, np.linspace(0.687, 0.65, len(balanced))[:, None]).all()
+    unbalanced = _shift_base(task, 0.3, 0.687, level=False)
+    assert np.abs(c.residual(unbalanced, [0.687])).max() < 1e-5  # feet kept where they stand ...
+    assert c.inequality(unbalanced[-1], [0.687]).max() > 0.15  # ... and the CoM 0.15 m beyond the margin
+    return {"balanced": _save(task, folder, "balanced", balanced),
+            "unbalanced": _save(task, folder, "unbalanced", unbalanced)}
+
+
+def test_a_balanced_path_stays_upright(paths):
+    result = check_path_file(paths["balanced"], FAST)
+    assert result.upright and result.stable and not result.fell
+    assert result.max_tilt_deg < 2.0 and result.max_slip_m < 0.015 and result.base_drift_m < 0.03
+    assert result.max_tracking_error_rad < 0.03  # the servos held the path
+    assert max(result.start_foot_gap_m.values()) < 1e-3  # all four wheels on the ground at the start
+    assert result.engine["mass_kg"] == pytest.approx(result.engine["pinocchio_mass_kg"])
+    assert result.engine["model_error_m"] < 1e-6  # MuJoCo and pinocchio put the feet and CoM at the same place
+    assert result.simulated_s > FAST.settle_s + FAST.hold_s
+    assert json.loads(json.dumps(result.to_dict()))["settings"]["tilt_threshold_deg"] == 10.0
+
+
+def test_an_unbalanced_path_falls(paths):
+    result = check_path_file(paths["unbalanced"], FAST)
+    assert result.fell and not result.upright and not result.stable
+    assert result.max_tilt_deg > FAST.fall_tilt_deg or result.base_drift_m > FAST.fall_drop_m
+
+
+def test_cli_reports_and_writes_json(paths, tmp_path):
+    out = tmp_path / "report.json"
+    result = CliRunner().invoke(app, ["physics", str(paths["balanced"]), "--hold", "0.3", "--settle", "0.1",
+                                      "--duration-scale", "1.0", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "upright" in result.output and "foot slip" in result.output
+    report = json.loads(out.read_text())
+    assert report["upright"] and report["settings"]["hold_s"] == 0.3
+
+
+def test_bad_inputs_are_one_line(paths, balance_task, panda_task, tmp_path):
+    runner = CliRunner()
+    fixed = runner.invoke(app, ["physics", str(_save(panda_task, tmp_path, "panda", [panda_task.home]))])
+    assert fixed.exit_code != 0 and "floating-base" in fixed.output
+    no_feet = _save(balance_task, tmp_path, "nofeet", [balance_task.home])
+    with pytest.raises(ManifoldgenError, match="unknown frame"):
+        check_path_file(no_feet, FAST, feet=["nope"])
+    with pytest.raises(ManifoldgenError, match="must be a positive number"):
+        PhysicsSettings(timestep=0.0)
+    missing = runner.invoke(app, ["physics", str(tmp_path / "absent.npz")])
+    assert missing.exit_code != 0 and "not found" in missing.output
