@@ -1,6 +1,7 @@
 """Physics check: a statically balanced centauro path stays upright in MuJoCo, an unbalanced one falls."""
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from manifoldgen.constraints.joint_linear import JointLinearConstraint
 from manifoldgen.constraints.projection import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
-from manifoldgen.physics import PhysicsSettings, check_path_file
+from manifoldgen.physics import PhysicsSettings, check_path, check_path_file
 from manifoldgen.tasks import load_task_file
 
 pytest.importorskip("mujoco")
@@ -24,7 +25,7 @@ LEGS = [f"{j}_{i}" for i in range(1, 5) for j in ("hip_yaw", "hip_pitch", "knee_
 HOME = [0.0, 0.0, 0.687, 0.0, 0.0, 0.0,
         -1.746874, -1.25409, -1.55576, -0.301666, 1.746874, 1.25409, 1.55576, 0.301666,
         0.746874, 1.25409, 1.55576, 0.301667, -0.746874, -1.25409, -1.55576, -0.301667]
-FAST = PhysicsSettings(settle_s=0.2, hold_s=0.5, seconds_per_unit=1.0)
+FAST = PhysicsSettings(settle_s=0.2, hold_s=0.5, seconds_per_rad=1.0, seconds_per_m=5.0)  # twice the default pace
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +95,7 @@ def paths(balance_task, tmp_path_factory):
 def test_a_balanced_path_stays_upright(paths):
     result = check_path_file(paths["balanced"], FAST)
     assert result.upright and result.stable and not result.fell
-    assert result.max_tilt_deg < 2.0 and result.max_slip_m < 0.015 and result.base_drift_m < 0.03
+    assert result.max_tilt_deg < 1.0 and result.max_slip_m < 0.015 and result.base_drift_m < 0.02
     assert result.max_tracking_error_rad < 0.03  # the servos held the path
     assert max(result.start_foot_gap_m.values()) < 1e-3  # all four wheels on the ground at the start
     assert result.engine["mass_kg"] == pytest.approx(result.engine["pinocchio_mass_kg"])
@@ -112,7 +113,7 @@ def test_an_unbalanced_path_falls(paths):
 def test_cli_reports_and_writes_json(paths, tmp_path):
     out = tmp_path / "report.json"
     result = CliRunner().invoke(app, ["physics", str(paths["balanced"]), "--hold", "0.3", "--settle", "0.1",
-                                      "--duration-scale", "1.0", "-o", str(out)])
+                                      "--duration-scale", "0.5", "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert "upright" in result.output and "foot slip" in result.output
     report = json.loads(out.read_text())
@@ -130,3 +131,23 @@ def test_bad_inputs_are_one_line(paths, balance_task, panda_task, tmp_path):
         PhysicsSettings(timestep=0.0)
     missing = runner.invoke(app, ["physics", str(tmp_path / "absent.npz")])
     assert missing.exit_code != 0 and "not found" in missing.output
+
+
+def test_missing_engine_is_one_line(paths, monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco now raises ImportError
+    with pytest.raises(ManifoldgenError, match="pip install mujoco"):
+        check_path_file(paths["balanced"], FAST)
+
+
+def test_talos_loads_and_stands():
+    """MuJoCo reads talos's URDF and meshes; standing in its SRDF stance on its two soles, it stays put."""
+    from manifoldgen.robot import Robot
+
+    robot = Robot.load("talos", floating_base=True)
+    stance = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0] +
+                      [robot.reference[robot.model.joints[robot.model.getJointId(j)].idx_q] for j in robot.joints[6:]])
+    result = check_path(robot, stance[None], ["left_sole_link", "right_sole_link"],
+                        PhysicsSettings(settle_s=0.5, hold_s=0.0))
+    assert result.upright and result.max_tilt_deg < 1.0 and result.max_slip_m < 0.005
+    assert result.engine["model_error_m"] < 1e-6 and len(result.engine["contact_geoms"]) == 2
+    assert max(result.start_foot_gap_m.values()) < 1e-3

@@ -177,7 +177,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
 @app.command()
 @friendly
 def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base robot (a balance task's path)"),
-            duration_scale: float = typer.Option(2.0, help="Seconds per rad (or m) of each segment's largest move"),
+            duration_scale: float = typer.Option(1.0, help="Multiplies the motion's duration (default: at most 0.5 "
+                                                 "rad/s per joint and 0.1 m/s for the base, eased in and out)"),
             settle: float = typer.Option(0.5, help="Seconds holding the first state before moving"),
             hold: float = typer.Option(1.0, help="Seconds holding the last state"),
             friction: float = typer.Option(0.8, help="Foot-ground sliding friction coefficient"),
@@ -187,8 +188,9 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
     """Execute the path quasi-statically in MuJoCo (feet on the ground, base free, joints servoed): upright?"""
     from manifoldgen.io import atomic_write_text, check_output_path
     from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
-    settings = PhysicsSettings(seconds_per_unit=duration_scale, settle_s=settle, hold_s=hold, friction=friction,
-                               tilt_threshold_deg=tilt)
+    pace = PhysicsSettings()
+    settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * duration_scale, seconds_per_m=pace.seconds_per_m
+                               * duration_scale, settle_s=settle, hold_s=hold, friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
         check_output_path(output)
     result = check_path_file(path, settings, feet=feet, progress=True)

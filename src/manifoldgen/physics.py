@@ -26,8 +26,10 @@ The model (see docs/physics.md):
   implicitly) whose stiffness is ``(2 pi f)^2 M_jj`` with ``M_jj`` the joint's diagonal of the joint-space
   inertia at the first state (armature included): every joint has natural frequency ``f``. Joints
   outside the planning group are held at their locked values;
-- time: each path segment lasts ``seconds_per_unit`` times its largest coordinate change (rad or m),
-  at least ``min_segment_s``; the first state is held ``settle_s`` before, the last ``hold_s`` after.
+- time: segment k gets a nominal duration, the larger of ``seconds_per_rad`` times its largest angle change
+  (joints and base angles) and ``seconds_per_m`` times its base translation; the whole path is then run on a
+  quintic ease-in/ease-out of its total (zero velocity and acceleration at both ends, peak speed the nominal
+  one). The first state is held ``settle_s`` before, the last ``hold_s`` after.
 
 Shapes: a path is ``(K, n)`` in the planning group's coordinates (floating base first).
 """
@@ -49,14 +51,15 @@ from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot, robots_dir
 
 _MESH_FORMATS = (".stl", ".obj", ".msh")  # what MuJoCo reads itself
+_PEAK_SPEED = 1.875  # peak / mean speed of the quintic ease 10u^3 - 15u^4 + 6u^5
 
 
 @dataclass(frozen=True)
 class PhysicsSettings:
     """How the path is played back, and the verdict's thresholds."""
 
-    seconds_per_unit: float = 2.0  # s per rad (or m) of a segment's largest coordinate change: 0.5 rad/s
-    min_segment_s: float = 0.01  # s, shortest segment
+    seconds_per_rad: float = 2.0  # s per rad of a segment's largest angle change: at most 0.5 rad/s
+    seconds_per_m: float = 10.0  # s per m of a segment's base translation: at most 0.1 m/s
     settle_s: float = 0.5  # s holding the first state before moving
     hold_s: float = 1.0  # s holding the last state after moving
     timestep: float = 0.001  # s, physics step
@@ -72,8 +75,7 @@ class PhysicsSettings:
 
     def __post_init__(self):
         for name, value in asdict(self).items():
-            if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s",
-                                                                                 "min_segment_s", "armature")):
+            if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s", "armature")):
                 raise ManifoldgenError(f"physics setting {name} must be a positive number, got {value}")
         if self.control_period < self.timestep:
             raise ManifoldgenError(f"control_period ({self.control_period} s) must be at least the timestep "
@@ -176,7 +178,8 @@ def _urdf_text(robot: Robot) -> str:
     text = re.sub(r'filename="(?!/)([^"]+\.[A-Za-z]+)"',
                   lambda m: f'filename="{(robot.urdf_path.parent / m.group(1)).resolve()}"', text)
     options = ('<mujoco><compiler strippath="false" discardvisual="true" fusestatic="false" '
-               'inertiafromgeom="false" balanceinertia="true"/></mujoco>')
+               'inertiafromgeom="false" balanceinertia="true" boundmass="1e-8" '
+               'boundinertia="1e-10"/></mujoco>')
     text, count = re.subn(r"(<robot\b[^>]*>)", lambda m: m.group(1) + options, text, count=1)
     if not count:
         raise ManifoldgenError(f"{robot.urdf_path} has no <robot> element; give a valid URDF")
@@ -218,8 +221,8 @@ def _welded(spec, body) -> list:
 
 def _weld_locked(spec, mujoco, robot: Robot, group: set[str]) -> int:
     """Remove every hinge or slide joint outside ``group``, its child body fixed at the joint's locked value
-    (as rigid as pinocchio's locked joints); returns how many were welded."""
-    welded = 0
+    (as rigid as pinocchio's locked joints), and the URDF mimic equalities that name one; returns how many."""
+    welded = set()
     for body in spec.bodies:
         for joint in list(body.joints):
             if joint.name in group or joint.type not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
@@ -239,9 +242,12 @@ def _weld_locked(spec, mujoco, robot: Robot, group: set[str]) -> int:
             pose = pin.SE3(pin.Quaternion(w, x, y, z).matrix(), np.asarray(body.pos, float)) * motion
             qx, qy, qz, qw = pin.Quaternion(pose.rotation).coeffs()
             body.pos, body.quat = pose.translation, [qw, qx, qy, qz]
+            welded.add(joint.name)
             spec.delete(joint)
-            welded += 1
-    return welded
+    for equality in list(spec.equalities):
+        if equality.type == mujoco.mjtEq.mjEQ_JOINT and {equality.name1, equality.name2} & welded:
+            spec.delete(equality)
+    return len(welded)
 
 
 class _Simulation:
@@ -380,18 +386,26 @@ class _Simulation:
         m.actuator_biasprm[:, :3] = np.stack([np.zeros_like(kp), -kp, -kv], axis=1)
 
     # ------------------------------------------------------------------ run
-    def schedule(self, path: np.ndarray) -> np.ndarray:
-        """Waypoint times (K,) in s, settling included: segment k lasts seconds_per_unit * max |dq|."""
+    def schedule(self, path: np.ndarray) -> tuple[np.ndarray, float]:
+        """Nominal waypoint stamps (K,) in s from the first, and the motion's real duration (see the module doc)."""
         s = self.settings
-        steps = np.abs(np.diff(path, axis=0)).max(axis=1) if len(path) > 1 else np.zeros(0)
-        return s.settle_s + np.concatenate([[0.0], np.cumsum(np.maximum(s.seconds_per_unit * steps, s.min_segment_s))])
+        step = np.abs(np.diff(path, axis=0))
+        nominal = np.maximum(s.seconds_per_rad * step[:, 3:].max(axis=1, initial=0.0),
+                             s.seconds_per_m * np.linalg.norm(step[:, :3], axis=1))
+        stamps = np.concatenate([[0.0], np.cumsum(nominal)])
+        return stamps, _PEAK_SPEED * stamps[-1]
+
+    def _plan_at(self, path: np.ndarray, stamps: np.ndarray, motion_s: float, t: float) -> np.ndarray:
+        """The planned configuration (n,) at simulated time t: held, eased along the path, held."""
+        u = np.clip((t - self.settings.settle_s) / motion_s, 0.0, 1.0) if motion_s > 0 else 1.0
+        return _interpolate(path, stamps, stamps[-1] * u ** 3 * (10 - 15 * u + 6 * u ** 2))
 
     def run(self, path: np.ndarray, progress: bool) -> PhysicsResult:
         mujoco, m, d, s = self.mujoco, self.model, self.data, self.settings
         shift, gaps = self._place(path[0])
         self._set_gains()
-        times = self.schedule(path)
-        total = times[-1] + s.hold_s
+        stamps, motion_s = self.schedule(path)
+        total = s.settle_s + motion_s + s.hold_s
         substeps = max(1, int(round(s.control_period / s.timestep)))
         ticks = int(np.ceil(total / (substeps * s.timestep)))
         start_feet = d.site_xpos[self.foot_sites].copy()
@@ -401,10 +415,10 @@ class _Simulation:
         with progress_bar("physics", ticks, enabled=progress) as bar:
             for tick in range(ticks):
                 t = d.time
-                q_plan = _interpolate(path, times, t)
+                q_plan = self._plan_at(path, stamps, motion_s, t)
                 d.ctrl[:] = q_plan[6:]
                 mujoco.mj_step(m, d, substeps)
-                q_plan = _interpolate(path, times, d.time)
+                q_plan = self._plan_at(path, stamps, motion_s, d.time)
                 base_plan = q_plan[:3] + [0.0, 0.0, shift]
                 R_plan = pin.rpy.rpyToMatrix(q_plan[5], q_plan[4], q_plan[3])
                 tilt = np.degrees(np.arccos(np.clip(R_plan[:, 2] @ d.xmat[self.root].reshape(3, 3)[:, 2], -1, 1)))
@@ -427,15 +441,14 @@ class _Simulation:
             wall_s=0.0, cpu_s=0.0, engine=self.engine, settings=asdict(s))
 
 
-def _interpolate(path: np.ndarray, times: np.ndarray, t: float) -> np.ndarray:
-    """The path's configuration (n,) at time t: linear between waypoints, held before and after."""
-    if t <= times[0] or len(path) == 1:
+def _interpolate(path: np.ndarray, stamps: np.ndarray, tau: float) -> np.ndarray:
+    """The path's configuration (n,) at nominal time tau: linear between waypoints (stamps (K,))."""
+    if tau <= 0 or len(path) == 1:
         return path[0]
-    if t >= times[-1]:
+    if tau >= stamps[-1]:
         return path[-1]
-    k = int(np.searchsorted(times, t, side="right")) - 1
-    a = (t - times[k]) / (times[k + 1] - times[k])
-    return (1 - a) * path[k] + a * path[k + 1]
+    k = int(np.searchsorted(stamps, tau, side="right")) - 1
+    return path[k] + (tau - stamps[k]) / (stamps[k + 1] - stamps[k]) * (path[k + 1] - path[k])
 
 
 def summary(result: PhysicsResult) -> str:
