@@ -116,7 +116,7 @@ def main():
           f"{np.mean([r.fell for r in results]):.0%} | tilt median {np.median(tilt):.2f} max {tilt.max():.2f} deg | "
           f"slip median {np.median(slip) * 1000:.1f} max {slip.max() * 1000:.1f} mm | drift median "
           f"{np.median(drift) * 1000:.1f} max {drift.max() * 1000:.1f} mm | {wall:.1f} s wall, {cpu:.1f} s CPU "
-          f"(paths written and checked)")
+          f"checking")
 
 
 if __name__ == "__main__":

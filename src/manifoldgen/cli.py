@@ -189,8 +189,9 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
     from manifoldgen.io import atomic_write_text, check_output_path
     from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
     pace = PhysicsSettings()
-    settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * duration_scale, seconds_per_m=pace.seconds_per_m
-                               * duration_scale, settle_s=settle, hold_s=hold, friction=friction, tilt_threshold_deg=tilt)
+    settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * duration_scale,
+                               seconds_per_m=pace.seconds_per_m * duration_scale, settle_s=settle, hold_s=hold,
+                               friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
         check_output_path(output)
     result = check_path_file(path, settings, feet=feet, progress=True)

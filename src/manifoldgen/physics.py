@@ -7,11 +7,10 @@ then held. What the base and the feet do is measured: base tilt from the planned
 foot slip along the ground, base drift from the planned position. This is the paper's Gazebo
 test made a number.
 
-Why MuJoCo (not pybullet): one ~20 MB wheel per platform with no build step, a URDF importer
-(``MjSpec.from_string``) that we can edit before compiling (free joint, ground, actuators,
-contact filters, sites) instead of rewriting the URDF, implicit integration of actuator damping
-(stiff position servos at a 1 ms step), exact soft contacts with a pyramidal/elliptic friction
-cone, and ``mj_geomDistance`` to place the feet on the ground; it loads centauro's and talos's
+Why MuJoCo (not pybullet): about 25 MB of wheels with no build step; a URDF importer (``MjSpec``) whose
+model we edit before compiling (free joint, ground, servos, contact filters, foot sites) instead of
+rewriting the URDF text; servo damping integrated implicitly (``implicitfast``), so stiff position servos
+run at a 1 ms step; ``mj_geomDistance`` to set the feet on the ground. It reads centauro's and talos's
 example-robot-data URDFs and meshes as they are.
 
 The model (see docs/physics.md):
@@ -25,7 +24,7 @@ The model (see docs/physics.md):
 - joints: each one a critically damped PD servo (MuJoCo ``general`` actuator, damping integrated
   implicitly) whose stiffness is ``(2 pi f)^2 M_jj`` with ``M_jj`` the joint's diagonal of the joint-space
   inertia at the first state (armature included): every joint has natural frequency ``f``. Joints
-  outside the planning group are held at their locked values;
+  outside the planning group are welded at their locked values (their mimic equalities dropped);
 - time: segment k gets a nominal duration, the larger of ``seconds_per_rad`` times its largest angle change
   (joints and base angles) and ``seconds_per_m`` times its base translation; the whole path is then run on a
   quintic ease-in/ease-out of its total (zero velocity and acceleration at both ends, peak speed the nominal
@@ -116,8 +115,8 @@ def check_path_file(path_file: str | Path, settings: PhysicsSettings | None = No
 
     meta, arrays = load_npz(path_file, ("path",))
     if not meta.get("floating_base"):
-        raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the physics "
-                               "check needs a floating-base robot standing on its feet (a balance task's path)")
+        raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the "
+                               "physics check needs a floating-base robot standing on its feet (a balance task's path)")
     task = task_from_meta(meta)
     feet = list(feet) if feet else balance_feet(meta.get("constraint") or {})
     if not feet:
@@ -198,8 +197,8 @@ def _foot_links(robot: Robot, feet: list[str]) -> dict[str, tuple[str, np.ndarra
         if frame.type == pin.FrameType.BODY:
             link = fid
         else:  # a joint's frame: the link that joint carries
-            link = next((i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY and f.parentFrame == fid),
-                        None)
+            link = next((i for i, f in enumerate(model.frames)
+                         if f.type == pin.FrameType.BODY and f.parentFrame == fid), None)
             if link is None:
                 raise ManifoldgenError(f"foot frame '{foot}' of {robot.name} carries no link; name a link as the foot")
         out[foot] = (model.frames[link].name, (data.oMf[link].inverse() * data.oMf[fid]).homogeneous)
@@ -322,8 +321,8 @@ class _Simulation:
         self.dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in self.joint_names])
         mass = float(m.body_subtreemass[0])
         self.engine = {"engine": "mujoco", "version": mujoco.__version__, "bodies": int(m.nbody - 1),
-                       "servoed_joints": len(self.joint_names), "welded_joints": welded, "mass_kg": mass, "pinocchio_mass_kg": robot.mass,
-                       "contact_geoms": sorted(foot_geoms), "dropped_geoms": dropped,
+                       "servoed_joints": len(self.joint_names), "welded_joints": welded, "mass_kg": mass,
+                       "pinocchio_mass_kg": robot.mass, "contact_geoms": sorted(foot_geoms), "dropped_geoms": dropped,
                        "meshes_from_pinocchio": converted}
         if abs(mass - robot.mass) > 1e-6 * max(1.0, robot.mass):
             raise ManifoldgenError(f"MuJoCo's model of {robot.name} weighs {mass:.3f} kg but pinocchio's "
@@ -343,7 +342,7 @@ class _Simulation:
 
     # ------------------------------------------------------------------ state
     def _qpos(self, q: np.ndarray) -> np.ndarray:
-        """MuJoCo qpos (nq,) of a group configuration q (n,): base pose, group and locked joints."""
+        """MuJoCo qpos (nq,) of a group configuration q (n,): free joint pose (quaternion w, x, y, z), joints."""
         qpos = self.model.qpos0.copy()
         qpos[:3] = q[:3]
         R = pin.rpy.rpyToMatrix(q[5], q[4], q[3])
@@ -357,7 +356,6 @@ class _Simulation:
         mujoco, m, d = self.mujoco, self.model, self.data
         d.qpos[:] = self._qpos(q0)
         mujoco.mj_kinematics(m, d)
-        mujoco.mj_collision(m, d)
         gaps = {f: min(mujoco.mj_geomDistance(m, d, g, self.ground, 10.0, None) for g in ids)
                 for f, ids in self.foot_geom_ids.items()}
         shift = -min(gaps.values())
