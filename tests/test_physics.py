@@ -102,6 +102,9 @@ def test_a_balanced_path_stays_upright(paths):
     assert result.engine["model_error_m"] < 1e-6  # MuJoCo and pinocchio put the feet and CoM at the same place
     assert result.simulated_s > FAST.settle_s + FAST.hold_s
     assert json.loads(json.dumps(result.to_dict()))["settings"]["tilt_threshold_deg"] == 10.0
+    again = check_path_file(paths["balanced"], FAST)  # deterministic: the same numbers again
+    assert (again.max_tilt_deg, again.foot_slip_m, again.base_drift_m) == (result.max_tilt_deg, result.foot_slip_m,
+                                                                          result.base_drift_m)
 
 
 def test_an_unbalanced_path_falls(paths):
@@ -124,6 +127,10 @@ def test_bad_inputs_are_one_line(paths, balance_task, panda_task, tmp_path):
     runner = CliRunner()
     fixed = runner.invoke(app, ["physics", str(_save(panda_task, tmp_path, "panda", [panda_task.home]))])
     assert fixed.exit_code != 0 and "floating-base" in fixed.output
+    lifted = balance_task.home.copy()
+    lifted[balance_task.robot.joints.index("hip_pitch_1")] -= 0.3  # front-left wheel 9 cm off the ground
+    result = runner.invoke(app, ["physics", str(_save(balance_task, tmp_path, "lifted", [lifted])), "--hold", "0"])
+    assert result.exit_code == 0 and "wheel_1 does not touch the ground" in result.output
     no_feet = _save(balance_task, tmp_path, "nofeet", [balance_task.home])
     with pytest.raises(ManifoldgenError, match="unknown frame"):
         check_path_file(no_feet, FAST, feet=["nope"])

@@ -50,6 +50,7 @@ from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot, robots_dir
 
 _MESH_FORMATS = (".stl", ".obj", ".msh")  # what MuJoCo reads itself
+_GAP = 0.005  # m: a foot further above the ground at the start is reported as not touching it
 _PEAK_SPEED = 1.875  # peak / mean speed of the quintic ease 10u^3 - 15u^4 + 6u^5
 
 
@@ -460,7 +461,9 @@ def summary(result: PhysicsResult) -> str:
              f"  max base tilt {result.max_tilt_deg:.2f} deg, base drift {result.base_drift_m:.4f} m "
              f"(final {result.final_drift_m:.4f} m), joint tracking error {result.max_tracking_error_rad:.4f} rad",
              "  foot slip " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.foot_slip_m.items()),
-             "  foot gap at start " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.start_foot_gap_m.items()),
+             "  foot gap at start " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.start_foot_gap_m.items())
+             + "".join(f"; {f} does not touch the ground: the first state is not a stance on these feet"
+                       for f, v in result.start_foot_gap_m.items() if v > _GAP),
              f"  {result.engine['engine']} {result.engine['version']}: {result.engine['mass_kg']:.2f} kg, "
              f"{len(result.engine['contact_geoms'])} contact geometries, {result.engine['dropped_geoms']} other "
              f"collision geometries dropped; {result.simulated_s:.2f} s simulated in {result.wall_s:.2f} s wall, "
