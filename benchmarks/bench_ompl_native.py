@@ -9,8 +9,9 @@ with our constraint and collision checker compiled; build it first with
 ``benchmarks/ompl_native/build.sh``). Every path gets the same dense check (0.005 rad) and the same
 retry policy. Prints per scene and method: success, median CPU and wall time (an unsolved run
 counts as slower than every solved one; CPU includes our dense check of the returned paths, and
-the C++ baseline's share is given apart), and the median FK evaluations and collision checks of
-the solved runs; each scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCENE.
+the C++ baseline's share is given apart), and the median collision checks, FK evaluations and
+samples drawn (ours: from the CVAE sampler; OMPL's: by its own sampler) of the solved runs; each
+scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCENE.
 """
 
 import argparse
@@ -39,12 +40,13 @@ def summary(records: list[dict], methods: list[str], scene: str) -> list[str]:
         solved = [r for r in runs if r["solved"]]
         failed = len(runs) - len(solved)
         ops = {k: (f"{np.median([r['ops'][k] for r in solved]):,.0f}" if solved else "-")
-               for k in ("collision_checks", "fk")}
+               for k in ("collision_checks", "fk", "samples")}
         native = [r["extras"]["native_cpu_s"] for r in solved if "native_cpu_s" in r.get("extras", {})]
         rows.append(f"| {scene} | {method} | {len(solved)}/{len(runs)} | "
                     f"{_median([r['cpu_s'] for r in solved], failed)} | "
                     f"{f'{np.median(native):.3g}' if native else '-'} | "
-                    f"{_median([r['time_s'] for r in solved], failed)} | {ops['collision_checks']} | {ops['fk']} |")
+                    f"{_median([r['time_s'] for r in solved], failed)} | {ops['collision_checks']} | {ops['fk']} | "
+                    f"{ops['samples']} |")
     return rows
 
 
@@ -60,7 +62,8 @@ def main() -> None:
     methods = [m.format(model=pretrained_model_dir()) for m in METHODS]
     labels = [m.split("=")[0] for m in methods]
     lines = ["| scene | method | solved | median CPU (s) | of which C++ OMPL, solved (s) | median wall (s) "
-             "| collision checks, solved (median) | FK evaluations, solved (median) |", "|---|---|---|---|---|---|---|---|"]
+             "| collision checks, solved (median) | FK evaluations, solved (median) | samples drawn, solved (median) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for scene in args.scenes:
         out = Path(args.out) / scene
         run_bench(Experiment(scene, time_limit=args.time), methods, out, runs=args.runs, workers=args.workers,

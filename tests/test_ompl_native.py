@@ -59,6 +59,7 @@ def test_atlas_path_passes_our_dense_check_and_is_reproducible(maze):
     assert task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
     ops = result.extras["native_ops"]
     assert ops["fk"] >= ops["jacobians"] > 0 and ops["collision_checks"] > 0 and result.extras["native_cpu_s"] > 0
+    assert ops["samples"] > 0 and result.iterations >= 2  # OMPL's own samples; its tree's vertices
     again = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(scene.start, scene.goal, 20.0)
     np.testing.assert_array_equal(again.path, path)
 
@@ -68,6 +69,12 @@ def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
     monkeypatch.setenv(ompl_native.BINARY_ENV, str(tmp_path / "missing"))
     with pytest.raises(ManifoldgenError, match="not built.*build.sh"):
         ompl_native.NativeOmplPlanner(space)
+    broken = tmp_path / "broken"
+    broken.write_text("#!/bin/sh\necho 'ompl_native: cannot read problem file' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setenv(ompl_native.BINARY_ENV, str(broken))
+    with pytest.raises(ManifoldgenError, match="baseline failed: ompl_native: cannot read problem file; rebuild"):
+        ompl_native.NativeOmplPlanner(space).solve(scene.start, scene.goal, 1.0)
     plane = PlaneConstraint(task.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])
     with pytest.raises(ManifoldgenError, match="pose constraints only"):
         ompl_native.NativeOmplPlanner(ConstrainedSpace(plane, [0.4]))

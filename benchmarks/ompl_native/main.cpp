@@ -8,7 +8,8 @@
 // Protocol (one line each, stdout answers, stdin asks): "ready LOAD_S" -> "go TIME_LIMIT";
 // then for every exact OMPL solution "path K" and K lines of n numbers -> "valid" or "invalid"
 // (manifoldgen's dense check decides; on "invalid" the search restarts within the remaining time,
-// the atlas keeps its charts); finally "done {JSON}" with the outcome and the operation counts.
+// the atlas keeps its charts); finally "done {JSON}" with the outcome and the operation counts
+// (constraint FK evaluations, Jacobians, collision checks, samples OMPL's sampler drew).
 //
 // Tolerance: OMPL tests || F_i / tol_i ||_2 <= t with t = settings.tolerance (1 - margin): our
 // residual scaled component-wise by our tolerances, as manifoldgen's Python OMPL bridge does.
@@ -78,6 +79,41 @@ class ScaledConstraint : public ob::Constraint {
  private:
   mgnative::Problem& problem_;
   Eigen::VectorXd scale_;
+};
+
+// OMPL's own state sampler, counting the samples it draws.
+class CountingSampler : public ob::StateSampler {
+ public:
+  CountingSampler(const ob::StateSpace* space, ob::StateSamplerPtr inner, long& count)
+      : ob::StateSampler(space), inner_(std::move(inner)), count_(count) {}
+  void sampleUniform(ob::State* state) override {
+    ++count_;
+    inner_->sampleUniform(state);
+  }
+  void sampleUniformNear(ob::State* state, const ob::State* near, double distance) override {
+    ++count_;
+    inner_->sampleUniformNear(state, near, distance);
+  }
+  void sampleGaussian(ob::State* state, const ob::State* mean, double std_dev) override {
+    ++count_;
+    inner_->sampleGaussian(state, mean, std_dev);
+  }
+
+ private:
+  ob::StateSamplerPtr inner_;
+  long& count_;
+};
+
+// RRTConnect drawing from a CountingSampler around the space's own sampler (the atlas ignores a
+// sampler allocator, so the planner's sampler is wrapped instead).
+class CountingRRTConnect : public og::RRTConnect {
+ public:
+  explicit CountingRRTConnect(const ob::SpaceInformationPtr& si) : og::RRTConnect(si) {}
+  ob::PlannerStatus solve(const ob::PlannerTerminationCondition& ptc) override {
+    if (!sampler_) sampler_ = std::make_shared<CountingSampler>(si_->getStateSpace().get(), si_->allocStateSampler(), samples);
+    return og::RRTConnect::solve(ptc);
+  }
+  long samples = 0;
 };
 
 std::string expect(const std::string& word) {
@@ -150,7 +186,7 @@ int plan(mgnative::Problem& problem, double load_s) {
     atlas->anchorChart(goal.get());
   }
   setup.setStartAndGoalStates(start, goal);
-  auto planner = std::make_shared<og::RRTConnect>(si);
+  auto planner = std::make_shared<CountingRRTConnect>(si);
   if (settings.range > 0) planner->setRange(settings.range);
   setup.setPlanner(planner);
   setup.setup();
@@ -180,9 +216,10 @@ int plan(mgnative::Problem& problem, double load_s) {
   long charts = settings.space == "projected" ? 0 : std::static_pointer_cast<ob::AtlasStateSpace>(space)->getChartCount();
   std::printf(
       "done {\"solved\": %s, \"status\": \"%s\", \"attempts\": %d, \"rejected_paths\": %d, \"vertices\": %ld, "
-      "\"charts\": %ld, \"projections\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"collision_checks\": %ld, "
+      "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"collision_checks\": %ld, "
       "\"wall_s\": %.6f, \"cpu_s\": %.6f, \"load_s\": %.6f}\n",
       solved ? "true" : "false", status.c_str(), attempts, rejected, vertices, charts, constraint->projections,
+      planner->samples,
       problem.counts.fk, problem.counts.jacobians, problem.counts.collision_checks, wall, cpu, load_s);
   std::fflush(stdout);
   return 0;

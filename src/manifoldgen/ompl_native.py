@@ -160,35 +160,37 @@ class NativeOmplPlanner:
             problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
                                      resolution=self.resolution, seed=self.seed, time_limit=time_limit,
                                      settings=self.settings)
-            with subprocess.Popen([str(self.binary), str(problem)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True) as child:
+            log = Path(folder) / "stderr.txt"  # a file, not a pipe: OMPL's warnings can never block the program
+            with log.open("w") as errors, subprocess.Popen([str(self.binary), str(problem)], stdin=subprocess.PIPE,
+                                                           stdout=subprocess.PIPE, stderr=errors, text=True) as child:
                 try:
-                    self._expect(child, "ready")
+                    self._expect(child, log, "ready")
                     began = time.perf_counter()
-                    path, worst, reason, done = self._converse(child, time_limit, n)
+                    path, worst, reason, done = self._converse(child, log, time_limit, n)
                     elapsed = time.perf_counter() - began
                 finally:
-                    child.kill() if child.poll() is None else None
+                    if child.poll() is None:
+                        child.kill()
         solved = bool(done["solved"])
         extras = {"space": self.ompl_space, "ompl_planner": "rrtconnect", "ompl_status": done["status"],
                   "ompl_solved": solved or done["rejected_paths"] > 0, "vertices": done["vertices"],
                   "charts": done["charts"], "attempts": done["attempts"], "rejected_paths": done["rejected_paths"],
                   "resolution": self.resolution, "ompl_tolerance": 1.0 - self.space.settings.margin,
-                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "collision_checks")},
+                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "collision_checks", "samples")},
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
         return PlanResult(solved, path, elapsed, int(done["vertices"]), 0, int(done["projections"]), self.name,
                           path_length(path), extras)
 
-    def _converse(self, child, time_limit: float, n: int):
+    def _converse(self, child, log: Path, time_limit: float, n: int):
         """Send go, answer every candidate path with our dense check; (path, worst violation, reason of
         the last rejection, the program's closing report)."""
         child.stdin.write(f"go {time_limit!r}\n")
         child.stdin.flush()
         path, worst, reason = np.zeros((0, n)), float("nan"), ""
         while True:
-            line = self._expect(child, "path", "done")
+            line = self._expect(child, log, "path", "done")
             if line.startswith("done "):
                 return path, worst, reason, json.loads(line[5:])
             count = int(line.split()[1])
@@ -199,11 +201,12 @@ class NativeOmplPlanner:
             child.stdin.flush()
 
     @staticmethod
-    def _expect(child, *words: str) -> str:
+    def _expect(child, log: Path, *words: str) -> str:
         line = child.stdout.readline()
         if not line.startswith(words):
             child.kill()
-            message = child.stderr.read().strip().splitlines()
+            child.wait()
+            message = log.read_text().strip().splitlines()
             raise ManifoldgenError(f"the C++ OMPL baseline failed: {message[-1] if message else 'no answer'}; "
                                    "rebuild it with benchmarks/ompl_native/build.sh")
         return line.strip()

@@ -16,9 +16,11 @@ Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Ru
 worker processes (each builds its own robot, checker, sampler and planner, with one torch
 thread); each finished run is appended to ``runs.jsonl`` at once, so an interrupted benchmark
 keeps its runs and ``resume=True`` skips them. A record holds the run's CPU time (``cpu_s``: this
-process's, plus the C++ baseline's own) and its operation counts (``ops``, see :func:`operations`). Every solved path is re-validated here,
-independently of the planner, by the space's dense check (``ValidationSettings.resolution``); a
-run counts as solved only when that check passes and the planner answered within the time limit. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
+process's, plus the C++ baseline's own) and its operation counts (``ops``, see :func:`operations`).
+Every solved path is re-validated here, independently of the planner, by the space's dense check
+(``ValidationSettings.resolution``); a run counts as solved only when that check passes and the
+planner answered within the time limit. ``results.md`` and box plots summarise the records
+(:mod:`manifoldgen.bench.report`).
 """
 
 from __future__ import annotations
@@ -192,7 +194,8 @@ def operations(result, before: dict, after: dict) -> dict:
     was computed (residual, or residual and Jacobian), ``jacobians``, ``projection_steps`` (Newton /
     Levenberg-Marquardt iterations over all rows), ``collision_checks`` (configurations checked for
     collision, robot-robot and robot-scene pairs together in one broad phase, each with its own FK of
-    every link), ``samples`` (configurations drawn from our sampler), ``nodes`` (tree or roadmap
+    every link), ``samples`` (configurations drawn from our sampler, or by the C++ baseline's OMPL
+    sampler; the Python-callback OMPL methods' own samples are not counted), ``nodes`` (tree or roadmap
     vertices). ``before`` / ``after``: the space's :meth:`~manifoldgen.space.ConstrainedSpace.counts`
     around the solve; the OMPL baselines add what their own callbacks counted (OMPL's projections are
     Newton steps, one Jacobian each)."""
@@ -205,7 +208,7 @@ def operations(result, before: dict, after: dict) -> dict:
             + native.get("fk", 0),
             "jacobians": d["jacobians"] + newton, "projection_steps": d["projection_steps"] + newton,
             "collision_checks": d["collision_checks"] + native.get("collision_checks", 0),
-            "samples": int(result.samples_drawn), "nodes": int(nodes)}
+            "samples": int(result.samples_drawn) + native.get("samples", 0), "nodes": int(nodes)}
 
 
 def run_once(experiment: Experiment, method: Method, run: int) -> dict:

@@ -161,7 +161,8 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "\n\n" + table + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own, "
             "plus the C++ baseline's; FK: configurations whose constraint kinematics was computed, Jacobians "
             "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "
-            "each with its own FK of every link; OMPL's internal samples are not counted):\n\n"
+            "each with its own FK of every link; samples: from our samplers, or drawn by the C++ OMPL baseline's "
+            "sampler, not counted for the Python-callback OMPL methods):\n\n"
             + operations_table(records, order) + "\n![time](time.png)\n\n![length](length.png)\n")
     atomic_write_text(out_dir / "results.md", text)
     atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",
