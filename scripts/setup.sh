@@ -13,3 +13,11 @@ if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/
   (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium) \
     >/dev/null 2>&1 || echo "setup: chromium not installed; the browser tests will be skipped"
 fi
+# Optional benchmark extra: the C++ OMPL baseline (Debian's libompl-dev; `bench` methods ompl-native-*).
+# Never fails the set-up: without it those methods say how to build it.
+if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null && command -v cmake >/dev/null; then
+  ( (dpkg -s libompl-dev >/dev/null 2>&1 || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+      apt-get install -y -qq --no-install-recommends libompl-dev)) \
+    && PYTHON=.venv/bin/python benchmarks/ompl_native/build.sh ) >/dev/null 2>&1 \
+    || echo "setup: the C++ OMPL baseline was not built (optional; see benchmarks/ompl_native/README.md)"
+fi

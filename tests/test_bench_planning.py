@@ -36,8 +36,11 @@ def test_method_parsing():
     m = Method.parse("ompl-atlas-prm@pg:data/pg.npz")
     assert m.is_ompl and m.label == "ompl-atlas-prm@pg:pg.npz" and m.sampler == "pg:data/pg.npz"
     assert default_baseline(["x=rrtconnect", "ref=ompl-projected-rrtconnect"]) == "ref"
+    m = Method.parse("ompl-native-atlas")
+    assert m.is_ompl and (m.label, m.local, m.sampler) == ("ompl-native-atlas", "", None)
     for bad, message in [("ompl-curved-rrt", "OMPL methods"), ("rrtconect", "unknown planner"),
-                         ("rrtconnect:walk", "unknown local"), ("ompl-atlas-rrt:project", "no local planner")]:
+                         ("rrtconnect:walk", "unknown local"), ("ompl-atlas-rrt:project", "no local planner"),
+                         ("ompl-native-curved", "ompl-native-SPACE"), ("ompl-native-atlas@pg", "without a local")]:
         with pytest.raises(ManifoldgenError, match=message):
             Method.parse(bad)
 
@@ -53,6 +56,11 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
         assert r["solved"] and r["valid"] and r["planner_solved"] and r["why"].startswith("solved in")
         assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"] and not r["late"]
         assert 0 < r["cpu_s"]
+        ops = r["ops"]  # counted at the source: every solve evaluates, checks and grows trees
+        assert ops["fk"] > 0 and ops["collision_checks"] > 0
+        if r["method"] == "atlas":  # OMPL: a Newton step is one Jacobian; nodes are its planner's vertices
+            assert ops["jacobians"] == ops["projection_steps"] > 0 and ops["nodes"] == r["iterations"] >= 2
+        assert ops["samples"] == r["samples_drawn"]
     # the same seed gives the same run (OMPL reseeded in every worker, our samplers seeded)
     rerun = run_once(experiment, Method.parse(METHODS[0]), 1)
     first = next(r for r in records if (r["method"], r["run"]) == ("atlas", 1))
@@ -60,6 +68,7 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     assert [(s.method, s.runs, s.solved) for s in summaries] == [("atlas", 2, 2), ("pg", 2, 2)]
     text = (out / "results.md").read_text()
     assert "| atlas | 2 | 100.0 |" in text and "| pg | 2 | 100.0 |" in text and table in text
+    assert "| Median CPU (s) |" in text and "| atlas | 2/2 |" in text and "| pg | 2/2 |" in text
     assert (out / "time.png").read_bytes()[:4] == b"\x89PNG" and (out / "length.png").stat().st_size > 0
     assert json.loads((out / "config.json").read_text())["methods"] == METHODS
     assert (out / "pg-easy-300.npz").is_file()

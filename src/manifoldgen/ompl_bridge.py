@@ -23,8 +23,11 @@ bindings, so they refuse a sampler.
 The returned path is OMPL's solution densified by OMPL's ``interpolate`` and then checked
 by the space's :meth:`~manifoldgen.space.ConstrainedSpace.validate_path`:
 OMPL guarantees only its own states (to its tolerance, ``delta`` apart on the manifold),
-not the straight segments between them. ``solved`` requires OMPL's exact solution *and* a
-valid path; ``extras`` keeps both verdicts, the worst violation and the reason.
+not the straight segments between them. A path that fails the check does not end the query: as
+our planners cut a rejected edge and go on, OMPL searches again (``SimpleSetup::clear``: a new
+tree; the atlas keeps its charts) within the time left. ``solved`` requires OMPL's exact solution
+*and* a valid path; ``extras`` keeps both verdicts, the attempts, the rejected paths, the worst
+violation and the reason.
 Constraint evaluations are our batched numpy code called one state at a time, so OMPL
 pays Python overhead on every Newton step: ``projections`` counts calls of OMPL's
 ``Constraint::project`` (the projected space; atlas and tangent bundle project through
@@ -282,22 +285,30 @@ class OmplPlanner:
                 planner.setRange(self.settings.range)
             setup.setPlanner(planner)
             setup.setup()
-            status = setup.solve(float(time_limit) - (time.perf_counter() - began))
-            elapsed = time.perf_counter() - began
-            exact = bool(setup.haveExactSolutionPath())
-            data = ob.PlannerData(si)
-            setup.getPlannerData(data)
-            extras = {"space": self.ompl_space, "ompl_planner": self.planner_name, "ompl_status": str(status),
-                      "ompl_solved": exact, "vertices": int(data.numVertices()), "resolution": self.resolution,
-                      "ompl_tolerance": 1.0 - margin}
+            exact, attempts, rejected, vertices, report, status = False, 0, 0, 0, None, "not run"
             path = np.zeros((0, n))
-            if exact:
+            while (remaining := float(time_limit) - (time.perf_counter() - began)) > 0:
+                if attempts:  # our dense check refused OMPL's path: search again (the atlas keeps its charts)
+                    setup.clear()
+                attempts += 1
+                status = setup.solve(remaining)
+                data = ob.PlannerData(si)
+                setup.getPlannerData(data)
+                vertices += int(data.numVertices())
+                exact = bool(setup.haveExactSolutionPath())
+                if not exact:
+                    break
                 solution = setup.getSolutionPath()
-                extras["ompl_states"] = int(solution.getStateCount())
-                densify_began = time.perf_counter()
                 solution.interpolate()
                 path = np.array([read_state(state, n) for state in solution.getStates()])
-                extras["interpolate_s"] = time.perf_counter() - densify_began
+                report = self.space.validate_path(path)
+                if report.valid:
+                    break
+                rejected += 1
+            elapsed = time.perf_counter() - began
+            extras = {"space": self.ompl_space, "ompl_planner": self.planner_name, "ompl_status": str(status),
+                      "ompl_solved": exact or rejected > 0, "vertices": vertices, "resolution": self.resolution,
+                      "ompl_tolerance": 1.0 - margin, "attempts": attempts, "rejected_paths": rejected}
             if self.ompl_space in ("atlas", "tangent"):
                 extras["charts"] = int(space.getChartCount())
             drawn = sum(b.drawn for b in bridge)
@@ -307,14 +318,13 @@ class OmplPlanner:
         finally:  # the allocator's closure holds the samplers, which hold the SpaceInformation: a cycle through C++
             if self.sampler is not None:
                 si.clearValidStateSamplerAllocator()
-        if exact:
-            report = self.space.validate_path(path)
+        if report is not None:
             extras.update(valid=report.valid, worst_violation=report.worst_violation, reason=report.reason)
         if ompl_constraint is not None:
             extras.update(function_evals=ompl_constraint.function_evals, newton_steps=ompl_constraint.jacobian_evals)
-        solved = exact and bool(extras["valid"])
+        solved = exact and report is not None and report.valid
         projections = ompl_constraint.projections if ompl_constraint is not None else 0
-        return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, int(data.numVertices()), drawn,
+        return PlanResult(solved, path if solved else np.zeros((0, n)), elapsed, vertices, drawn,
                           projections, self.name, path_length(path) if solved else 0.0, extras)
 
 

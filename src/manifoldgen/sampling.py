@@ -82,7 +82,7 @@ class ProjectionSampler(Sampler):
 
     def candidates(self, count):
         space = self.space
-        q = project(space.constraint, space.robot.sample_uniform(count, self.rng), space.y).q
+        q = space.project(space.robot.sample_uniform(count, self.rng)).q
         self.stats.refined += count
         return q
 
@@ -122,7 +122,8 @@ class ModelSampler(Sampler):
         self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
 
     def candidates(self, count):
-        q = generate(self.model, self.space.constraint, self.space.y, count, self.generator, self.refine)[1]
+        q = self.model.sample(self.space.y, count, self.generator)
+        q = self.space.project(q, max_iters=self.refine).q if self.refine else q
         self.stats.refined += count if self.refine else 0
         return q
 

@@ -13,7 +13,8 @@ A configuration ``q (n,)`` is valid at the condition ``y (k,)`` when, tested in 
 
 A motion is a straight segment checked at its states; a path is valid when every state every
 ``settings.resolution`` along its segments is. Every sampler, collector, local planner, planner,
-the OMPL bridge and the benchmarks ask this object; its counters say what the checks cost.
+the OMPL bridge and the benchmarks ask this object; its counters say what the checks cost
+(projections onto the manifold go through :meth:`ConstrainedSpace.project` to be counted too).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from manifoldgen.collision import CollisionChecker
-from manifoldgen.constraints import Constraint
+from manifoldgen.constraints import Constraint, Projection, project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import as_batch
 
@@ -80,7 +81,9 @@ class ConstrainedSpace:
     """The configurations of ``constraint.robot`` valid at condition ``y (k,)`` among ``checker``'s
     obstacles (None: no collision test), by the rule of the module doc.
 
-    Counters since construction: ``evaluations`` (configurations whose constraint was evaluated),
+    Counters since construction: ``evaluations`` (configurations whose constraint residual was
+    evaluated), ``jacobians`` (configurations whose residual and Jacobian were evaluated, by
+    :meth:`project`), ``projection_steps`` (projection iterations, summed over rows),
     ``collision_checks`` (configurations checked for collision), ``stopped`` (motion checks that
     stopped short, by the reason of their first invalid state); ``stop`` is that reason for the
     latest motion check (None when it passed).
@@ -91,7 +94,7 @@ class ConstrainedSpace:
         self.constraint, self.robot, self.checker, self.settings = constraint, constraint.robot, checker, settings
         self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
         self._inequalities = constraint.inequality(self.robot.lower[None], self.y).shape[1] > 0
-        self.evaluations = self.collision_checks = 0
+        self.evaluations = self.jacobians = self.projection_steps = self.collision_checks = 0
         self.stopped = dict.fromkeys(REASONS, 0)
         self.stop: str | None = None
 
@@ -101,7 +104,8 @@ class ConstrainedSpace:
 
     def counts(self) -> dict:
         """The counters as a JSON-ready dict."""
-        return {"evaluations": self.evaluations, "collision_checks": self.collision_checks,
+        return {"evaluations": self.evaluations, "jacobians": self.jacobians,
+                "projection_steps": self.projection_steps, "collision_checks": self.collision_checks,
                 "stopped": dict(self.stopped)}
 
     # ---------------------------------------------------------------- the rule
@@ -110,6 +114,15 @@ class ConstrainedSpace:
         q = as_batch(q, self.n)
         self.evaluations += len(q)
         return self.constraint.violation(q, self.y)
+
+    def project(self, q: np.ndarray, **options) -> Projection:
+        """:func:`~manifoldgen.constraints.project` of ``q (B, n)`` onto this condition's manifold
+        (``options``: its keywords), counted: a row that stopped after ``i`` iterations evaluated
+        ``i + 1`` residuals with Jacobians."""
+        result = project(self.constraint, q, self.y, **options)
+        self.jacobians += int(result.iterations.sum()) + len(result.iterations)
+        self.projection_steps += int(result.iterations.sum())
+        return result
 
     def _failures(self, q: np.ndarray, limit, equality: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(B,) code of the first failed test before collision (0: none; i + 1: ``REASONS[i]``) and

@@ -5,7 +5,8 @@ A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
 - ``PLANNER``: one of :data:`manifoldgen.planning.PLANNERS` (``rrtconnect``, ``cbirrt``, ...)
   with a ``LOCAL`` planner (``auto`` by default, ``interpolate`` or ``project``), or an OMPL baseline
   ``ompl-SPACE-PLANNER`` (e.g. ``ompl-projected-rrtconnect``, ``ompl-atlas-prm``; see
-  :mod:`manifoldgen.ompl_bridge`);
+  :mod:`manifoldgen.ompl_bridge`), or the C++ OMPL baseline ``ompl-native-SPACE`` (RRTConnect in
+  ``projected``, ``atlas`` or ``tangent``, the callbacks compiled; see :mod:`manifoldgen.ompl_native`);
 - ``SAMPLER``: a sampler spec for :func:`manifoldgen.specs.make_sampler` (``cvae:DIR``,
   ``pg:DATASET.npz``, ``project``, ``uniform``); ``pg`` alone means a PG dataset of
   ``pg_rows`` configurations at the scene's condition, collected once into the output folder.
@@ -14,9 +15,12 @@ A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
 Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Runs execute in
 worker processes (each builds its own robot, checker, sampler and planner, with one torch
 thread); each finished run is appended to ``runs.jsonl`` at once, so an interrupted benchmark
-keeps its runs and ``resume=True`` skips them. Every solved path is re-validated here,
-independently of the planner, by the space's dense check (``ValidationSettings.resolution``); a
-run counts as solved only when that check passes and the planner answered within the time limit. ``results.md`` and box plots summarise the records (:mod:`manifoldgen.bench.report`).
+keeps its runs and ``resume=True`` skips them. A record holds the run's CPU time (``cpu_s``: this
+process's, plus the C++ baseline's own) and its operation counts (``ops``, see :func:`operations`).
+Every solved path is re-validated here, independently of the planner, by the space's dense check
+(``ValidationSettings.resolution``); a run counts as solved only when that check passes and the
+planner answered within the time limit. ``results.md`` and box plots summarise the records
+(:mod:`manifoldgen.bench.report`).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ CONFIG_FILE = "config.json"
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
+NATIVE_PREFIX = "ompl-native-"
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,12 @@ class Method:
         if not planner:
             raise ManifoldgenError(f"method '{text}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
                                    "e.g. rrtconnect:interpolate@cvae:models/cvae or ompl-projected-rrtconnect")
-        if planner.startswith(OMPL_PREFIX):
+        if planner.startswith(NATIVE_PREFIX):
+            from manifoldgen.ompl_native import SPACES as NATIVE_SPACES
+            if planner[len(NATIVE_PREFIX):] not in NATIVE_SPACES or local or sampler:
+                raise ManifoldgenError(f"method '{text}': the C++ OMPL methods are ompl-native-SPACE with SPACE in "
+                                       f"{', '.join(NATIVE_SPACES)}, without a local planner or sampler")
+        elif planner.startswith(OMPL_PREFIX):
             from manifoldgen.ompl_bridge import PLANNERS as OMPL_PLANNERS, SPACES
             parts = planner[len(OMPL_PREFIX):].split("-")
             if len(parts) != 2 or parts[0] not in SPACES or parts[1] not in OMPL_PLANNERS:
@@ -160,7 +170,11 @@ def build(experiment: Experiment, method: Method, seed: int):
     scene = get_scene(task, experiment.scene)
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
-    if method.is_ompl:
+    if method.planner.startswith(NATIVE_PREFIX):
+        from manifoldgen.ompl_native import NativeOmplPlanner
+        planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
+                                    resolution=experiment.resolution, seed=seed)
+    elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
         planner = OmplPlanner(space, sampler, ompl_space=ompl_space, planner=planner_name,
@@ -175,6 +189,28 @@ def build(experiment: Experiment, method: Method, seed: int):
     return planner, scene, space
 
 
+def operations(result, before: dict, after: dict) -> dict:
+    """What a solve cost, counted at the source: ``fk`` configurations whose constraint kinematics
+    was computed (residual, or residual and Jacobian), ``jacobians``, ``projection_steps`` (Newton /
+    Levenberg-Marquardt iterations over all rows), ``collision_checks`` (configurations checked for
+    collision, robot-robot and robot-scene pairs together in one broad phase, each with its own FK of
+    every link), ``samples`` (configurations drawn from our sampler, or by the C++ baseline's OMPL
+    sampler; the Python-callback OMPL methods' own samples are not counted), ``nodes`` (tree or roadmap
+    vertices). ``before`` / ``after``: the space's :meth:`~manifoldgen.space.ConstrainedSpace.counts`
+    around the solve; the OMPL baselines add what their own callbacks counted (OMPL's projections are
+    Newton steps, one Jacobian each)."""
+    d = {k: after[k] - before[k] for k in ("evaluations", "jacobians", "projection_steps", "collision_checks")}
+    x = result.extras
+    native = x.get("native_ops", {})
+    newton = x.get("newton_steps", 0) + native.get("jacobians", 0)
+    nodes = x.get("vertices", sum(x.get("nodes", [])) or x.get("roadmap", {}).get("nodes", 0))
+    return {"fk": d["evaluations"] + d["jacobians"] + x.get("function_evals", 0) + x.get("newton_steps", 0)
+            + native.get("fk", 0),
+            "jacobians": d["jacobians"] + newton, "projection_steps": d["projection_steps"] + newton,
+            "collision_checks": d["collision_checks"] + native.get("collision_checks", 0),
+            "samples": int(result.samples_drawn) + native.get("samples", 0), "nodes": int(nodes)}
+
+
 def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     """One run of ``method`` (seed ``experiment.seed + run``) as a JSON-ready record."""
     seed = experiment.seed + run
@@ -184,9 +220,11 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     try:
         planner, scene, space = build(experiment, method, seed)
         record["build_s"] = time.perf_counter() - began
-        cpu = time.process_time()
+        cpu, before = time.process_time(), space.counts()
         result = planner.solve(scene.start, scene.goal, experiment.time_limit)
-        record["cpu_s"] = time.process_time() - cpu  # this process's CPU: robust to other load
+        # this process's CPU (robust to other load), plus the C++ baseline's over its solve
+        record["cpu_s"] = time.process_time() - cpu + result.extras.get("native_cpu_s", 0.0)
+        record["ops"] = operations(result, before, space.counts())
     except ManifoldgenError as exc:
         return {**record, "solved": False, "planner_solved": False, "time_s": experiment.time_limit,
                 "iterations": 0, "samples_drawn": 0, "projections": 0, "length": 0.0, "waypoints": 0,

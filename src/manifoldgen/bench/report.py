@@ -94,6 +94,25 @@ def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) 
     return "\n".join(lines) + "\n"
 
 
+OPERATIONS = ("fk", "jacobians", "projection_steps", "collision_checks", "samples", "nodes")
+
+
+def operations_table(records: list[dict], methods: list[str]) -> str:
+    """Markdown: per method, medians over its solved runs of the CPU time, the wall time and each
+    operation count of the records' ``ops`` (see :func:`manifoldgen.bench.planning.operations`)."""
+    header = ["Method", "Solved", "Median CPU (s)", "Median wall (s)", "FK", "Jacobians", "Projection steps",
+              "Collision checks", "Samples", "Nodes"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for method in methods:
+        runs = [r for r in records if r["method"] == method]
+        solved = [r for r in runs if r["solved"] and "ops" in r]
+        median = (lambda values: _num(float(np.median(values))) if values else "-")
+        row = [method, f"{len(solved)}/{len(runs)}", median([r["cpu_s"] for r in solved]),
+               median([r["time_s"] for r in solved])] + [median([r["ops"][k] for r in solved]) for k in OPERATIONS]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylabel: str, *,
              solved_only: bool = False, log: bool = True) -> bytes:
     """PNG bytes: one box per method of ``key`` (``time`` counts failures at the limit)."""
@@ -139,7 +158,12 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "Constraint::project; Atlas and TangentBundle project through charts and count 0). The worst "
             "violation is max |F_i| / tol_i over every state of every solved path, checked every "
             f"{ValidationSettings.resolution} rad."
-            "\n\n" + table + "\n![time](time.png)\n\n![length](length.png)\n")
+            "\n\n" + table + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own, "
+            "plus the C++ baseline's; FK: configurations whose constraint kinematics was computed, Jacobians "
+            "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "
+            "each with its own FK of every link; samples: from our samplers, or drawn by the C++ OMPL baseline's "
+            "sampler, not counted for the Python-callback OMPL methods):\n\n"
+            + operations_table(records, order) + "\n![time](time.png)\n\n![length](length.png)\n")
     atomic_write_text(out_dir / "results.md", text)
     atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",
                                                       "time (s, failures at the limit)"))

@@ -18,7 +18,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.space import ConstrainedSpace
 
@@ -108,8 +107,8 @@ class LocalPlanner(ABC):
                     break
             else:
                 target = q + (b - q) * min(1.0, length / max(gap, 1e-12))
-                projected = project(space.constraint, target[None], space.y, max_iters=self.max_iters,
-                                    tol=self.precision * float(space.constraint.tolerance.min()))
+                projected = space.project(target[None], max_iters=self.max_iters,
+                                          tol=self.precision * float(space.constraint.tolerance.min()))
                 self.projections += 1
                 nxt = projected.q[0]
                 moved = float(np.linalg.norm(nxt - q))

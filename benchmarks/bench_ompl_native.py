@@ -1,0 +1,79 @@
+"""Our learned sampler against OMPL at native speed: panda wall and maze, same queries and seeds.
+
+    python benchmarks/bench_ompl_native.py [--runs 30] [--time 10] [--scenes wall maze]
+                                           [--workers 1] [--out runs/ompl-native] [--resume]
+
+Methods, interleaved per seed in one run: the shipped CVAE with RRT-Connect (our default local
+planner) and the C++ OMPL baseline (``ompl-native-atlas``, ``-projected``, ``-tangent``: RRTConnect
+with our constraint and collision checker compiled; build it first with
+``benchmarks/ompl_native/build.sh``). Every path gets the same dense check (0.005 rad) and the same
+retry policy. Prints per scene and method: success, median CPU and wall time (an unsolved run
+counts as slower than every solved one; CPU includes our dense check of the returned paths, and
+the C++ baseline's share is given apart), and the median collision checks, FK evaluations and
+samples drawn (ours: from the CVAE sampler; OMPL's: by its own sampler) of the solved runs; each
+scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCENE.
+"""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from manifoldgen.bench.planning import RUNS_FILE, Experiment, read_records, run_bench
+from manifoldgen.models import pretrained_model_dir
+
+METHODS = ["cvae=rrtconnect@cvae:{model}", "atlas-c++=ompl-native-atlas", "projected-c++=ompl-native-projected",
+           "tangent-c++=ompl-native-tangent"]
+
+
+def _median(values: list[float], failures: int) -> str:
+    """Median with ``failures`` runs counted as slower than every value ('> limit' when they hold it)."""
+    ranked = sorted(values) + [np.inf] * failures
+    value = float(np.median(ranked)) if ranked else np.inf
+    return "> limit" if not np.isfinite(value) else f"{value:.3g}"
+
+
+def summary(records: list[dict], methods: list[str], scene: str) -> list[str]:
+    rows = []
+    for method in methods:
+        runs = [r for r in records if r["method"] == method]
+        solved = [r for r in runs if r["solved"]]
+        failed = len(runs) - len(solved)
+        ops = {k: (f"{np.median([r['ops'][k] for r in solved]):,.0f}" if solved else "-")
+               for k in ("collision_checks", "fk", "samples")}
+        native = [r["extras"]["native_cpu_s"] for r in solved if "native_cpu_s" in r.get("extras", {})]
+        rows.append(f"| {scene} | {method} | {len(solved)}/{len(runs)} | "
+                    f"{_median([r['cpu_s'] for r in solved], failed)} | "
+                    f"{f'{np.median(native):.3g}' if native else '-'} | "
+                    f"{_median([r['time_s'] for r in solved], failed)} | {ops['collision_checks']} | {ops['fk']} | "
+                    f"{ops['samples']} |")
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--runs", type=int, default=30)
+    parser.add_argument("--time", type=float, default=10.0)
+    parser.add_argument("--scenes", nargs="*", default=["wall", "maze"])
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--out", default="runs/ompl-native")
+    parser.add_argument("--resume", action="store_true")
+    args = parser.parse_args()
+    methods = [m.format(model=pretrained_model_dir()) for m in METHODS]
+    labels = [m.split("=")[0] for m in methods]
+    lines = ["| scene | method | solved | median CPU (s) | of which C++ OMPL, solved (s) | median wall (s) "
+             "| collision checks, solved (median) | FK evaluations, solved (median) | samples drawn, solved (median) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for scene in args.scenes:
+        out = Path(args.out) / scene
+        run_bench(Experiment(scene, time_limit=args.time), methods, out, runs=args.runs, workers=args.workers,
+                  resume=args.resume)
+        records = [r for r in read_records(out / RUNS_FILE) if r["run"] < args.runs]
+        lines += summary(records, labels, scene)
+    print(f"{args.runs} seeds per method, {args.time:g} s limit, {args.workers} worker(s), methods interleaved "
+          f"per seed; full reports in {args.out}/SCENE/results.md")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,212 @@
+"""The C++ OMPL baseline: OMPL's constrained spaces with our constraint and validity checker compiled.
+
+A benchmark extra (``benchmarks/ompl_native/``, built by its ``build.sh`` against Debian's
+``libompl-dev`` and the ``pin`` wheel's pinocchio and coal); manifoldgen runs without it.
+:class:`NativeOmplPlanner` has the :class:`~manifoldgen.planning.base.Planner` contract and is the
+``bench`` method ``ompl-native-SPACE`` (``projected``, ``atlas`` or ``tangent``, with RRTConnect).
+
+The problem goes to the C++ program as a JSON file (:func:`export_problem`): the task spec for
+people, and what the program builds from: the robot model and the collision model written by
+pinocchio's own serialization from the very objects this space checks with (robot geometries,
+scene obstacles, the exact collision pairs: SRDF-pruned or the sampled matrix), the locked joints'
+reference, the joint limits, the pose terms (frame, rotation, axes, y, tolerances), start, goal,
+seed and OMPL settings. OMPL plans at native speed: the constraint, its Jacobian and the validity
+test (joint limits, then collision, as :meth:`~manifoldgen.space.ConstrainedSpace.valid` with
+``equality=False``, like the Python bridge) are C++ calls.
+
+Tolerance: exactly as :class:`~manifoldgen.ompl_bridge.OmplConstraint`: OMPL gets ``F_i / tol_i``
+and the tolerance ``1 - margin`` on its Euclidean norm, so a state OMPL accepts is within our
+per-component tolerance with the margin our planners keep for intermediate states.
+
+Final check and retry: every exact OMPL solution (densified by OMPL's ``interpolate``) comes back
+over a pipe and is checked here by the space's
+:meth:`~manifoldgen.space.ConstrainedSpace.validate_path`, the same dense check (every
+``ValidationSettings.resolution`` rad) every method gets. A rejected path does not end the query:
+as our planners go on searching after a candidate fails the dense check, OMPL searches again
+(``SimpleSetup::clear``: a new tree, the atlas keeps its charts) until a path passes or the time
+limit is reached. ``time_s`` runs from the go signal to the answer (the program's start-up and
+model loading excluded, as our planners' construction is); ``extras['native_cpu_s']`` is the
+program's CPU over the same span, which the benchmark adds to this process's CPU.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from manifoldgen.constraints import ConstraintSet, PoseConstraint
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.ompl_bridge import OmplSettings
+from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.space import ConstrainedSpace
+
+SPACES = ("projected", "atlas", "tangent")
+BINARY_ENV = "MANIFOLDGEN_OMPL_NATIVE"
+SOURCE_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "ompl_native"
+
+
+def native_binary() -> Path:
+    """The built C++ program (``$MANIFOLDGEN_OMPL_NATIVE`` or the source tree's build folder);
+    a one-line error saying how to build it when it is missing."""
+    path = Path(os.environ.get(BINARY_ENV) or SOURCE_DIR / "build" / "ompl_native")
+    if not (path.is_file() and os.access(path, os.X_OK)):
+        raise ManifoldgenError(f"the C++ OMPL baseline is not built ({path} missing): apt-get install libompl-dev, "
+                               f"then run benchmarks/ompl_native/build.sh, or set {BINARY_ENV} to the program")
+    return path
+
+
+def _pose_terms(space: ConstrainedSpace) -> list[dict]:
+    """The space's constraint as pose terms for the C++ side; anything else is refused."""
+    constraint, y = space.constraint, space.y
+    parts = constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
+    terms, offset = [], 0
+    for part in parts:
+        if type(part) is not PoseConstraint:
+            raise ManifoldgenError(f"the C++ OMPL baseline supports pose constraints only, not "
+                                   f"'{constraint.spec()['type']}'; use the Python-callback ompl-SPACE-PLANNER methods")
+        k = part.condition.k
+        terms.append({"type": "pose", "frame": part.frame, "frame_id": part.robot.frame_id(part.frame),
+                      "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
+                      "orientation_axes": list(part._oidx), "y": y[offset:offset + k].tolist()})
+        offset += k
+    return terms
+
+
+def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray, folder: Path, *,
+                   ompl_space: str, resolution: float, seed: int, time_limit: float,
+                   settings: OmplSettings) -> Path:
+    """Write ``problem.json``, ``model.bin`` and ``geometry.bin`` into ``folder``; the JSON's path."""
+    robot = space.robot
+    if robot.floating_base:
+        raise ManifoldgenError("the C++ OMPL baseline does not handle a floating base yet; use the Python-callback "
+                               "ompl-SPACE-PLANNER methods")
+    terms = _pose_terms(space)
+    folder = Path(folder)
+    model_file, geometry_file = folder / "model.bin", folder / "geometry.bin"
+    robot.model.saveToBinary(str(model_file))
+    (space.checker.geom if space.checker is not None else pin.GeometryModel()).saveToBinary(str(geometry_file))
+    active = [{"joint": robot.model.names[j], "idx_q": robot.model.joints[j].idx_q,
+               "idx_v": robot.model.joints[j].idx_v, "nq": robot.model.joints[j].nq} for j in robot._joint_ids]
+    problem = {
+        "format_version": 1,
+        "task": {"robot": robot.identity, "joints": robot.joints, "locked": robot.locked,
+                 "constraint": space.constraint.spec(), "condition": space.y.tolist()},
+        "model_file": str(model_file), "geometry_file": str(geometry_file),
+        "reference": robot.reference.tolist(), "active": active,
+        "lower": robot.lower.tolist(), "upper": robot.upper.tolist(),
+        "constraint": {"terms": terms, "tolerance": space.constraint.tolerance.tolist()},
+        "start": np.asarray(start, float).tolist(), "goal": np.asarray(goal, float).tolist(),
+        "settings": {"space": ompl_space, "planner": "rrtconnect", "delta": resolution,
+                     "lambda": settings.lambda_, "range": settings.range,
+                     "tolerance": 1.0 - space.settings.margin, "max_iterations": settings.max_iterations,
+                     "time_limit": time_limit, "seed": int(seed)},
+    }
+    path = folder / "problem.json"
+    path.write_text(json.dumps(problem, indent=1))
+    return path
+
+
+def evaluate(space: ConstrainedSpace, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The C++ side's residual (B, m), Jacobian (B, m, n) and collision-free flags (B,) for ``q (B, n)``
+    (to compare with the Python side's)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    m, n = space.constraint.m, space.n
+    with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
+        problem = export_problem(space, q[0], q[0], Path(folder), ompl_space="atlas", resolution=0.05, seed=0,
+                                 time_limit=1.0, settings=OmplSettings())
+        text = "\n".join(" ".join(repr(float(v)) for v in row) for row in q) + "\n"
+        done = subprocess.run([str(native_binary()), "--evaluate", str(problem)], input=text, capture_output=True,
+                              text=True, check=False)
+    if done.returncode:
+        raise ManifoldgenError(f"the C++ OMPL baseline failed: {done.stderr.strip().splitlines()[-1:]}")
+    rows = np.array([[float(v) for v in line.split()] for line in done.stdout.splitlines()])
+    return rows[:, :m], rows[:, m:m + m * n].reshape(-1, m, n), rows[:, -1].astype(bool)
+
+
+class NativeOmplPlanner:
+    """OMPL ``ompl_space`` + RRTConnect in C++ for our ``space`` (see the module docstring).
+
+    resolution: OMPL's manifold step ``delta`` (rad); seed: OMPL's RNG seed (as the Python
+    bridge sets it, so both draw the same numbers for a seed); settings: as the Python bridge's.
+    """
+
+    def __init__(self, space: ConstrainedSpace, *, ompl_space: str = "atlas", resolution: float = 0.05,
+                 seed: int = 0, settings: OmplSettings | None = None):
+        if ompl_space not in SPACES:
+            raise ManifoldgenError(f"unknown native OMPL space '{ompl_space}'; known: {', '.join(SPACES)}")
+        if resolution <= 0:
+            raise ManifoldgenError(f"resolution must be positive, got {resolution}")
+        _pose_terms(space)  # refuse an unsupported constraint now, not at solve time
+        self.binary = native_binary()
+        self.settings = OmplSettings() if settings is None else settings
+        self.settings.check()
+        self.space, self.ompl_space, self.resolution, self.seed = space, ompl_space, resolution, seed
+        self.name = f"ompl-native-{ompl_space}"
+
+    def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
+        """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
+        if not np.isfinite(time_limit) or time_limit <= 0:
+            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        n = self.space.n
+        start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
+        with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
+            problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
+                                     resolution=self.resolution, seed=self.seed, time_limit=time_limit,
+                                     settings=self.settings)
+            log = Path(folder) / "stderr.txt"  # a file, not a pipe: OMPL's warnings can never block the program
+            with log.open("w") as errors, subprocess.Popen([str(self.binary), str(problem)], stdin=subprocess.PIPE,
+                                                           stdout=subprocess.PIPE, stderr=errors, text=True) as child:
+                try:
+                    self._expect(child, log, "ready")
+                    began = time.perf_counter()
+                    path, worst, reason, done = self._converse(child, log, time_limit, n)
+                    elapsed = time.perf_counter() - began
+                finally:
+                    if child.poll() is None:
+                        child.kill()
+        solved = bool(done["solved"])
+        extras = {"space": self.ompl_space, "ompl_planner": "rrtconnect", "ompl_status": done["status"],
+                  "ompl_solved": solved or done["rejected_paths"] > 0, "vertices": done["vertices"],
+                  "charts": done["charts"], "attempts": done["attempts"], "rejected_paths": done["rejected_paths"],
+                  "resolution": self.resolution, "ompl_tolerance": 1.0 - self.space.settings.margin,
+                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "collision_checks", "samples")},
+                  "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
+                  "valid": solved, "worst_violation": worst, "reason": reason}
+        path = path if solved else np.zeros((0, n))
+        return PlanResult(solved, path, elapsed, int(done["vertices"]), 0, int(done["projections"]), self.name,
+                          path_length(path), extras)
+
+    def _converse(self, child, log: Path, time_limit: float, n: int):
+        """Send go, answer every candidate path with our dense check; (path, worst violation, reason of
+        the last rejection, the program's closing report)."""
+        child.stdin.write(f"go {time_limit!r}\n")
+        child.stdin.flush()
+        path, worst, reason = np.zeros((0, n)), float("nan"), ""
+        while True:
+            line = self._expect(child, log, "path", "done")
+            if line.startswith("done "):
+                return path, worst, reason, json.loads(line[5:])
+            count = int(line.split()[1])
+            path = np.array([[float(v) for v in child.stdout.readline().split()] for _ in range(count)])
+            report = self.space.validate_path(path)
+            worst, reason = report.worst_violation, report.reason
+            child.stdin.write("valid\n" if report.valid else "invalid\n")
+            child.stdin.flush()
+
+    @staticmethod
+    def _expect(child, log: Path, *words: str) -> str:
+        line = child.stdout.readline()
+        if not line.startswith(words):
+            child.kill()
+            child.wait()
+            message = log.read_text().strip().splitlines()
+            raise ManifoldgenError(f"the C++ OMPL baseline failed: {message[-1] if message else 'no answer'}; "
+                                   "rebuild it with benchmarks/ompl_native/build.sh")
+        return line.strip()

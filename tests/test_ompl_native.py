@@ -1,0 +1,82 @@
+"""The C++ OMPL baseline (a benchmark extra): its constraint and collision checker equal ours, and its
+paths pass our dense check. Tests that need the built program skip, saying why, without it."""
+
+import numpy as np
+import pytest
+
+from manifoldgen.constraints import PlaneConstraint
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.space import ConstrainedSpace, densify
+
+ompl_native = pytest.importorskip("manifoldgen.ompl_native")
+
+
+def _built() -> bool:
+    try:
+        ompl_native.native_binary()
+        return True
+    except ManifoldgenError:
+        return False
+
+
+needs_binary = pytest.mark.skipif(not _built(), reason="the C++ OMPL baseline is not built "
+                                  "(apt-get install libompl-dev; benchmarks/ompl_native/build.sh)")
+
+
+@pytest.fixture(scope="module")
+def maze():
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import get_task
+    task = get_task("pose", "panda")
+    scene = get_scene(task, "maze")
+    return task, scene, ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+
+
+@needs_binary
+def test_residuals_jacobians_and_collisions_equal_ours(maze):
+    task, scene, space = maze
+    q = task.robot.sample_uniform(120, np.random.default_rng(3))
+    q[:40] = space.project(q[:40]).q  # on the manifold too, where the planners live
+    q[40:60] = densify(np.array([scene.start, scene.goal]), 0.05)[0][:20]  # near the maze walls
+    F, J, free = ompl_native.evaluate(space, q)
+    F_ours, J_ours = task.constraint.jacobian(q, np.broadcast_to(space.y, (len(q), 1)))
+    np.testing.assert_allclose(F, F_ours, atol=1e-8)
+    np.testing.assert_allclose(J, J_ours, atol=1e-8)
+    ours = ~space.checker.in_collision(q)
+    assert np.array_equal(free, ours) and 0 < ours.sum() < len(q)  # both verdicts occur
+
+
+@needs_binary
+def test_atlas_path_passes_our_dense_check_and_is_reproducible(maze):
+    task, scene, space = maze
+    planner = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4)
+    result = planner.solve(scene.start, scene.goal, 20.0)
+    assert result.solved and result.extras["valid"]
+    path = result.path
+    np.testing.assert_allclose(path[0], scene.start) and np.testing.assert_allclose(path[-1], scene.goal)
+    states = densify(path, space.settings.resolution)[0]  # state by state, with our rule
+    assert task.constraint.violation(states, space.y).max() <= 1.0
+    assert task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+    ops = result.extras["native_ops"]
+    assert ops["fk"] >= ops["jacobians"] > 0 and ops["collision_checks"] > 0 and result.extras["native_cpu_s"] > 0
+    assert ops["samples"] > 0 and result.iterations >= 2  # OMPL's own samples; its tree's vertices
+    again = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(scene.start, scene.goal, 20.0)
+    np.testing.assert_array_equal(again.path, path)
+
+
+def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
+    task, scene, space = maze
+    monkeypatch.setenv(ompl_native.BINARY_ENV, str(tmp_path / "missing"))
+    with pytest.raises(ManifoldgenError, match="not built.*build.sh"):
+        ompl_native.NativeOmplPlanner(space)
+    broken = tmp_path / "broken"
+    broken.write_text("#!/bin/sh\necho 'ompl_native: cannot read problem file' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setenv(ompl_native.BINARY_ENV, str(broken))
+    with pytest.raises(ManifoldgenError, match="baseline failed: ompl_native: cannot read problem file; rebuild"):
+        ompl_native.NativeOmplPlanner(space).solve(scene.start, scene.goal, 1.0)
+    plane = PlaneConstraint(task.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])
+    with pytest.raises(ManifoldgenError, match="pose constraints only"):
+        ompl_native.NativeOmplPlanner(ConstrainedSpace(plane, [0.4]))
+    with pytest.raises(ManifoldgenError, match="unknown native OMPL space"):
+        ompl_native.NativeOmplPlanner(space, ompl_space="curved")
