@@ -92,18 +92,21 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
         raise ManifoldgenError(f"condition values must be finite numbers, got {values.tolist()}")
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
             "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection"}
-    partial = None
+    partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
         out = check_output_path(out)
         partial = out.with_name(out.name + ".partial")
-        _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
-                                   "max_batches": max_batches, "give_up": give_up})
+        owned = not partial.exists()
     try:
+        if partial is not None:
+            _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
+                                       "max_batches": max_batches, "give_up": give_up})
+            owned = True
         dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta)
         if out is not None:
             dataset.save(out)
     except Exception:  # a failed run leaves nothing behind (an interrupt or a kill keeps the batches to resume)
-        if partial is not None:
+        if owned:
             shutil.rmtree(partial, ignore_errors=True)
         raise
     if partial is not None:
