@@ -22,7 +22,7 @@ import numpy as np
 
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import project
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
@@ -47,9 +47,13 @@ class Dataset:
         save_npz(path, self.meta, q=self.q, y=self.y)
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> Dataset:
         """Read and validate a dataset file (clear errors for truncated or foreign files)."""
         meta, arrays = load_npz(path, ("q", "y"))
+        if any(arrays[k].dtype.kind not in "fiu" for k in ("q", "y")):
+            raise ManifoldgenError(f"{path}: q and y must be arrays of numbers, got {arrays['q'].dtype} and "
+                                   f"{arrays['y'].dtype}; regenerate the file")
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         for key in ("format_version", "robot", "joints", "constraint"):
             if key not in meta:

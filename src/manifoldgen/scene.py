@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.collision import CollisionChecker, touch_links
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot
 from manifoldgen.targets import parse_target, resolve_query
@@ -270,6 +270,7 @@ class Scene:
         return out
 
     @classmethod
+    @file_reader
     def from_meta(cls, meta: dict) -> Scene:
         """The scene a path file records (the inverse of :meth:`to_meta`): obstacles, held tool, and the
         query's start, goal and condition."""
@@ -313,6 +314,7 @@ class Scene:
                    str(data.get("robot", "")))
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> Scene:
         path = Path(path)
         if not path.is_file():

@@ -22,7 +22,7 @@ import safetensors.torch
 import torch
 
 from manifoldgen.constraints import Condition
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.training import TrainingLog, train
 
@@ -197,6 +197,7 @@ class ConditionalSampler(ABC):
         atomic_write_text(path / CONFIG_FILE, json.dumps(doc, indent=1))
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> ConditionalSampler:
         """Load a model directory written by :meth:`save` (validated; clear errors)."""
         doc, tensors = read_model_dir(path)
