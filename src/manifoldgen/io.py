@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import glob
 import json
 import os
 import tempfile
@@ -34,11 +35,12 @@ def write_error(path: Path, exc: OSError) -> ManifoldgenError:
 
 def _atomic(path: Path, write) -> None:
     """Write through a temporary file in the same directory and a rename; the file gets the
-    permissions an ordinary ``open`` would give it (0o666 less the umask)."""
+    permissions an ordinary ``open`` would give it (0o666 less the umask). Temporary files that a
+    killed writer left (``.NAME.PID-*.tmp`` of a process that is gone) are removed."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp")
     except OSError as exc:
         raise write_error(path, exc) from None
     try:
@@ -46,12 +48,21 @@ def _atomic(path: Path, write) -> None:
             write(f)
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+        _remove_orphans(path)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
         raise write_error(path, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _remove_orphans(path: Path) -> None:
+    """Delete ``.NAME.PID-*.tmp`` files beside ``path`` whose writer process no longer exists."""
+    for orphan in path.parent.glob(f".{glob.escape(path.name)}.*-*.tmp"):
+        pid = orphan.name[len(path.name) + 2:].split("-")[0]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists() and Path("/proc/self").exists():
+            orphan.unlink(missing_ok=True)
 
 
 def atomic_write_text(path: Path, text: str) -> None:
