@@ -8,6 +8,7 @@ import errno
 import hashlib
 import io
 import json
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,6 +74,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     (root / "bad.toml").write_text("name = [unclosed\n")
     (root / "latin1.toml").write_bytes("name = 'pösé'\n".encode("latin-1"))
     shutil.copy(planned_path("wall"), root / "path.npz")
+    os.mkfifo(root / "pipe")  # not a regular file: never replaced by an output
     return root
 
 
@@ -128,6 +130,11 @@ CASES = [
     cli("collect-nan-condition", "collect pose --per-condition 5 --condition nan -o {O}/x.npz", "nan"),
     cli("collect-missing-dir", "collect pose -o {O}/nodir/x.npz", "nodir"),
     cli("collect-output-is-dir", "collect pose -o {O}", "is a folder"),
+    cli("collect-output-is-pipe", "collect pose -o {I}/pipe", "not a regular file"),
+    cli("sample-output-is-pipe", "sample {I}/model --condition 0.4 -o {I}/pipe", "not a regular file"),
+    api("api-atomic-over-pipe", lambda I, O: atomic_write_text(I / "pipe", "x"), "not a regular file"),
+    cli("bench-sampling-too-few-samples", "bench sampling {I}/model --samples 2 -o {O}/b", "got 2"),
+    cli("sample-condition-1e308", "sample {I}/model --condition 1e308 -o {O}/s.npz", "1e+308"),
     cli("collect-output-is-task-file", "collect {I}/task.toml -o {I}/task.toml", "task.toml"),
     cli("collect-missing-task-file", "collect {I}/nothere.toml -o {O}/x.npz", "nothere.toml"),
     cli("collect-bad-toml", "collect {I}/bad.toml -o {O}/x.npz", "bad.toml"),

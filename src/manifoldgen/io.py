@@ -38,6 +38,8 @@ def _atomic(path: Path, write) -> None:
     permissions an ordinary ``open`` would give it (0o666 less the umask). Temporary files that a
     killed writer left (``.NAME.PID-*.tmp`` of a process that is gone) are removed."""
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise ManifoldgenError(f"{path} exists and is not a regular file (a folder or a device); write elsewhere")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp")
@@ -99,6 +101,8 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
         if path.is_dir():
             raise ManifoldgenError(f"{what} {path} is a folder, but a file is meant here; give a file path "
                                    f"such as {path / 'out.npz'}")
+        if path.exists() and not path.is_file():
+            raise ManifoldgenError(f"{what} {path} is not a regular file (a device, pipe or socket); give a file path")
         if not path.parent.exists():
             raise ManifoldgenError(f"output directory {path.parent} does not exist; create it or choose "
                                    "another path")
@@ -138,7 +142,7 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
         with loaded as f:
             arrays = {k: f[k] for k in f.files}
     except Exception as exc:  # zipfile/np raise many types for damaged files
-        why = "it holds Python objects, which are never loaded" if "pickle" in str(exc) else \
+        why = "neither a zip archive nor an .npy array" if "pickle" in str(exc) else \
             f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}"
         raise ManifoldgenError(f"{path} is not a readable .npz file ({why}); it may be truncated or another "
                                "kind of file: regenerate it") from None

@@ -28,6 +28,7 @@ from manifoldgen.runtime import check_seed, set_torch_threads
 from manifoldgen.tasks import check_made_for, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
+MIN_ROWS = 20  # samples and reference rows per condition: the k-NN metrics need more than k (5) of each
 OUTPUT_FILES = ("results.json", "table.md", "fig2_samples.png", "residuals.png", "coverage.png")
 
 
@@ -68,7 +69,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
-    for option, value, low in (("--samples", samples, 2), ("--reference", reference_rows, 2),
+    for option, value, low in (("--samples", samples, MIN_ROWS), ("--reference", reference_rows, MIN_ROWS),
                                ("--repeats", repeats, 1), ("--refine", refine, 0), ("--threads", threads, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ManifoldgenError(f"{option} must be an integer >= {low}, got {value!r}")

@@ -161,9 +161,11 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"model '{self.name}' is not trained; call fit() or load one")
         if n < 0:
             raise ManifoldgenError(f"number of samples must be >= 0, got {n}")
-        y = np.asarray(y, dtype=np.float32).reshape(-1, self.k)
-        if not np.isfinite(y).all():
-            raise ManifoldgenError(f"condition y must be finite numbers, got {y[~np.isfinite(y).all(1)][0].tolist()}")
+        given = np.asarray(y, dtype=float).reshape(-1, self.k)
+        bad = ~(np.abs(given) < 1e30).all(axis=1)  # NaN, infinite, or lost in float32
+        if bad.any():
+            raise ManifoldgenError(f"condition y must be finite numbers of sensible size, got {given[bad][0].tolist()}")
+        y = given.astype(np.float32)
         if len(y) not in (1, n):
             raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(y)}")
         out = np.empty((n, self.d), dtype=np.float64)
