@@ -1,13 +1,16 @@
 """Crash tests: ``collect`` and ``train`` are killed with SIGKILL in a subprocess just before or just after
-one of their file replacements (the moments a kill could tear a file), then rerun: the final files equal
-an uninterrupted run's bytes, and no temporary file is left."""
+one of their file replacements (the moments a kill could tear a file), and ``bench plan`` after a finished
+run, then rerun: the final files equal an uninterrupted run's (bytes; the benchmark's records up to their
+timings), and no temporary file or worker process is left."""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -85,3 +88,41 @@ def test_train_killed_then_resumed_gives_the_same_model(dataset_file, tmp_path, 
     for name in ("model.json", "model.safetensors"):
         assert (out / name).read_bytes() == (tmp_path / "whole" / name).read_bytes(), name
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp") or p.name.startswith("checkpoint")]
+
+
+TIMED = {"build_s", "cpu_s", "time_s", "why", "late"}  # what a run measured of the machine's speed
+
+
+def test_bench_killed_then_resumed_gives_the_same_runs(tmp_path):
+    """``bench plan`` SIGKILLed after its first finished run, then rerun with --resume: the same records
+    (up to their timings) as an uninterrupted benchmark, and its worker gone with it."""
+    from manifoldgen.bench.planning import RUNS_FILE, Experiment, read_records, run_bench
+    methods, experiment = ["rrtconnect@project"], Experiment("wall", "pose", "panda", 30.0, 0)
+    run_bench(experiment, methods, tmp_path / "whole", runs=3, progress=False)
+    out = tmp_path / "cut"
+    command = [sys.executable, "-c", "from manifoldgen.cli import app; app()", "bench", "plan", "pose", "--scene",
+               "wall", "-m", methods[0], "--runs", "3", "--time", "30", "-o", str(out)]
+    bench = subprocess.Popen(command, env={**os.environ, "PYTHONPATH": SRC}, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (out / RUNS_FILE).is_file():
+            time.sleep(0.02)
+        children = [int(p) for p in Path(f"/proc/{bench.pid}/task/{bench.pid}/children").read_text().split()]
+        while time.monotonic() < deadline and not read_records(out / RUNS_FILE):
+            time.sleep(0.02)
+        bench.send_signal(signal.SIGKILL)
+        bench.wait(10)
+    finally:
+        bench.kill()
+        bench.wait()
+    assert len(read_records(out / RUNS_FILE)) < 3  # killed mid-way
+    time.sleep(1)
+    assert not [p for p in children if Path(f"/proc/{p}").exists()
+                and Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"]
+    run_bench(experiment, methods, out, runs=3, resume=True, progress=False)
+
+    def runs(folder):
+        return sorted(({k: v for k, v in r.items() if k not in TIMED} for r in read_records(folder / RUNS_FILE)),
+                      key=lambda r: (r["method"], r["run"]))
+    assert runs(out) == runs(tmp_path / "whole") and len(runs(out)) == 3
