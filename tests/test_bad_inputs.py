@@ -59,6 +59,12 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     blob = (root / "cut" / "model.safetensors").read_bytes()
     (root / "cut" / "model.safetensors").write_bytes(blob[:len(blob) // 2])
     shutil.copy(BUILTIN_DIR / "pose-panda.toml", root / "task.toml")
+    text = (BUILTIN_DIR / "pose-panda.toml").read_text()
+    arm = ", ".join(f'"panda_joint{i}"' for i in range(1, 8))
+    group = text[text.index("group = ["):text.index("]", text.index("group = [")) + 1]
+    for name, joints in (("duplicate", f'"panda_joint1", {arm}'), ("empty", ""),
+                         ("mimic", f'{arm}, "panda_finger_joint2"'), ("fixed", f'{arm}, "panda_joint8"')):
+        (root / f"{name}.toml").write_text(text.replace(group, f"group = [{joints}]"))
     shutil.copytree(BUILTIN_DIR / "scenes", root / "scenes")
     wall = json.loads((BUILTIN_DIR / "scenes" / "panda-wall.json").read_text())
     (root / "scene.json").write_text(json.dumps(wall))
@@ -136,6 +142,11 @@ CASES = [
     cli("bench-sampling-too-few-samples", "bench sampling {I}/model --samples 2 -o {O}/b", "got 2"),
     cli("sample-condition-1e308", "sample {I}/model --condition 1e308 -o {O}/s.npz", "1e+308"),
     cli("collect-output-is-task-file", "collect {I}/task.toml -o {I}/task.toml", "task.toml"),
+    cli("collect-group-duplicate", "collect {I}/duplicate.toml -o {O}/x.npz", "'panda_joint1' is 2 times"),
+    cli("collect-group-empty", "collect {I}/empty.toml -o {O}/x.npz", "empty planning group"),
+    cli("collect-group-mimic", "collect {I}/mimic.toml -o {O}/x.npz", "'panda_finger_joint2'"),
+    cli("collect-group-fixed", "collect {I}/fixed.toml -o {O}/x.npz", "'panda_joint8'"),
+    cli("collect-markup-in-path", "collect pose -o {O}/a[/]b/x.npz", "a[/]b"),
     cli("collect-missing-task-file", "collect {I}/nothere.toml -o {O}/x.npz", "nothere.toml"),
     cli("collect-bad-toml", "collect {I}/bad.toml -o {O}/x.npz", "bad.toml"),
     cli("collect-not-utf8-toml", "collect {I}/latin1.toml -o {O}/x.npz", "latin1.toml"),
@@ -215,6 +226,8 @@ CASES = [
     # bench
     cli("bench-sampling-zero-samples", "bench sampling {I}/model --samples 0 -o {O}/b", "got 0"),
     cli("bench-sampling-zero-repeats", "bench sampling {I}/model --repeats 0 -o {O}/b", "--repeats"),
+    cli("bench-sampling-huge-samples", "bench sampling {I}/model --samples 100000000 -o {O}/b", "100000000"),
+    cli("collect-huge-rows", "collect pose --per-condition 100000000 -o {O}/x.npz", "100000000"),
     cli("bench-sampling-negative-refine", "bench sampling {I}/model --refine -1 -o {O}/b", "got -1"),
     cli("bench-sampling-zero-reference", "bench sampling {I}/model --reference 0 -o {O}/b", "--reference"),
     cli("bench-sampling-model-twice", "bench sampling {I}/model {I}/model -o {O}/b", "twice"),
@@ -261,7 +274,8 @@ CASES = [
     api("api-sample-to-file-seed", lambda I, O: _sample_to_file(I, O, seed=2**40), str(2**40)),
     api("api-parse-spec-batch", lambda I, O: parse_spec("cvae:m,batch=0"),
         "batch=0"),
-    api("api-output-over-model", lambda I, O: check_output_path(I / "model" / "model.json", [I / "model"]), "model.json"),
+    api("api-output-over-model", lambda I, O: check_output_path(I / "model" / "model.json", [I / "model"]),
+        "model.json"),
     api("api-scene-not-utf8", lambda I, O: Scene.load(I / "latin1.json"),
         "latin1.json"),
     api("api-task-file-missing", lambda I, O: load_task_file(I / "no.toml"),

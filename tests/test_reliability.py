@@ -110,6 +110,14 @@ def test_outputs_never_overwrite_inputs(tmp_path):
     assert check_output_path(model / "samples.npz", [model]) == model / "samples.npz"  # a new file beside is fine
 
 
+def test_models_of_one_kind_in_folders_of_one_name_get_their_own_columns():
+    from manifoldgen.bench.sampling import _label
+    cvae = CVAE()
+    models = {"runs/a/cvae": cvae, "runs/b/cvae": cvae, "runs/c/other": cvae}
+    labels = [_label(m, k, models) for k, m in models.items()]
+    assert labels == ["cvae (runs/a/cvae)", "cvae (runs/b/cvae)", "cvae (other)"]
+
+
 # ---------------------------------------------------------------------------------------- training checkpoint
 @pytest.fixture(scope="module")
 def tiny(panda_task):

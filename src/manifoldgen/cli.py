@@ -172,8 +172,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     set_torch_threads()
     picture = output.with_suffix(".png")
     if picture == output or snapshots in (output, picture):
-        raise ManifoldgenError(f"-o {output} and its picture {picture}{f' and --snapshots {snapshots}' if snapshots else ''}"
-                               " would overwrite each other; give -o a .npz name and --snapshots another .png")
+        also = f" and --snapshots {snapshots}" if snapshots else ""
+        raise ManifoldgenError(f"-o {output} and its picture {picture}{also} would overwrite each other; give -o a "
+                               ".npz name and --snapshots another .png")
     inputs = [_file(task), _file(scene), _file(parse_spec(sampler)[1]), config]
     for out in (output, picture, snapshots):
         if out is not None:
@@ -284,13 +285,13 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
                     config: Path | None = None, snapshots: bool = False) -> None:
     from manifoldgen.bench.planning import (OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment, Method,
                                             default_baseline, default_methods, run_bench)
+    from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
+    from manifoldgen.tasks import BUILTIN_DIR, get_task
     samplers = [Method.parse(m).sampler for m in methods or []]
     check_output_path(output, [_file(task), _file(scene), config, *(models or []),
                                *(_file(parse_spec(s)[1]) for s in samplers if s)],
                       directory=True, writes=OUTPUT_FILES)
-    from manifoldgen.scene import get_scene
-    from manifoldgen.tasks import BUILTIN_DIR, get_task
     task_obj = get_task(task, robot)
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR

@@ -30,6 +30,7 @@ from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task, task_from_meta
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
+MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
 
 
 @dataclass
@@ -94,6 +95,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     values = task.condition.grid if conditions is None or not k else np.asarray(conditions, float).reshape(-1, k)
     if not np.isfinite(values).all():
         raise ManifoldgenError(f"condition values must be finite numbers, got {values.tolist()}")
+    if per_condition * len(values) > MAX_ROWS:
+        raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
+                               f"{MAX_ROWS:,} rows; collect several smaller datasets")
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
             "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection"}
     partial, owned = None, False  # owned: this run may remove the partial folder when it fails

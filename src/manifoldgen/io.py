@@ -16,10 +16,14 @@ from manifoldgen.errors import ManifoldgenError
 
 
 def _umask() -> int:
-    """The process umask (read by setting it and setting it back)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
+    """The process umask: from /proc on Linux, else by setting it and setting it back."""
+    try:
+        status = Path("/proc/self/status").read_text()
+        return int(next(line.split()[1] for line in status.splitlines() if line.startswith("Umask:")), 8)
+    except (OSError, StopIteration, IndexError, ValueError):
+        mask = os.umask(0o022)
+        os.umask(mask)
+        return mask
 
 
 def write_error(path: Path, exc: OSError) -> ManifoldgenError:

@@ -69,10 +69,11 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
-    for option, value, low in (("--samples", samples, MIN_ROWS), ("--reference", reference_rows, MIN_ROWS),
-                               ("--repeats", repeats, 1), ("--refine", refine, 0), ("--threads", threads, 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise ManifoldgenError(f"{option} must be an integer >= {low}, got {value!r}")
+    limits = {"--samples": (samples, MIN_ROWS, 10**6), "--reference": (reference_rows, MIN_ROWS, 10**6),
+              "--repeats": (repeats, 1, 1000), "--refine": (refine, 0, 1000), "--threads": (threads, 1, 1024)}
+    for option, (value, low, high) in limits.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise ManifoldgenError(f"{option} must be an integer from {low} to {high:,}, got {value!r}")
     seed = check_seed(seed)
     if len({Path(d).resolve() for d in model_dirs}) < len(model_dirs):
         raise ManifoldgenError(f"a model directory is given twice in {[str(d) for d in model_dirs]}; give each once")

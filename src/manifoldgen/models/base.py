@@ -294,8 +294,8 @@ def _validate_doc(path: Path, doc: object) -> None:
         raise bad(f"format_version {doc.get('format_version')!r} is not supported (expected {MODEL_FORMAT_VERSION}; "
                   "version 1 files carry no checksum of their fields)")
     if doc.get("sha256") != document_checksum(doc):
-        raise bad("its contents do not match its checksum 'sha256' (a weight, normalisation, range or "
-                  "architecture field was changed)")
+        raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
+                  "other field was changed)")
     for key, kind in (("model", str), ("config", dict), ("dims", dict),
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
