@@ -25,7 +25,8 @@ from manifoldgen.io import atomic_write_text, check_output_path
 from manifoldgen.models import CVAE, load_model
 from manifoldgen.models.base import document_checksum
 from manifoldgen.sampling import sample_to_file
-from manifoldgen.scene import Scene
+from manifoldgen.planning.query import run_query
+from manifoldgen.scene import Scene, get_scene
 from manifoldgen.specs import parse_spec
 from manifoldgen.tasks import BUILTIN_DIR, get_task, load_task_file, task_from_meta
 
@@ -121,6 +122,11 @@ def _sample_to_file(I, O, **kw):
     model = _model(I)
     return sample_to_file(model, task_from_meta(model.meta).constraint, np.array([0.4]),
                           **{"count": 5, "out": O / "s.npz", **kw})
+
+
+def _plan(**kw):
+    task = get_task("pose", "panda")
+    return run_query(task, get_scene(task, "wall"), "project", "rrtconnect", **{"seed": 0, "time_limit": 1.0, **kw})
 
 
 CASES = [
@@ -272,6 +278,7 @@ CASES = [
     api("api-collect-zero-batch", lambda I, O: _collect(I, O, batch=0), "batch"),
     api("api-sample-to-file-zero", lambda I, O: _sample_to_file(I, O, count=0), "got 0"),
     api("api-sample-to-file-seed", lambda I, O: _sample_to_file(I, O, seed=2**40), str(2**40)),
+    api("api-run-query-seed", lambda I, O: _plan(seed=-1), "-1"),
     api("api-parse-spec-batch", lambda I, O: parse_spec("cvae:m,batch=0"),
         "batch=0"),
     api("api-output-over-model", lambda I, O: check_output_path(I / "model" / "model.json", [I / "model"]),

@@ -124,12 +124,20 @@ def tiny(panda_task):
     return collect(panda_task, 30, seed=1, conditions=[[0.3], [0.5]], progress=False)
 
 
+@pytest.fixture(scope="module")
+def whole(tiny, tmp_path_factory):
+    """The uninterrupted run's model directory."""
+    out = tmp_path_factory.mktemp("whole")
+    CVAE(**TINY).fit(tiny, epochs=3, seed=0, progress=False, out=out)
+    return out
+
+
 @pytest.mark.parametrize("target, call", [("checkpoint.safetensors", 2), ("model.json", 1),
                                           ("training.json", 1)])
-def test_a_crash_at_any_write_of_training_resumes_to_the_same_model(tiny, tmp_path, monkeypatch, target, call):
+def test_a_crash_at_any_write_of_training_resumes_to_the_same_model(tiny, whole, tmp_path, monkeypatch, target,
+                                                                    call):
     """The checkpoint is one file replaced by one rename: a crash just before the ``call``-th rename onto
     ``target`` (the temporary file written, the rename not done) leaves a resumable run."""
-    CVAE(**TINY).fit(tiny, epochs=3, seed=0, progress=False, out=tmp_path / "whole")
     original, seen = os.replace, {"n": 0}
 
     def crash(src, dst):
@@ -145,7 +153,7 @@ def test_a_crash_at_any_write_of_training_resumes_to_the_same_model(tiny, tmp_pa
     assert (tmp_path / "cut" / "checkpoint.safetensors").is_file()
     CVAE(**TINY).fit(tiny, epochs=3, seed=0, progress=False, out=tmp_path / "cut", resume=True)
     for name in ("model.json", "model.safetensors"):
-        assert (tmp_path / "cut" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()
+        assert (tmp_path / "cut" / name).read_bytes() == (whole / name).read_bytes()
     assert not (tmp_path / "cut" / "checkpoint.safetensors").exists()
 
 
