@@ -61,6 +61,8 @@ def test_resume_with_other_settings_is_refused_naming_them(panda_task, tmp_path,
     from manifoldgen.tasks import get_task
     with pytest.raises(ManifoldgenError, match="task.robot.name: \"panda\" then, \"pr2\" now"):
         collect(get_task("pose", "pr2"), 6, seed=3, out=out, conditions=[[0.7], [0.8]], batch=16, progress=False)
+    first = partial / "c0-b0.npz"  # a saved batch replaced by rows of another condition is recomputed
+    data.save_npz(first, {}, q=collect(panda_task, 3, seed=8, conditions=[[0.6]], progress=False).q)
     collect(panda_task, 6, seed=3, out=out, conditions=[[0.3], [0.5]], batch=16, progress=False)
     assert out.read_bytes() == whole.read_bytes() and not partial.exists()
 

@@ -134,6 +134,8 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
                 if sum(len(g) for g in got) >= per_condition:
                     break
                 rows = _load_batch(partial, c, b, task.robot.n)
+                if rows is not None and not space.valid(rows).all():
+                    rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
                     rng = np.random.default_rng([seed, c, b])
                     res = project(task.constraint, task.robot.sample_uniform(batch, rng), y)
