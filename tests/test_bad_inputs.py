@@ -250,6 +250,8 @@ CASES = [
     cli("bench-plan-bad-ompl", "bench plan pose --scene wall -m ompl-foo-bar -o {O}/b", "ompl-foo-bar"),
     cli("bench-plan-negative-batch", "bench plan pose --scene wall -m rrtconnect@project,batch=-5 -o {O}/b",
         "batch=-5"),
+    cli("bench-plan-unknown-baseline", "bench plan pose --scene wall -m rrtconnect@project --baseline nope -o {O}/b",
+        "'nope'"),
     cli("bench-plan-output-is-file", "bench plan pose --scene wall -m rrtconnect@project -o {I}/data.npz",
         "data.npz"),
     cli("bench-plan-negative-seed", "bench plan pose --scene wall --seed -1 -o {O}/b", "-1"),

@@ -26,6 +26,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -334,6 +335,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     duplicates = sorted({label for label in labels if labels.count(label) > 1})
     if duplicates:
         raise ManifoldgenError(f"methods share the labels {duplicates}; name them with LABEL=... ")
+    if baseline is not None and baseline not in labels:
+        raise ManifoldgenError(f"--baseline '{baseline}' is not one of the method labels {labels}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
@@ -363,9 +366,13 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
                     _append(runs_path, record)
                     records.append(record)
                     bar.advance(1)
-        except BaseException:  # an interrupt or a crashed run: finished runs are already on disk
+        except BaseException as exc:  # an interrupt or a crashed run: finished runs are already on disk
             for future in pending:
                 future.cancel()
+            if isinstance(exc, BrokenProcessPool):
+                raise ManifoldgenError(f"a benchmark worker process died (killed, or out of memory); the "
+                                       f"{len(records)} finished runs are in {runs_path}: rerun with --resume "
+                                       "(fewer --workers if memory ran out)") from None
             raise
     kept = [r for r in records if r["method"] in labels and r["run"] < runs]
     if snapshots:
