@@ -258,6 +258,7 @@ CASES = [
     cli("bench-plan-scene-not-utf8", "bench plan pose --scene {I}/latin1.json -o {O}/b", "latin1.json"),
     cli("bench-plan-into-model", "bench plan pose --scene wall -m rrtconnect@cvae:{I}/model -o {I}/model",
         "input folder"),
+    cli("bench-maze-zero-runs", "bench maze --runs 0 -m rrtconnect@project -o {O}/b", "got 0"),
     cli("bench-wall-missing-model", "bench wall --model {I}/nomodel -o {O}/b", "nomodel"),
     # trajectory, view, robots, tasks, demo
     cli("trajectory-text-npz", "trajectory {I}/text.npz -o {O}/t.json", "text.npz"),
