@@ -12,6 +12,7 @@ import torch
 from manifoldgen.data import Dataset, collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import MODELS, load_model, pretrained_model_dir
+from manifoldgen.models.base import document_checksum
 from manifoldgen.tasks import get_task
 
 TINY = {"hidden": [32, 32], "batch": 32}
@@ -113,10 +114,15 @@ def test_model_dir_errors(trained, tmp_path):
     doc = json.loads((tampered / "model.json").read_text())
     doc["config"]["hidden"] = [64, 64]
     (tampered / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifoldgenError, match="do not match its checksum"):  # an edit is refused as such
+        load_model(tampered)
+    doc["sha256"] = document_checksum(doc)  # re-signed edits still meet the field checks
+    (tampered / "model.json").write_text(json.dumps(doc))
     with pytest.raises(ManifoldgenError, match="do not match the architecture"):
         load_model(tampered)
     doc["config"]["hidden"] = [32, 32]
     doc["normalisation"]["q_std"][0] = -1.0
+    doc["sha256"] = document_checksum(doc)
     (tampered / "model.json").write_text(json.dumps(doc))
     with pytest.raises(ManifoldgenError, match="standard deviations must be positive"):
         load_model(tampered)

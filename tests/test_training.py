@@ -53,7 +53,7 @@ def test_outputs_and_early_stopping(tiny, tmp_path):
     assert log.stopped_early and len(log.history) < 30
     assert log.best_val == min(h["val"] for h in log.history)
     assert {"model.json", "model.safetensors", "loss.png", "training.json"} <= {p.name for p in out.iterdir()}
-    assert not (out / "checkpoint.json").exists()
+    assert not (out / "checkpoint.safetensors").exists()
     assert json.loads((out / "training.json").read_text())["best_epoch"] == log.best_epoch
     assert (out / "loss.png").read_bytes()[:4] == b"\x89PNG"
 
@@ -75,7 +75,7 @@ def test_interrupted_run_resumes_to_the_same_model(tiny, tmp_path, monkeypatch):
     with pytest.raises(ManifoldgenError, match="--resume"):
         CVAE(**TINY).fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut")
     monkeypatch.setattr(CVAE, "_train_step", original)
-    assert (tmp_path / "cut" / "checkpoint.json").exists()
+    assert (tmp_path / "cut" / "checkpoint.safetensors").exists()
     with pytest.raises(ManifoldgenError, match="pass --resume"):
         CVAE(**TINY).fit(tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut")
     with pytest.raises(ManifoldgenError, match="another dataset, model, seed"):

@@ -11,7 +11,8 @@ from rich.console import Console
 from rich.text import Text
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.runtime import REFINE, TORCH_THREADS, set_torch_threads
+from manifoldgen.io import check_output_path
+from manifoldgen.runtime import REFINE, TORCH_THREADS, check_seed, set_torch_threads
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Constrained motion planning with learned samplers.")
@@ -21,16 +22,24 @@ console = Console(soft_wrap=True)
 
 
 def friendly(command):
-    """Turn ManifoldgenError into a one-line error and exit code 2; warnings print in yellow."""
+    """Turn ManifoldgenError (and an OS error no library call turned into one) into a one-line error and
+    exit code 2; warnings print in yellow. Every command's ``seed`` is range-checked here."""
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         def show(message, category, filename, lineno, file=None, line=None):
             console.print(Text.assemble(("warning: ", "yellow"), str(message)))
         warnings.showwarning = show
         try:
+            if "seed" in kwargs:
+                check_seed(kwargs["seed"])
             return command(*args, **kwargs)
         except ManifoldgenError as exc:
             console.print(Text.assemble(("error: ", "red"), str(exc)))  # verbatim: no markup
+            raise typer.Exit(2) from None
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            console.print(Text.assemble(("error: ", "red"), f"{where}{exc.strerror or exc}; check the path and its "
+                                        "permissions"))
             raise typer.Exit(2) from None
     return wrapper
 
@@ -49,6 +58,11 @@ def _names(registry: str) -> list[str]:
         return PLANNERS.names()
     from manifoldgen.constraints import CONSTRAINTS
     return CONSTRAINTS.names()
+
+
+def _file(name: str | None) -> Path | None:
+    """``name`` as a Path when it names an existing file or folder (an input that outputs must not touch)."""
+    return Path(name) if name and Path(name).exists() else None
 
 
 def _task(task: str, robot: str | None):
@@ -78,6 +92,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.data import collect as run_collect
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
+    check_output_path(output, [_file(task)])
     task_obj = _task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     start = time.perf_counter()
@@ -125,6 +140,7 @@ def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda,
          seed: int = typer.Option(0)):
     """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""
     from manifoldgen.demos import run
+    check_output_path(output, directory=True)
     run(name, output, seed, console)
 
 
@@ -152,14 +168,23 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
     from manifoldgen.viz.path import plot_path
+    from manifoldgen.specs import parse_spec
     set_torch_threads()
+    picture = output.with_suffix(".png")
+    if picture == output or snapshots in (output, picture):
+        also = f" and --snapshots {snapshots}" if snapshots else ""
+        raise ManifoldgenError(f"-o {output} and its picture {picture}{also} would overwrite each other; give -o a "
+                               ".npz name and --snapshots another .png")
+    inputs = [_file(task), _file(scene), _file(parse_spec(sampler)[1]), config]
+    for out in (output, picture, snapshots):
+        if out is not None:
+            check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = _task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values)
     save_path(output, result, meta)
-    picture = output.with_suffix(".png")
     plot_path(result.path, task_obj.robot, meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name),
               scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
     if snapshots is not None and result.solved:
@@ -217,6 +242,8 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     from manifoldgen.data import Dataset
     from manifoldgen.models import get_model_class
     from manifoldgen.settings import parse_settings
+    from manifoldgen.training import OUTPUT_FILES
+    check_output_path(output, [dataset, config], directory=True, writes=OUTPUT_FILES)
     set_torch_threads(threads)
     cls = get_model_class(model)
     net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
@@ -244,9 +271,8 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     from manifoldgen.sampling import sample_to_file
     from manifoldgen.tasks import task_from_meta
     set_torch_threads(2)
-    if n <= 0:
-        raise ManifoldgenError(f"-n must be a positive number of samples, got {n}")
     net = load_model(model_dir)
+    check_output_path(output, [model_dir, _file(task)])
     task_obj = task_from_meta(net.meta) if task is None else _task(task, robot)
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
@@ -270,7 +296,8 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                                                       "skipped with a warning"),
                    seed: int = typer.Option(0)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
-    from manifoldgen.bench.sampling import run_sampling_bench
+    from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
+    check_output_path(output, model_dirs, directory=True, writes=OUTPUT_FILES)
     set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=max(1, threads), seen=seen or None, unseen=unseen or None)
@@ -282,10 +309,15 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
                     baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
                     config: Path | None = None, snapshots: bool = False) -> None:
-    from manifoldgen.bench.planning import (OTHER_LIMITS, PAPER_LIMITS, Experiment, default_baseline,
-                                            default_methods, run_bench)
+    from manifoldgen.bench.planning import (OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment, Method,
+                                            default_baseline, default_methods, run_bench)
     from manifoldgen.scene import get_scene
+    from manifoldgen.specs import parse_spec
     from manifoldgen.tasks import BUILTIN_DIR, get_task
+    samplers = [Method.parse(m).sampler for m in methods or []]
+    check_output_path(output, [_file(task), _file(scene), config, *(models or []),
+                               *(_file(parse_spec(s)[1]) for s in samplers if s)],
+                      directory=True, writes=OUTPUT_FILES)
     task_obj = get_task(task, robot)
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR

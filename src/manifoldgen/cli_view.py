@@ -25,7 +25,11 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
          snapshots: Path = typer.Option(None, help="Write a .png strip of robot snapshots along a path, instead "
                                         "of serving")):
     """Show a file in the browser (viser): a path animated, a dataset's rows, a scene's start and goal."""
+    from manifoldgen.io import check_output_path
     start = time.perf_counter()
+    for out, option in ((export, "--export"), (snapshots, "--snapshots")):
+        if out is not None:
+            check_output_path(out, [file], what=option)
     if export is not None:
         from manifoldgen.viewer.export import export_html
         info = export_html(file, export, task)
@@ -65,7 +69,7 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
     from manifoldgen.trajectory import trajectory_of_file
     if output.suffix.lower() not in TRAJECTORY_FORMATS:
         raise ManifoldgenError(f"-o must end in .json or .csv, got {output.name}")
-    check_output_path(output)
+    check_output_path(output, [path_file])
     traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt)
     info, check = traj.info, traj.info["check"]
     if check["first_invalid"] is not None:

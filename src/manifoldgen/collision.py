@@ -6,7 +6,9 @@ broad phase (dynamic AABB tree), 3-5x faster than checking pair by pair.
 Pairs are pruned as MoveIt's setup assistant does: pairs the SRDF disables, pairs whose
 relative pose the planning group cannot change, and, when the SRDF disables fewer than
 ``MIN_SRDF_PAIRS`` (centauro's disables none), pairs found never or always colliding
-over random configurations. That matrix is cached on disk, keyed by robot and group.
+over random configurations. That matrix is cached on disk, keyed by robot and group; the cache
+file holds hashes of the robot (URDF and SRDF content, group, reference), of the candidate pairs and
+of its own pair list, and one that does not match is recomputed with a one-line notice.
 """
 
 from __future__ import annotations
@@ -14,11 +16,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot, as_batch
 
@@ -136,16 +140,19 @@ def _self_pairs(robot: Robot) -> list[tuple[int, int]]:
     return pairs
 
 
+def _digest(value) -> str:
+    return hashlib.sha256(json.dumps(value).encode()).hexdigest()
+
+
 def _sampled_matrix(robot: Robot, pairs: list[tuple[int, int]]) -> list[tuple[int, int]]:
     """Drop pairs never or always in collision over random configurations (cached)."""
-    key = hashlib.sha256(json.dumps([robot.identity, robot.joints, robot.reference.tolist(), pairs,
-                                     MATRIX_SAMPLES]).encode()).hexdigest()[:16]
-    path = cache_dir() / "collision" / f"{robot.name}-{key}.json"
-    if path.exists():
-        try:
-            return [tuple(p) for p in json.loads(path.read_text())["pairs"]]
-        except (ValueError, KeyError):
-            pass  # a damaged cache is recomputed below
+    robot_sha = _digest([robot.identity, robot.joints, robot.reference.tolist()])
+    stamp = {"robot_sha256": robot_sha, "candidates_sha256": _digest([list(p) for p in pairs]),
+             "samples": MATRIX_SAMPLES}
+    path = cache_dir() / "collision" / f"{robot.name}-{_digest([robot_sha, stamp])[:16]}.json"
+    kept = read_matrix_cache(path, stamp, pairs)
+    if kept is not None:
+        return kept
     geom = robot.collision_model.copy()
     geom.removeAllCollisionPairs()
     for a, b in pairs:
@@ -157,6 +164,35 @@ def _sampled_matrix(robot: Robot, pairs: list[tuple[int, int]]) -> list[tuple[in
         pin.computeCollisions(robot.model, data, geom, gdata, row, False)
         hits += [r.isCollision() for r in gdata.collisionResults]
     kept = [p for p, h in zip(pairs, hits) if 0 < h < MATRIX_SAMPLES]
-    atomic_write_text(path, json.dumps({"robot": robot.name, "joints": robot.joints, "pairs": kept,
-                                        "samples": MATRIX_SAMPLES}))
+    doc = {"robot": robot.name, "joints": robot.joints, **stamp, "pairs": [list(p) for p in kept],
+           "pairs_sha256": _digest([list(p) for p in kept])}
+    try:
+        atomic_write_text(path, json.dumps(doc))
+    except ManifoldgenError as exc:  # an unwritable cache costs time, not correctness
+        warnings.warn(f"collision matrix not cached: {exc}")
     return kept
+
+
+def read_matrix_cache(path: Path, stamp: dict, candidates: list[tuple[int, int]]) -> list[tuple[int, int]] | None:
+    """The cached pair list at ``path`` if it was computed for ``stamp`` (robot, candidates, samples) and is
+    intact; None (with a one-line notice when a file was there) otherwise."""
+    if not path.exists():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        return _stale(path, f"unreadable: {type(exc).__name__}")
+    if not isinstance(doc, dict) or any(doc.get(k) != v for k, v in stamp.items()):
+        return _stale(path, "made for another robot, group or pair list")
+    pairs, allowed = doc.get("pairs"), {tuple(p) for p in candidates}
+    if not isinstance(pairs, list) or doc.get("pairs_sha256") != _digest(pairs):
+        return _stale(path, "its pair list does not match its checksum")
+    if not all(isinstance(p, list) and len(p) == 2 and all(type(i) is int for i in p) and tuple(p) in allowed
+               for p in pairs):
+        return _stale(path, "it names pairs that are not candidate pairs of this robot")
+    return [tuple(p) for p in pairs]
+
+
+def _stale(path: Path, why: str) -> None:
+    warnings.warn(f"collision matrix cache {path} is not valid ({why}); recomputing it")
+    return None

@@ -5,7 +5,10 @@ File: ``q (N, n) float64``, ``y (N, k) float64`` and ``meta`` (JSON string) with
 :meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch;
 batch ``b`` of condition ``c`` draws from ``default_rng([seed, c, b])``, and every
 finished batch is saved under ``<out>.partial/``, so an interrupted run resumes where it
-stopped and produces the same file as an uninterrupted one.
+stopped and produces the same file as an uninterrupted one. ``<out>.partial/meta.json`` records
+everything that defines the output (task spec with the robot's identity, condition values, rows
+per condition, seed, batch settings); a rerun that differs in any of them is refused, naming the
+difference, instead of mixing rows. A run that fails with an error removes its partial folder.
 """
 
 from __future__ import annotations
@@ -19,13 +22,15 @@ import numpy as np
 
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import project
-from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import check_output_path, load_npz, save_npz
+from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
+from manifoldgen.runtime import check_seed
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task, task_from_meta
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
+MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
 
 
 @dataclass
@@ -43,9 +48,13 @@ class Dataset:
         save_npz(path, self.meta, q=self.q, y=self.y)
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> Dataset:
         """Read and validate a dataset file (clear errors for truncated or foreign files)."""
         meta, arrays = load_npz(path, ("q", "y"))
+        if any(arrays[k].dtype.kind not in "fiu" for k in ("q", "y")):
+            raise ManifoldgenError(f"{path}: q and y must be arrays of numbers, got {arrays['q'].dtype} and "
+                                   f"{arrays['y'].dtype}; regenerate the file")
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         for key in ("format_version", "robot", "joints", "constraint"):
             if key not in meta:
@@ -78,15 +87,43 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     """
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be a positive number of rows, got {per_condition}")
+    seed = check_seed(seed)
+    if min(batch, max_batches, give_up) <= 0:
+        raise ManifoldgenError(f"batch, max_batches and give_up must be positive, got {batch}, {max_batches}, "
+                               f"{give_up}")
     k = task.condition.k
     values = task.condition.grid if conditions is None or not k else np.asarray(conditions, float).reshape(-1, k)
+    if not np.isfinite(values).all():
+        raise ManifoldgenError(f"condition values must be finite numbers, got {values.tolist()}")
+    if per_condition * len(values) > MAX_ROWS:
+        raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
+                               f"{MAX_ROWS:,} rows; collect several smaller datasets")
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
             "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection"}
-    partial = None
+    partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
         out = check_output_path(out)
         partial = out.with_name(out.name + ".partial")
-        _prepare_partial(partial, meta)
+        owned = not partial.exists()
+    try:
+        if partial is not None:
+            _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
+                                       "max_batches": max_batches, "give_up": give_up})
+            owned = True
+        dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta)
+        if out is not None:
+            dataset.save(out)
+    except Exception:  # a failed run leaves nothing behind (an interrupt or a kill keeps the batches to resume)
+        if owned:
+            shutil.rmtree(partial, ignore_errors=True)
+        raise
+    if partial is not None:
+        shutil.rmtree(partial, ignore_errors=True)
+    return dataset
+
+
+def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, partial: Path | None, batch: int,
+             max_batches: int, give_up: int, progress: bool, meta: dict) -> Dataset:
     checker = CollisionChecker(task.robot)
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
@@ -96,7 +133,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
             for b in range(max_batches):
                 if sum(len(g) for g in got) >= per_condition:
                     break
-                rows = _load_batch(partial, c, b)
+                rows = _load_batch(partial, c, b, task.robot.n)
+                if rows is not None and not space.valid(rows).all():
+                    rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
                     rng = np.random.default_rng([seed, c, b])
                     res = project(task.constraint, task.robot.sample_uniform(batch, rng), y)
@@ -114,32 +153,43 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
                                        f"choose values inside {task.condition.describe()}")
             qs.append(q)
             ys.append(np.broadcast_to(y, (per_condition, len(y))))
-    dataset = Dataset(np.concatenate(qs), np.concatenate(ys).copy(), meta)
-    if out is not None:
-        dataset.save(out)
-        shutil.rmtree(partial, ignore_errors=True)
-    return dataset
+    return Dataset(np.concatenate(qs), np.concatenate(ys).copy(), meta)
 
 
-def _prepare_partial(partial: Path, meta: dict) -> None:
-    """Keep a previous run's batches only if it ran with the same settings."""
+def _prepare_partial(partial: Path, settings: dict) -> None:
+    """Resume a previous run's batches only if it ran with the same ``settings``; refuse otherwise."""
     stamp = partial / "meta.json"
-    if partial.exists():
+    settings = json.loads(json.dumps(settings))
+    if partial.exists() and any(partial.glob("c*-b*.npz")):
         try:
-            same = json.loads(stamp.read_text()) == json.loads(json.dumps(meta))
+            old = json.loads(stamp.read_text())
         except (OSError, ValueError):
-            same = False
-        if not same:
-            shutil.rmtree(partial)
+            raise ManifoldgenError(f"{partial} holds batches of an interrupted collection but no readable "
+                                   f"meta.json; delete {partial} to start over") from None
+        changed = _differences(old, settings)
+        if changed:
+            raise ManifoldgenError(f"{partial} holds an interrupted collection made with other settings "
+                                   f"({'; '.join(changed)}); rerun the same command to resume it, or delete "
+                                   f"{partial} to start over")
     partial.mkdir(parents=True, exist_ok=True)
-    if not stamp.exists():
-        stamp.write_text(json.dumps(meta))
+    atomic_write_text(stamp, json.dumps(settings))
 
 
-def _load_batch(partial: Path | None, c: int, b: int) -> np.ndarray | None:
+def _differences(old, new, where: str = "") -> list[str]:
+    """``'KEY: OLD then, NEW now'`` for every leaf (dicts are descended) where ``old`` and ``new`` differ."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return [d for key in sorted(set(old) | set(new), key=str)
+                for d in _differences(old.get(key), new.get(key), f"{where}.{key}" if where else str(key))]
+    return [] if old == new else [f"{where or 'settings'}: {json.dumps(old)[:80]} then, {json.dumps(new)[:80]} now"]
+
+
+def _load_batch(partial: Path | None, c: int, b: int, n: int) -> np.ndarray | None:
+    """A saved batch's rows (R, n), or None when it is missing or damaged (then it is recomputed)."""
     if partial is None or not (partial / f"c{c}-b{b}.npz").exists():
         return None
     try:
-        return load_npz(partial / f"c{c}-b{b}.npz", ("q",))[1]["q"]
+        q = load_npz(partial / f"c{c}-b{b}.npz", ("q",))[1]["q"]
     except ManifoldgenError:
-        return None  # a batch cut off mid-write is recomputed
+        return None
+    ok = q.dtype == np.float64 and q.ndim == 2 and q.shape[1] == n and np.isfinite(q).all()
+    return q if ok else None

@@ -1,6 +1,9 @@
-"""The one exception type the library raises for bad input, and its message for unknown names."""
+"""The one exception type the library raises for bad input, its message for unknown names, and the guard
+every file reader wears (:func:`file_reader`)."""
 
 import difflib
+import functools
+import os
 
 
 class ManifoldgenError(ValueError):
@@ -12,3 +15,23 @@ def unknown_name(kind: str, name: str, known: list[str]) -> ManifoldgenError:
     close = difflib.get_close_matches(name, known, n=2)
     hint = f"did you mean {', '.join(close)}? " if close else ""
     return ManifoldgenError(f"unknown {kind} '{name}'; {hint}known {kind}s: {', '.join(known)}")
+
+
+DAMAGED = (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError, OverflowError, RecursionError)
+
+
+def file_reader(read):
+    """Decorate a reader of files: an exception that a damaged or foreign file's content raises deep inside
+    (a string where a number belongs, a missing key ...) becomes one ManifoldgenError naming the file."""
+    @functools.wraps(read)
+    def wrapper(*args, **kwargs):
+        try:
+            return read(*args, **kwargs)
+        except ManifoldgenError:
+            raise
+        except DAMAGED as exc:
+            source = next((str(a) for a in args if isinstance(a, (str, os.PathLike))), "the file")
+            why = (str(exc).strip().splitlines() or [""])[0][:120]
+            raise ManifoldgenError(f"{source}: damaged or unexpected content ({type(exc).__name__}: {why}); "
+                                   "regenerate the file or fix it") from None
+    return wrapper

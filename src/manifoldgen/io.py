@@ -1,10 +1,13 @@
-"""Atomic file writes and the JSON ``meta`` carried by every .npz file."""
+"""Atomic file writes, output-path checks, and the JSON ``meta`` carried by every .npz file."""
 
 from __future__ import annotations
 
+import errno
+import glob
 import json
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -12,17 +15,60 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError
 
 
+def _umask() -> int:
+    """The process umask: from /proc on Linux, else by setting it and setting it back."""
+    try:
+        status = Path("/proc/self/status").read_text()
+        return int(next(line.split()[1] for line in status.splitlines() if line.startswith("Umask:")), 8)
+    except (OSError, StopIteration, IndexError, ValueError):
+        mask = os.umask(0o022)
+        os.umask(mask)
+        return mask
+
+
+def write_error(path: Path, exc: OSError) -> ManifoldgenError:
+    """A one-line error for a failed write to ``path`` (disk full, read-only, not a directory ...)."""
+    if exc.errno == errno.ENOSPC or exc.errno == errno.EDQUOT:
+        fix = "free some space or write elsewhere"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        fix = "choose a writable location"
+    else:
+        fix = "check the path"
+    return ManifoldgenError(f"cannot write {path}: {exc.strerror or exc}; {fix} (nothing was written)")
+
+
 def _atomic(path: Path, write) -> None:
+    """Write through a temporary file in the same directory and a rename; the file gets the
+    permissions an ordinary ``open`` would give it (0o666 less the umask). Temporary files that a
+    killed writer left (``.NAME.PID-*.tmp`` of a process that is gone) are removed."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    if path.exists() and not path.is_file():
+        raise ManifoldgenError(f"{path} exists and is not a regular file (a folder or a device); write elsewhere")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp")
+    except OSError as exc:
+        raise write_error(path, exc) from None
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+        _remove_orphans(path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise write_error(path, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _remove_orphans(path: Path) -> None:
+    """Delete ``.NAME.PID-*.tmp`` files beside ``path`` whose writer process no longer exists."""
+    for orphan in path.parent.glob(f".{glob.escape(path.name)}.*-*.tmp"):
+        pid = orphan.name[len(path.name) + 2:].split("-")[0]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists() and Path("/proc/self").exists():
+            orphan.unlink(missing_ok=True)
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -34,11 +80,52 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     _atomic(path, lambda f: f.write(data))
 
 
-def check_output_path(path: str | Path) -> Path:
-    """Refuse an output path whose directory does not exist."""
+def _same(a: Path, b: Path) -> bool:
+    return a == b or (a.exists() and b.exists() and os.path.samefile(a, b))
+
+
+def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = (), *,
+                      directory: bool = False, writes: Iterable[str] = (), what: str = "-o") -> Path:
+    """Refuse an output that cannot be written or would destroy an input; returns it as a Path.
+
+    A file output (``directory=False``) must not be an existing directory and its directory must
+    exist; a directory output must not be an existing file. No file written (the output, or for a
+    directory output the names it ``writes`` inside it) may be one of ``inputs`` or a file of an input
+    folder (a model directory's model.json, say), and a directory output may not be an input folder.
+    """
     path = Path(path)
-    if not path.parent.exists():
-        raise ManifoldgenError(f"output directory {path.parent} does not exist; create it or choose another path")
+    if directory:
+        if path.exists() and not path.is_dir():
+            raise ManifoldgenError(f"{what} {path} is an existing file, but a folder is meant here; "
+                                   "give a folder path")
+        if not path.parent.exists():
+            raise ManifoldgenError(f"{what}: parent folder {path.parent} does not exist; create it or choose "
+                                   "another path")
+    else:
+        if path.is_dir():
+            raise ManifoldgenError(f"{what} {path} is a folder, but a file is meant here; give a file path "
+                                   f"such as {path / 'out.npz'}")
+        if path.exists() and not path.is_file():
+            raise ManifoldgenError(f"{what} {path} is not a regular file (a device, pipe or socket); give a file path")
+        if not path.parent.exists():
+            raise ManifoldgenError(f"output directory {path.parent} does not exist; create it or choose "
+                                   "another path")
+    written = [path / name for name in writes] if directory else [path]
+    for given in inputs:
+        if given is None or not Path(given).exists():
+            continue
+        source = Path(given)
+        if source.is_dir():
+            if directory and _same(path, source):
+                raise ManifoldgenError(f"{what} {path} is the input folder {given}; choose another output folder")
+            protected = [f for f in source.iterdir() if f.is_file()]
+        else:
+            protected = [source]
+        for w in written:
+            hit = next((f for f in protected if _same(w, f)), None)
+            if hit is not None:
+                part = "" if hit == source else f", part of the input folder {given}"
+                raise ManifoldgenError(f"{what} {path} would overwrite the input {hit}{part}; choose another output")
     return path
 
 
@@ -53,16 +140,23 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
     if not path.is_file():
         raise ManifoldgenError(f"file not found: {path}")
     try:
-        with np.load(path, allow_pickle=False) as f:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz archive")
+        with loaded as f:
             arrays = {k: f[k] for k in f.files}
     except Exception as exc:  # zipfile/np raise many types for damaged files
-        raise ManifoldgenError(f"{path} is not a readable .npz file ({type(exc).__name__}: {exc}); "
-                               "it may be truncated: regenerate it") from exc
+        why = "neither a zip archive nor an .npy array" if "pickle" in str(exc) else \
+            f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}"
+        raise ManifoldgenError(f"{path} is not a readable .npz file ({why}); it may be truncated or another "
+                               "kind of file: regenerate it") from None
     missing = [k for k in ("meta", *required) if k not in arrays]
     if missing:
         raise ManifoldgenError(f"{path} is not a manifoldgen file: missing {', '.join(missing)}")
     try:
         meta = json.loads(str(arrays.pop("meta")))
     except ValueError as exc:
-        raise ManifoldgenError(f"{path} has a corrupted meta field: {exc}") from exc
+        raise ManifoldgenError(f"{path} has a corrupted meta field: {exc}") from None
+    if not isinstance(meta, dict):
+        raise ManifoldgenError(f"{path} has a corrupted meta field (not a JSON object); regenerate it")
     return meta, arrays

@@ -10,3 +10,21 @@ def set_torch_threads(threads: int = TORCH_THREADS) -> None:
     import torch
 
     torch.set_num_threads(max(1, int(threads)))
+
+
+MAX_SEED = 2**32 - 1  # seeds feed numpy's and torch's generators; run r of a benchmark uses seed + r
+
+
+def check_seed(seed: int, what: str = "--seed") -> int:
+    """``seed`` as an int in [0, MAX_SEED], or a one-line error naming it."""
+    import operator
+
+    from manifoldgen.errors import ManifoldgenError
+
+    try:
+        value = None if isinstance(seed, bool) else operator.index(seed)
+    except TypeError:
+        value = None
+    if value is None or not 0 <= value <= MAX_SEED:
+        raise ManifoldgenError(f"{what} must be an integer from 0 to {MAX_SEED}, got {seed!r}")
+    return value

@@ -15,7 +15,7 @@ import numpy as np
 
 from manifoldgen.constraints import Constraint, project
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.runtime import REFINE
+from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
 
@@ -135,6 +135,9 @@ def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator
     return raw, (project(constraint, raw, y, max_iters=refine).q if refine else raw)
 
 
+MAX_FILE_ROWS = 1_000_000  # rows one `sample` call generates and projects in memory (~1.4 kB each at peak)
+
+
 def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out, *, seed: int = 0,
                    refine: int = REFINE, source: str = "") -> dict:
     """Generate ``count`` rows at ``y``, write them in the dataset format (raw rows when refine=0,
@@ -143,8 +146,10 @@ def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out
 
     from manifoldgen.io import check_output_path, save_npz
 
-    if count <= 0:
-        raise ManifoldgenError(f"-n must be a positive number of samples, got {count}")
+    if not 0 < count <= MAX_FILE_ROWS:
+        raise ManifoldgenError(f"-n must be a positive number of samples, at most {MAX_FILE_ROWS:,} (memory grows "
+                               f"with it), got {count}; write larger sets as several files with different --seed")
+    seed = check_seed(seed)
     if refine < 0:
         raise ManifoldgenError(f"--refine must be >= 0 projection iterations, got {refine}")
     out = check_output_path(out)

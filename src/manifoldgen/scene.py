@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.collision import CollisionChecker, touch_links
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot
 from manifoldgen.targets import parse_target, resolve_query
@@ -27,6 +27,13 @@ from manifoldgen.tasks import Task
 
 OBSTACLE_TYPES = ("box", "sphere", "cylinder", "mesh")
 FORMAT_VERSION = 1
+MAX_METRES = 1e3  # largest position coordinate or extent accepted (coal's bounding boxes overflow near 1e308)
+
+
+def _bounded(values: np.ndarray, what: str) -> np.ndarray:
+    if np.any(np.abs(values) > MAX_METRES):
+        raise ManifoldgenError(f"{what} {values.tolist()} is beyond {MAX_METRES:g} m; give metres within that")
+    return values
 
 
 def _vector(value, size: int, what: str) -> np.ndarray:
@@ -48,7 +55,7 @@ def _floats(value, what: str) -> np.ndarray:
 def _positive(value, what: str) -> float:
     if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value) or value <= 0:
         raise ManifoldgenError(f"{what} must be a positive number of metres, got {value!r}")
-    return float(value)
+    return float(_bounded(np.array([value], float), what)[0])
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,7 @@ class Pose:
     quaternion: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
 
     def __post_init__(self):
-        object.__setattr__(self, "position", _vector(self.position, 3, "pose position"))
+        object.__setattr__(self, "position", _bounded(_vector(self.position, 3, "pose position"), "pose position"))
         quat = _vector(self.quaternion, 4, "pose quaternion [x, y, z, w]")
         norm = np.linalg.norm(quat)
         if abs(norm - 1.0) > 1e-3:
@@ -103,7 +110,7 @@ class Obstacle:
             raise ManifoldgenError(f"{what} has unknown type '{self.type}'{hint}; known types: "
                                    f"{', '.join(OBSTACLE_TYPES)}")
         if self.type == "box":
-            self.size = _vector(self.size, 3, f"{what} size (full extents x, y, z)")
+            self.size = _bounded(_vector(self.size, 3, f"{what} size (full extents x, y, z)"), f"{what} size")
             if np.any(self.size <= 0):
                 raise ManifoldgenError(f"{what} size {self.size.tolist()} must be three positive extents in metres")
         if self.type in ("sphere", "cylinder"):
@@ -111,13 +118,15 @@ class Obstacle:
         if self.type == "cylinder":
             self.length = _positive(self.length, f"{what} length")
         if self.type == "mesh":
-            if not self.mesh or not Path(self.mesh).is_file():
+            if not isinstance(self.mesh, str) or not self.mesh or not Path(self.mesh).is_file():
                 raise ManifoldgenError(f"{what}: mesh file {self.mesh!r} not found; give the path of an "
                                        ".stl, .obj or .dae file")
             scale = 1.0 if self.scale is None else self.scale
             self.scale = _vector(np.broadcast_to(scale, 3) if np.ndim(scale) == 0 else scale, 3, f"{what} scale")
             if np.any(self.scale <= 0):
                 raise ManifoldgenError(f"{what} scale {self.scale.tolist()} must be positive")
+            _bounded(self.scale, f"{what} scale")
+            self.geometry()  # an unreadable or malformed mesh fails here, with its reason
 
     def geometry(self) -> coal.CollisionGeometry:
         if self.type == "box":
@@ -126,7 +135,17 @@ class Obstacle:
             return coal.Sphere(self.radius)
         if self.type == "cylinder":
             return coal.Cylinder(self.radius, self.length)
-        return coal.MeshLoader().load(str(self.mesh), self.scale)
+        try:
+            mesh = coal.MeshLoader().load(str(self.mesh), self.scale)
+        except Exception as exc:  # coal raises ValueError with assimp's report for bad files
+            lines = [line for line in str(exc).splitlines() if line and not line.startswith(("From file", "in function",
+                                                                                         "at line", "Hint"))]
+            why = " ".join(lines).replace("message: ", "")[:160] or type(exc).__name__
+            raise ManifoldgenError(f"obstacle '{self.name}': cannot read mesh file {self.mesh} ({why}); give a "
+                                   "readable .stl, .obj or .dae file") from None
+        if mesh.num_vertices == 0:
+            raise ManifoldgenError(f"obstacle '{self.name}': mesh file {self.mesh} has no vertices")
+        return mesh
 
     def geometry_object(self, joint: int = 0, frame: int = 0, placement: pin.SE3 | None = None) -> pin.GeometryObject:
         """The pinocchio object; by default fixed in the world (joint 0) at ``pose``."""
@@ -251,6 +270,7 @@ class Scene:
         return out
 
     @classmethod
+    @file_reader
     def from_meta(cls, meta: dict) -> Scene:
         """The scene a path file records (the inverse of :meth:`to_meta`): obstacles, held tool, and the
         query's start, goal and condition."""
@@ -294,11 +314,17 @@ class Scene:
                    str(data.get("robot", "")))
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> Scene:
         path = Path(path)
         if not path.is_file():
             raise ManifoldgenError(f"scene file not found: {path}")
-        return cls.from_json(path.read_text(), str(path))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise ManifoldgenError(f"scene file {path} is not UTF-8 text (byte {exc.start}); save it as UTF-8 "
+                                   "JSON") from None
+        return cls.from_json(text, str(path))
 
 
 def get_scene(task: Task, name: str) -> Scene:

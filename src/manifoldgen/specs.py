@@ -21,6 +21,7 @@ from manifoldgen.tasks import check_made_for
 
 SPEC_HELP = "uniform, project, pg:DATASET.npz, or MODEL:DIR (e.g. cvae:runs/cvae; options: ,refine=N,batch=B)"
 OPTIONS = {"refine": int, "batch": int}
+LIMITS = {"refine": (0, 1000), "batch": (1, 1_000_000)}  # inclusive ranges of the options
 
 
 def parse_spec(spec: str) -> tuple[str, str, dict[str, int]]:
@@ -37,6 +38,9 @@ def parse_spec(spec: str) -> tuple[str, str, dict[str, int]]:
             parsed[key] = OPTIONS[key](value)
         except ValueError as exc:
             raise ManifoldgenError(f"sampler option {key} must be an integer, got '{value}'") from exc
+        low, high = LIMITS[key]
+        if not low <= parsed[key] <= high:
+            raise ManifoldgenError(f"sampler option {key}={parsed[key]} in '{spec}' must be from {low} to {high:,}")
     return name, arg, parsed
 
 

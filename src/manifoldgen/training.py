@@ -3,7 +3,8 @@
 ``train(model, dataset, seed=s)`` is deterministic for a seed: the split, the initial
 weights, the batch order and every noise draw come from generators seeded with ``s``.
 With ``out``, a checkpoint (weights, optimiser state, generator state, history, best
-weights) is written atomically after every epoch, so an interrupted run continued with
+weights: one safetensors file whose header carries the JSON state) is written atomically after
+every epoch, so an interrupted run continued with
 ``resume=True`` ends exactly where the uninterrupted run would have. When training ends the
 best-validation weights are saved to ``out`` with ``loss.png`` and ``training.json``.
 """
@@ -25,12 +26,14 @@ from manifoldgen.data import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.progress import progress_bar
+from manifoldgen.runtime import check_seed
 from manifoldgen.tasks import Task
 
 if TYPE_CHECKING:  # the models call train(); training needs them only as a type
     from manifoldgen.models.base import ConditionalSampler
 
-CHECKPOINT_WEIGHTS, CHECKPOINT_STATE = "checkpoint.safetensors", "checkpoint.json"
+CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous epoch's or this one's, never a mix
+OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
 MIN_ROWS = 10
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
 
@@ -100,13 +103,14 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     epochs = int(model.config["epochs"] if epochs is None else epochs)
     if epochs <= 0:
         raise ManifoldgenError(f"--epochs must be positive, got {epochs}")
+    seed = check_seed(seed)
     out = Path(out) if out is not None else None
     if out is not None:
         if out.exists() and not out.is_dir():
             raise ManifoldgenError(f"{out} exists and is not a directory; choose a model directory path")
         if not out.parent.exists():
             raise ManifoldgenError(f"output directory {out.parent} does not exist; create it first")
-        has_checkpoint = (out / CHECKPOINT_STATE).exists()
+        has_checkpoint = (out / CHECKPOINT).exists()
         if resume and not has_checkpoint:
             raise ManifoldgenError(f"no checkpoint in {out} to resume (training finished or never started); "
                                    "run without --resume")
@@ -187,8 +191,7 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
         atomic_write_text(out / "training.json", json.dumps(log.to_dict(), indent=1))
         from manifoldgen.viz.losses import plot_training
         plot_training(log, out / "loss.png")
-        (out / CHECKPOINT_STATE).unlink(missing_ok=True)
-        (out / CHECKPOINT_WEIGHTS).unlink(missing_ok=True)
+        (out / CHECKPOINT).unlink(missing_ok=True)
     return log
 
 
@@ -211,29 +214,27 @@ def _save_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optim
         optim_doc.append({"param_groups": sd["param_groups"], "scalars": scalars,
                           "tensor_keys": {str(pid): [k for k, v in st.items() if torch.is_tensor(v)]
                                           for pid, st in sd["state"].items()}})
-    blob = safetensors.torch.save(tensors)
+    doc = {"identity": identity, "log": asdict(log), "bad": bad, "optimizers": optim_doc}
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out / CHECKPOINT_WEIGHTS, blob)
-    doc = {"identity": identity, "log": asdict(log), "bad": bad, "optimizers": optim_doc,
-           "sha256": hashlib.sha256(blob).hexdigest()}
-    atomic_write_text(out / CHECKPOINT_STATE, json.dumps(doc))
+    atomic_write_bytes(out / CHECKPOINT, safetensors.torch.save(tensors, metadata={"state": json.dumps(doc)}))
 
 
 def _load_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optimizers: list,
                      gen: torch.Generator, log: TrainingLog) -> tuple[dict, int]:
+    damaged = (f"the checkpoint {out / CHECKPOINT} is damaged ({{}}); delete it and train from scratch, "
+               "or choose another directory")
     try:
-        doc = json.loads((out / CHECKPOINT_STATE).read_text())
-        blob = (out / CHECKPOINT_WEIGHTS).read_bytes()
-    except (OSError, ValueError) as exc:
-        raise ManifoldgenError(f"cannot read the checkpoint in {out} ({exc}); delete {CHECKPOINT_STATE} "
-                               "there and train from scratch") from exc
-    if hashlib.sha256(blob).hexdigest() != doc.get("sha256"):
-        raise ManifoldgenError(f"the checkpoint in {out} is damaged (weights do not match its checksum); "
-                               f"delete {CHECKPOINT_STATE} there and train from scratch")
+        blob = (out / CHECKPOINT).read_bytes()
+        size = int.from_bytes(blob[:8], "little")  # safetensors: header length, JSON header, tensor data
+        doc = json.loads(json.loads(blob[8:8 + size])["__metadata__"]["state"])
+        tensors = safetensors.torch.load(blob)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ManifoldgenError(damaged.format(f"{type(exc).__name__}: {exc}")) from None
+    except Exception as exc:  # safetensors raises its own error types for damaged files
+        raise ManifoldgenError(damaged.format(type(exc).__name__)) from None
     if json.loads(json.dumps(identity)) != doc.get("identity"):
         raise ManifoldgenError(f"the checkpoint in {out} was made with another dataset, model, seed or "
                                "settings; resume with the same command, or choose another directory")
-    tensors = safetensors.torch.load(blob)
     model.nets.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
     best = {k[5:]: v for k, v in tensors.items() if k.startswith("best.")}
     for j, (opt, od) in enumerate(zip(optimizers, doc["optimizers"])):

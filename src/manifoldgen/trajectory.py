@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz
 from manifoldgen.robot import BASE_JOINTS, Robot
 from manifoldgen.space import ConstrainedSpace, ValidationSettings, densify
@@ -129,6 +129,7 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
     raise RuntimeError(f"internal error: the trajectory still exceeds its limits by {ratio:.3g} after stretching")
 
 
+@file_reader
 def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale: float = 1.0,
                        dt: float = 0.01) -> Trajectory:
     """The time-parameterised trajectory of a path file, every sample rechecked (``info["check"]``)."""

@@ -30,6 +30,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -39,9 +40,11 @@ from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
 from manifoldgen.progress import progress_bar
+from manifoldgen.runtime import check_seed
 
 RUNS_FILE = "runs.jsonl"
 CONFIG_FILE = "config.json"
+OUTPUT_FILES = (RUNS_FILE, CONFIG_FILE, "results.md", "time.png", "length.png")
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
@@ -255,10 +258,25 @@ def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) 
         draw_snapshots(np.asarray(record["path"]), task, scene, out_dir / f"{record['method']}-snapshots.png")
 
 
-def _init_worker() -> None:
-    """One torch thread per worker process (the workers already share the cores)."""
+def _init_worker(parent: int) -> None:
+    """One torch thread per worker process (the workers already share the cores); on Linux the worker
+    is killed with its parent (``PR_SET_PDEATHSIG``), so a kill -9 of the benchmark leaves no orphans."""
+    import sys
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        if os.getppid() != parent:  # the parent died before the line above
+            os._exit(1)
     from manifoldgen.runtime import set_torch_threads
     set_torch_threads()
+
+
+def worker_pool(workers: int) -> ProcessPoolExecutor:
+    """The benchmark's pool: ``workers`` spawned processes that die with this one."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_init_worker, initargs=(os.getpid(),))
 
 
 def read_records(path: Path) -> list[dict]:
@@ -271,12 +289,17 @@ def read_records(path: Path) -> list[dict]:
         if not line.strip():
             continue
         try:
-            records.append(json.loads(line))
+            record = json.loads(line)
         except ValueError as exc:
             if i == len(lines) - 1:
                 break
             raise ManifoldgenError(f"{path} line {i + 1} is not JSON ({exc}); remove that line or rerun into "
-                                   "another folder") from exc
+                                   "another folder") from None
+        if not (isinstance(record, dict) and isinstance(record.get("method"), str)
+                and isinstance(record.get("run"), int)):
+            raise ManifoldgenError(f"{path} line {i + 1} is not a run record (method, run, ...); remove that line "
+                                   "or rerun into another folder")
+        records.append(record)
     return records
 
 
@@ -317,7 +340,13 @@ def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
         raise ManifoldgenError(f"{out_dir} already holds {done} runs; pass --resume to continue them or choose "
                                "another output folder")
     if resume and path.is_file():
-        old = json.loads(path.read_text())
+        try:
+            old = json.loads(path.read_text())
+        except ValueError:
+            old = None
+        if not isinstance(old, dict) or "experiment" not in old:
+            raise ManifoldgenError(f"{path} is damaged; delete it (the runs in {RUNS_FILE} are kept) or use "
+                                   "another folder") from None
         changed = [k for k in ("experiment",) if old.get(k) != config[k]]
         if changed:
             raise ManifoldgenError(f"{out_dir} was run with {old['experiment']}, not {config['experiment']}; "
@@ -332,6 +361,9 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     return the Markdown table and the summaries."""
     if runs <= 0 or workers <= 0:
         raise ManifoldgenError(f"--runs and --workers must be positive, got {runs} and {workers}")
+    if pg_rows <= 0:
+        raise ManifoldgenError(f"--pg-rows must be a positive number of dataset rows, got {pg_rows}")
+    check_seed(experiment.seed)
     if not np.isfinite(experiment.time_limit) or experiment.time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {experiment.time_limit}")
     parsed = [Method.parse(m) for m in methods]
@@ -341,6 +373,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     duplicates = sorted({label for label in labels if labels.count(label) > 1})
     if duplicates:
         raise ManifoldgenError(f"methods share the labels {duplicates}; name them with LABEL=... ")
+    if baseline is not None and baseline not in labels:
+        raise ManifoldgenError(f"--baseline '{baseline}' is not one of the method labels {labels}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
@@ -349,7 +383,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     _check_config(out_dir, config, resume, len(records))
     for record in records:
         match = next((m for m in parsed if m.label == record["method"]), None)
-        if match is not None and match.spec != record["spec"]:
+        if match is not None and match.spec != record.get("spec"):
             raise ManifoldgenError(f"{runs_path} has runs of '{match.label}' made with '{record['spec']}', not "
                                    f"'{match.spec}'; give that method another label or use another folder")
     atomic_write_text(out_dir / CONFIG_FILE, json.dumps(config, indent=1))
@@ -359,9 +393,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
         build(experiment, method, experiment.seed)
     done = {(r["method"], r["run"]) for r in records}
     todo = [(m, r) for r in range(runs) for m in parsed if (m.label, r) not in done]
-    context = multiprocessing.get_context("spawn")
     with progress_bar(f"{experiment.scene}: runs", total=len(todo), enabled=progress) as bar, \
-            ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker) as pool:
+            worker_pool(workers) as pool:
         pending = {pool.submit(run_once, experiment, m, r) for m, r in todo}
         try:
             while pending:
@@ -371,9 +404,13 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
                     _append(runs_path, record)
                     records.append(record)
                     bar.advance(1)
-        except BaseException:  # an interrupt or a crashed run: finished runs are already on disk
+        except BaseException as exc:  # an interrupt or a crashed run: finished runs are already on disk
             for future in pending:
                 future.cancel()
+            if isinstance(exc, BrokenProcessPool):
+                raise ManifoldgenError(f"a benchmark worker process died (killed, or out of memory); the "
+                                       f"{len(records)} finished runs are in {runs_path}: rerun with --resume "
+                                       "(fewer --workers if memory ran out)") from None
             raise
     kept = [r for r in records if r["method"] in labels and r["run"] < runs]
     if snapshots:

@@ -24,10 +24,12 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import check_seed, set_torch_threads
 from manifoldgen.tasks import check_made_for, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
+MIN_ROWS = 20  # samples and reference rows per condition: the k-NN metrics need more than k (5) of each
+OUTPUT_FILES = ("results.json", "table.md", "fig2_samples.png", "residuals.png", "coverage.png")
 
 
 def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, ...] = COUNTS, repeats: int = 7,
@@ -67,6 +69,14 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
+    limits = {"--samples": (samples, MIN_ROWS, 10**6), "--reference": (reference_rows, MIN_ROWS, 10**6),
+              "--repeats": (repeats, 1, 1000), "--refine": (refine, 0, 1000), "--threads": (threads, 1, 1024)}
+    for option, (value, low, high) in limits.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise ManifoldgenError(f"{option} must be an integer from {low} to {high:,}, got {value!r}")
+    seed = check_seed(seed)
+    if len({Path(d).resolve() for d in model_dirs}) < len(model_dirs):
+        raise ManifoldgenError(f"a model directory is given twice in {[str(d) for d in model_dirs]}; give each once")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     models = {str(d): load_model(d) for d in model_dirs}
@@ -79,6 +89,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     default_seen, default_unseen = default_conditions(task.condition.values)
     seen, unseen = seen or default_seen, unseen or default_unseen
     conditions = [*seen, *unseen]
+    check_seed(seed + 1000 + len(conditions), "--seed (+ 1000 + i seeds the reference set of condition i)")
     robot, constraint = task.robot, task.constraint
 
     reference = {}
@@ -140,8 +151,12 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
 
 
 def _label(model: ConditionalSampler, label: str, models: dict) -> str:
+    """The model's name; with others of its kind, its folder name too (its whole path when names collide)."""
     same = [k for k, m in models.items() if m.name == model.name]
-    return model.name if len(same) == 1 else f"{model.name} ({Path(label).name})"
+    if len(same) == 1:
+        return model.name
+    names = [Path(k).name for k in same]
+    return f"{model.name} ({Path(label).name if names.count(Path(label).name) == 1 else label})"
 
 
 def _average(per_condition: dict, ys: list[float]) -> dict:

@@ -70,7 +70,8 @@ class Condition:
             raise ManifoldgenError(f"condition needs {self.k} value(s) ({', '.join(self.names)}), "
                                    f"got {y.shape[1]}")
         if not np.all(np.isfinite(y)):
-            raise ManifoldgenError("condition contains NaN or infinite values")
+            raise ManifoldgenError(f"condition {y[~np.isfinite(y).all(axis=1)][0].tolist()} is not finite; give "
+                                   f"numbers inside {self.describe()}")
         outside = np.any((y < self.low - margin) | (y > self.high + margin), axis=1)
         if outside.any():
             msg = (f"condition {y[outside][0].tolist()} is outside the trained range "

@@ -21,7 +21,7 @@ from manifoldgen.sampling import generate
 from manifoldgen.scene import get_scene
 from manifoldgen.runtime import REFINE, set_torch_threads
 from manifoldgen.tasks import get_task
-from manifoldgen.training import CHECKPOINT_STATE
+from manifoldgen.training import CHECKPOINT
 from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
 
@@ -49,7 +49,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
 
     console.rule("2. train a CVAE")
     model = get_model_class("cvae")(**CVAE_SETTINGS)
-    interrupted = (output / "cvae" / CHECKPOINT_STATE).exists()  # a previous demo was stopped mid-training
+    interrupted = (output / "cvae" / CHECKPOINT).exists()  # a previous demo was stopped mid-training
     log = model.fit(dataset, epochs=EPOCHS, seed=seed, out=output / "cvae", resume=interrupted)
     figures["train_s"], figures["epochs"] = log.seconds, len(log.history)
 

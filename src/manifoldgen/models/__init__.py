@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.base import ConditionalSampler, read_model_dir
 from manifoldgen.models.cvae import CVAE
 from manifoldgen.models.flow import ConditionalFlow
@@ -27,6 +27,7 @@ def get_model_class(name: str) -> type[ConditionalSampler]:
     return MODELS.get(name)
 
 
+@file_reader
 def load_model(path: str | Path) -> ConditionalSampler:
     """Load a model directory (model.json + model.safetensors) of any registered model."""
     doc, tensors = read_model_dir(path)

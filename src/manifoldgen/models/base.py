@@ -4,7 +4,8 @@ A model learns ``p(q | y)``. Inputs and outputs are normalised inside the model 
 training split's statistics (saved with it); generated rows are clamped to the joint limits
 of the training robot. Files: a directory with ``model.safetensors`` (weights) and
 ``model.json`` (model name, hyper-parameters, dimensions, normalisation, dataset ``meta``,
-SHA-256 of the weights). Loading validates everything and never unpickles.
+SHA-256 of the weights, and ``sha256``: the checksum of every other field of the document, so an
+edited number is refused, not silently sampled from). Loading validates everything and never unpickles.
 """
 
 from __future__ import annotations
@@ -21,14 +22,14 @@ import safetensors.torch
 import torch
 
 from manifoldgen.constraints import Condition
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.training import TrainingLog, train
 
 if TYPE_CHECKING:
     from manifoldgen.data import Dataset
 
-MODEL_FORMAT_VERSION = 1
+MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 CHUNK = 10_000  # rows per forward pass when sampling (fastest on 2 CPU cores)
 LIMIT_SCALE = 0.01  # rad: a joint-limit overshoot of this size costs as much as one tolerance
@@ -68,6 +69,8 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"unknown hyper-parameter(s) {unknown} for model '{self.name}'; "
                                    f"known: {', '.join(sorted(self.defaults))}")
         self.config: dict = {**self.defaults, **hyper}
+        for key, value in self.config.items():
+            _check_hyper(self.name, key, value, self.defaults[key])
         self.meta: dict = {}
         self.d = self.k = 0
         self.norm: dict[str, list[float]] = {}
@@ -158,7 +161,11 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"model '{self.name}' is not trained; call fit() or load one")
         if n < 0:
             raise ManifoldgenError(f"number of samples must be >= 0, got {n}")
-        y = np.asarray(y, dtype=np.float32).reshape(-1, self.k)
+        given = np.asarray(y, dtype=float).reshape(-1, self.k)
+        bad = ~(np.abs(given) < 1e30).all(axis=1)  # NaN, infinite, or lost in float32
+        if bad.any():
+            raise ManifoldgenError(f"condition y must be finite numbers of sensible size, got {given[bad][0].tolist()}")
+        y = given.astype(np.float32)
         if len(y) not in (1, n):
             raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(y)}")
         out = np.empty((n, self.d), dtype=np.float64)
@@ -188,9 +195,11 @@ class ConditionalSampler(ABC):
         blob = safetensors.torch.save(self.state_tensors())
         atomic_write_bytes(path / WEIGHTS_FILE, blob)
         doc = {**self.describe(), "weights_sha256": hashlib.sha256(blob).hexdigest()}
+        doc["sha256"] = document_checksum(doc)
         atomic_write_text(path / CONFIG_FILE, json.dumps(doc, indent=1))
 
     @classmethod
+    @file_reader
     def load(cls, path: str | Path) -> ConditionalSampler:
         """Load a model directory written by :meth:`save` (validated; clear errors)."""
         doc, tensors = read_model_dir(path)
@@ -220,6 +229,35 @@ class ConditionalSampler(ABC):
         return model
 
 
+def _check_hyper(model: str, key: str, value, default) -> None:
+    """Refuse a hyper-parameter value no model can train with (raw torch errors otherwise)."""
+    if isinstance(default, list):
+        ok = isinstance(value, list) and value and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1
+                                                       for v in value)
+        need = "a non-empty list of positive integers"
+    elif isinstance(default, int) and not isinstance(default, bool):
+        ok, need = isinstance(value, int) and not isinstance(value, bool) and value >= 1, "a positive integer"
+    elif isinstance(default, float):
+        number = isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
+        if key == "lr":
+            ok, need = number and value > 0, "a positive number"
+        elif key == "beta1":
+            ok, need = number and 0 <= value < 1, "a number in [0, 1)"
+        else:
+            ok, need = number and value >= 0, "a finite number >= 0"
+    else:
+        return
+    if not ok:
+        raise ManifoldgenError(f"hyper-parameter {key}={value!r} of model '{model}' must be {need} "
+                               f"(default {default!r})")
+
+
+def document_checksum(doc: dict) -> str:
+    """SHA-256 of ``doc`` without its ``sha256`` field, as canonical JSON (key order and spacing ignored)."""
+    body = {k: v for k, v in doc.items() if k != "sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
 def read_model_dir(path: str | Path) -> tuple[dict, dict[str, torch.Tensor]]:
     """Read and validate ``model.json`` and ``model.safetensors`` of a model directory."""
     path = Path(path)
@@ -231,8 +269,8 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, torch.Tensor]]:
                                    "(retrain, or copy both model.json and model.safetensors)")
     try:
         doc = json.loads((path / CONFIG_FILE).read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from exc
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from None
     _validate_doc(path, doc)
     blob = (path / WEIGHTS_FILE).read_bytes()
     if hashlib.sha256(blob).hexdigest() != doc["weights_sha256"]:
@@ -252,12 +290,16 @@ def _validate_doc(path: Path, doc: object) -> None:
 
     if not isinstance(doc, dict):
         raise bad("not a JSON object")
-    for key, kind in (("format_version", int), ("model", str), ("config", dict), ("dims", dict),
+    if doc.get("format_version") != MODEL_FORMAT_VERSION:
+        raise bad(f"format_version {doc.get('format_version')!r} is not supported (expected {MODEL_FORMAT_VERSION}; "
+                  "version 1 files carry no checksum of their fields)")
+    if doc.get("sha256") != document_checksum(doc):
+        raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
+                  "other field was changed)")
+    for key, kind in (("model", str), ("config", dict), ("dims", dict),
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
             raise bad(f"field '{key}' is missing or not a {kind.__name__}")
-    if doc["format_version"] != MODEL_FORMAT_VERSION:
-        raise bad(f"format_version {doc['format_version']} is not supported (expected {MODEL_FORMAT_VERSION})")
     d, k = doc["dims"].get("d"), doc["dims"].get("k")
     if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):
         raise bad("dims must hold positive integers d and k")

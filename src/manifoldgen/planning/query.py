@@ -20,6 +20,7 @@ from manifoldgen.planning.base import Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.smoothing import shortcut
+from manifoldgen.runtime import check_seed
 from manifoldgen.scene import Scene
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task
@@ -44,6 +45,7 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
 
     if not np.isfinite(time_limit) or time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
+    seed = check_seed(seed)
     planner_type = get_planner(planner)
     y = task.condition.check(scene.condition)[0]
     space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))

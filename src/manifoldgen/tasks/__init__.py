@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
-from manifoldgen.errors import ManifoldgenError, unknown_name
+from manifoldgen.errors import ManifoldgenError, file_reader, unknown_name
 from manifoldgen.robot import Robot, find_robot, resolve_robot
 
 BUILTIN_DIR = Path(__file__).resolve().parent
@@ -96,19 +96,27 @@ def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
 
 def task_from_meta(meta: dict, robot_hint: str | None = None) -> Task:
     """The task a dataset, model or path file was made for, from its ``meta`` alone."""
-    spec = meta.get("task")
+    spec = meta.get("task") if isinstance(meta, dict) else None
     if not isinstance(spec, dict):
         raise ManifoldgenError("the file's meta has no task specification (made by manifoldgen before 0.2); "
                                "recollect the dataset or retrain the model with this version")
-    return task_from_spec(spec, robot_hint)
+    try:
+        return task_from_spec(spec, robot_hint)
+    except ManifoldgenError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError) as exc:  # a damaged file
+        why = (str(exc).strip().splitlines() or [""])[0][:120]
+        raise ManifoldgenError(f"the file's task specification is damaged ({type(exc).__name__}: {why}); "
+                               "regenerate the file") from None
 
 
 def _finish(name: str, robot: Robot, constraint: Constraint, home, home_condition, notes: str,
             scenes: dict[str, Path]) -> Task:
     """A task with a home on the manifold: ``home`` projected, else the first of HOME_SEEDS uniform seeds that converges."""
     grid = constraint.condition.grid
-    y = grid[0] if home_condition is None else constraint.condition.check(home_condition)[0]
-    seeds = (np.asarray(home, float)[None] if home is not None
+    y = (grid[0] if home_condition is None
+         else constraint.condition.check(_numbers(home_condition, "home_condition"))[0])
+    seeds = (_numbers(home, "home")[None] if home is not None
              else robot.sample_uniform(HOME_SEEDS, np.random.default_rng(0)))
     if seeds.shape[1] != robot.n:
         raise ManifoldgenError(f"home has {seeds.shape[1]} values but the group has {robot.n} joints "
@@ -119,6 +127,14 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         raise ManifoldgenError(f"task '{name}': projecting {where} onto the constraint at condition {y.tolist()} "
                                "failed; give a home configuration closer to the manifold, or check the constraint")
     return Task(name, robot, constraint, res.q[int(np.argmax(res.converged))], y, notes, scenes)
+
+
+def _numbers(value, what: str) -> np.ndarray:
+    """``value`` as a flat float array, or a clear error."""
+    try:
+        return np.asarray(value, float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ManifoldgenError(f"{what} must be a list of numbers, got {value!r}") from None
 
 
 def check_made_for(meta: dict, constraint: Constraint, what: str) -> None:
@@ -160,6 +176,7 @@ def _nth_table_line(text: str, key: str, index: int) -> int:
     return lines[index] if index < len(lines) else 0
 
 
+@file_reader
 def load_task_file(path: str | Path) -> Task:
     """Read a TOML task file (see the module doc and docs/tasks.md)."""
     path = Path(path)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import load_npz
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
@@ -37,6 +37,7 @@ class ViewSource:
     title: str
 
 
+@file_reader
 def read_source(file: str | Path, task: str | None = None) -> ViewSource:
     """Read ``file``; ``task`` names the task of a scene .json (default: the built-in task that lists
     the scene, else ``pose`` for the scene's robot)."""
