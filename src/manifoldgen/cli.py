@@ -218,7 +218,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                seconds_per_m=pace.seconds_per_m * duration_scale, settle_s=settle, hold_s=hold,
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
-        check_output_path(output)
+        check_output_path(output, [path])
     result = check_path_file(path, settings, feet=feet, progress=True)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
