@@ -119,16 +119,36 @@ def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     assert "refused extensions: no sample within range" in stuck.why()
 
 
-def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validation():
+@pytest.mark.parametrize("name", ["rrtconnect", "sbl"])
+def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validation(name):
     """At resolution 0.5 the straight checks step over a 2 cm slab; the final 0.005 check must
     refuse such paths (the offending edge is cut and the search goes on)."""
     constraint, y, _, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, BoxChecker([([-0.01, -2.5, -0.5], [0.01, 1.9, 0.5])]))
-    planner = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), seed=0,
-                                     settings=RRTConnectSettings(range=1.0, resolution=0.5))
+    cls = PLANNERS.get(name)
+    planner = cls(space, ProjectionSampler(space, seed=0), seed=0,
+                  settings=cls.settings_type(range=1.0, resolution=0.5))
     result = planner.solve(start, goal, 20.0)
     assert result.extras["rejected_paths"] > 0
     _check(result, space, start, goal)
+
+
+def test_sbl_checks_edges_only_on_candidate_paths_and_removes_the_failing_ones():
+    """The corridor's wall cuts many of the unchecked edges that join the trees: those fail when a
+    candidate path crosses them and go (with their subtrees), edges off the candidate paths are never
+    checked (here over 40 % of them), and the same seed gives the same path."""
+    planner, space, start, goal = _planner("sbl", "interpolate", corridor_problem, seed=1)
+    result = planner.solve(start, goal, 20.0)
+    _check(result, space, start, goal)
+    lazy, nodes = result.extras["lazy"], sum(result.extras["nodes"])
+    assert 0 < lazy["edges_removed"] < lazy["edges_checked"] < 0.6 * nodes
+    assert len(planner.trees[0]) + len(planner.trees[1]) == nodes
+    dead = sum(int(np.sum(~np.isfinite(t.q[:t.size, 0]))) for t in planner.trees)
+    assert dead >= lazy["edges_removed"]
+    again, *_ = _planner("sbl", "interpolate", corridor_problem, seed=1)
+    np.testing.assert_array_equal(again.solve(start, goal, 20.0).path, result.path)
+    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0 and dimensions >= 0, got 0, 0"):
+        _planner("sbl", "auto", corridor_problem, cells=0)
 
 
 def test_shortcut_keeps_the_constraint_and_never_lengthens():
