@@ -8,9 +8,11 @@ to the other tree's node in that cell closest to it (OMPL's rule; the 2001 paper
 closest node within a distance, which in 7 and more dimensions the trees seldom reach), and only
 then are the edges of the path start .. bridge .. goal checked, in order from the start, each with
 the local planner (a chord that leaves the manifold becomes a projected walk under ``auto`` and
-``project``); an edge that fails is removed with the subtree grown from it (as OMPL's SBL does), an
-edge that passes is never checked again. The path that passes goes through the space's dense
-validation like every planner's.
+``project``). An edge that passes is never checked again. A bridge that fails is dropped. A tree
+edge that fails is removed, and the nodes beyond it, still joined to the other tree through the
+bridge, move to that tree, as in the 2001 paper (OMPL's SBL deletes them instead; keeping them
+solved far more of the panda maze's queries). The path that passes goes through the space's dense
+validation like every planner's, and a segment that fails it is handled the same way.
 
 "Near a node", with a sampler that puts its samples on the manifold: a random perturbation of a
 node leaves the manifold, so the new node is one of the sampler's samples. The planner draws a
@@ -61,10 +63,7 @@ class SBL(Planner):
         axes = self.rng.normal(size=(dims, robot.n))
         axes /= np.linalg.norm(axes, axis=1, keepdims=True)
         size = np.abs(axes) @ (robot.upper - robot.lower) / settings.cells
-        self._checked = self._removed = 0
-        self._via: list[dict[int, np.ndarray]] = [{}, {}]  # checked edges: node -> waypoints (K, n) ending at it
-        self.trees = [Tree(start), Tree(goal)]
-        self._grids = [_Grid(axes, size, tree) for tree in self.trees]
+        self._plant(start, goal, axes, size)
         self._start_pool(self.trees, deadline)
         while time.perf_counter() < deadline:
             self.iterations += 1
@@ -77,8 +76,16 @@ class SBL(Planner):
                 return path
         return None
 
+    def _plant(self, start: np.ndarray, goal: np.ndarray, axes: np.ndarray, size: np.ndarray) -> None:
+        """The two trees and their density grids (cells of ``size (d,)`` over the projection ``axes (d, n)``),
+        no edge checked yet."""
+        self._checked = self._removed = 0
+        self._via: list[dict[int, np.ndarray]] = [{}, {}]  # checked edges: node -> waypoints (K, n) ending at it
+        self.trees = [Tree(start), Tree(goal)]
+        self._grids = [_Grid(axes, size, tree) for tree in self.trees]
+
     def _extras(self):
-        """Lazy checks of the query: edges checked, and removed (with their subtrees) when they failed."""
+        """Lazy checks of the query: edges (and bridges) checked, and removed because they failed."""
         return {"lazy": {"edges_checked": self._checked, "edges_removed": self._removed}} if self.trees else {}
 
     def _expand(self, k: int, node: int) -> int | None:
@@ -110,49 +117,93 @@ class SBL(Planner):
 
     def _bridge(self, k: int, new: int) -> np.ndarray | None:
         """Bridge node ``new`` of tree ``k`` to the closest node of the other tree in its cell, if
-        any; check the path through the bridge lazily, then densely: the path or None.
-
-        The bridge is an unchecked edge in tree ``k`` to a copy of that node (OMPL's way), so that
-        a failing bridge is removed like any edge."""
+        any; check the path through the bridge lazily, then densely: the path or None."""
         other, q = self.trees[1 - k], self.trees[k].q[new]
         members = self._grids[1 - k].cells.get(self._grids[1 - k].cell(q))
         if not members:
             return None
         near = members[int(np.argmin(np.linalg.norm(other.q[members] - q, axis=1)))]
-        copy = self.trees[k].add(new, other.q[near][None])
-        self._grids[k].add(copy)
-        ends = [copy, near] if k == 0 else [near, copy]
-        edges = [(0, i) for i in self.trees[0].branch(ends[0])[1:]] + \
+        ends = (new, near) if k == 0 else (near, new)
+        edges = [(0, i) for i in self.trees[0].branch(ends[0])[1:]] + [None] + \
                 [(1, i) for i in self.trees[1].branch(ends[1])[:0:-1]]
-        if not all(self._check(t, i) for t, i in edges):
-            return None
+        bridge = None  # waypoints (K, n) from ends[0] to ends[1], once checked
+        for edge in edges:
+            if edge is None:
+                self._checked += 1
+                bridge = self.local.connect(self.trees[0].q[ends[0]], self.trees[1].q[ends[1]])
+                if bridge is None:
+                    self._removed += 1
+                    return None
+                bridge = bridge.copy()  # not a view of a node that a cut may remove
+            elif not self._check(*edge):
+                self._cut(*edge, ends, bridge)
+                return None
         pieces, owners = [self.trees[0].q[:1]], []
-        for t, i in edges:
-            via = self._via[t][i]
-            if t == 1:  # walked from node i back to its parent
-                via = np.concatenate([via[-2::-1], self.trees[1].q[self.trees[1].parent[i]][None]])
+        for edge in edges:
+            if edge is None:
+                via = bridge
+            elif edge[0] == 0:
+                via = self._via[0][edge[1]]
+            else:  # walked from the node back to its parent
+                tree = self.trees[1]
+                via = _reverse(self._via[1][edge[1]], tree.q[tree.parent[edge[1]]])
             pieces.append(via)
-            owners += [(self.trees[t], i)] * len(via)
-        path = self._finish(np.concatenate(pieces), owners)
-        if path is None:
-            for grid in self._grids:
-                grid.prune()
-        return path
+            owners += [edge] * len(via)
+        path = np.concatenate(pieces)
+        report = self._accept(path)
+        if report.valid:
+            return path
+        if owners[report.segment] is not None:
+            self._cut(*owners[report.segment], ends, bridge)
+        return None
 
     def _check(self, k: int, i: int) -> bool:
-        """Check the edge into node ``i`` of tree ``k`` once; a failing one goes with its subtree."""
+        """Check the edge into node ``i`` of tree ``k`` once (remembering its waypoints)."""
         if i in self._via[k]:
             return True
         tree = self.trees[k]
         self._checked += 1
         waypoints = self.local.connect(tree.q[tree.parent[i]], tree.q[i])
-        if waypoints is None:
-            self._removed += 1
-            tree.kill(i)
-            self._grids[k].prune()
-            return False
-        self._via[k][i] = waypoints
-        return True
+        if waypoints is not None:
+            self._via[k][i] = waypoints.copy()  # not a view of a node that a cut may remove
+        return waypoints is not None
+
+    def _cut(self, k: int, i: int, ends: tuple[int, int], bridge: np.ndarray | None) -> None:
+        """Remove the failed edge into node ``i`` of tree ``k``, which lies on the path to the
+        bridge end ``ends[k]``: the nodes grown from ``i`` stay connected to the other tree through
+        the bridge, so they move there (Sánchez & Latombe's split), the bridge end first, then
+        the path up to ``i`` reversed, then the rest in order, their checked edges kept."""
+        self._removed += 1
+        src, dst, via, dst_via = self.trees[k], self.trees[1 - k], self._via[k], self._via[1 - k]
+        inside = np.zeros(src.size, dtype=bool)  # the live nodes grown from i
+        inside[i] = True
+        for j in range(i + 1, src.size):
+            inside[j] = inside[src.parent[j]]
+        inside &= np.isfinite(src.q[:src.size, 0])
+        up = src.branch(ends[k])
+        up = up[up.index(i):][::-1]  # bridge end .. i
+        moved = {up[0]: dst.add(ends[1 - k], src.q[up[0]][None])}
+        if bridge is not None:
+            dst_via[moved[up[0]]] = bridge if k == 1 else _reverse(bridge, src.q[up[0]])
+        for child, parent in zip(up[1:], up[:-1]):
+            moved[child] = dst.add(moved[parent], src.q[child][None])
+            if parent in via:
+                dst_via[moved[child]] = _reverse(via[parent], src.q[child])
+        for j in np.flatnonzero(inside):
+            if j not in moved:
+                moved[j] = dst.add(moved[src.parent[j]], src.q[j][None])
+                if j in via:
+                    dst_via[moved[j]] = via[j]
+        src.kill(i)
+        self._grids[k].prune()
+        for j in moved.values():
+            self._grids[1 - k].add(j)
+
+
+def _reverse(waypoints: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """The waypoints (K, n) of an edge from ``parent (n,)`` to its last row, walked back: from the
+    last row to ``parent``."""
+    return np.concatenate([waypoints[-2::-1], parent[None]])
 
 
 class _Grid:
