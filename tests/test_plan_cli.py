@@ -43,6 +43,19 @@ def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, robot, sce
         assert meta["scene"][-1]["attached_to"] == "panda_hand_tcp"
 
 
+def test_plan_with_sbl_and_the_shipped_cvae_passes_the_outside_checker(tmp_path):
+    from manifoldgen.models import pretrained_model_dir
+    out = tmp_path / "sbl.npz"
+    result = runner.invoke(app, ["plan", "pose", "--robot", "panda", "--scene", "wall", "--sampler",
+                                 f"cvae:{pretrained_model_dir()}", "--planner", "sbl", "--seed", "0", "--time", "60",
+                                 "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    check = outside_check(out)
+    assert check["worst"] <= 1.0 and check["collisions"] == 0 and check["outside"] == 0
+    assert check["states"] > len(check["path"]) and check["meta"]["result"]["planner"] == "sbl"
+    assert check["meta"]["result"]["extras"]["lazy"]["edges_checked"] > 0
+
+
 def test_outside_checker_catches_a_path_through_the_wall(tmp_path, panda_task):
     """The checker itself must see collisions and constraint violations."""
     out = tmp_path / "p.npz"

@@ -119,16 +119,56 @@ def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     assert "refused extensions: no sample within range" in stuck.why()
 
 
-def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validation():
+@pytest.mark.parametrize("name", ["rrtconnect", "sbl"])
+def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validation(name):
     """At resolution 0.5 the straight checks step over a 2 cm slab; the final 0.005 check must
     refuse such paths (the offending edge is cut and the search goes on)."""
     constraint, y, _, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, BoxChecker([([-0.01, -2.5, -0.5], [0.01, 1.9, 0.5])]))
-    planner = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), seed=0,
-                                     settings=RRTConnectSettings(range=1.0, resolution=0.5))
+    cls = PLANNERS.get(name)
+    planner = cls(space, ProjectionSampler(space, seed=0), seed=0,
+                  settings=cls.settings_type(range=1.0, resolution=0.5))
     result = planner.solve(start, goal, 20.0)
     assert result.extras["rejected_paths"] > 0
     _check(result, space, start, goal)
+
+
+def test_sbl_checks_edges_only_on_candidate_paths():
+    """The corridor's wall cuts many of the unchecked edges that join the trees: those fail when a
+    candidate path crosses them, edges off the candidate paths are never checked (here over 40 %
+    of them), and the same seed gives the same path."""
+    planner, space, start, goal = _planner("sbl", "interpolate", corridor_problem, seed=1)
+    result = planner.solve(start, goal, 20.0)
+    _check(result, space, start, goal)
+    lazy = result.extras["lazy"]
+    assert 0 < lazy["edges_removed"] < lazy["edges_checked"] < 0.6 * sum(result.extras["nodes"])
+    again, *_ = _planner("sbl", "interpolate", corridor_problem, seed=1)
+    np.testing.assert_array_equal(again.solve(start, goal, 20.0).path, result.path)
+    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0 and dimensions >= 0, got 0, 0"):
+        _planner("sbl", "auto", corridor_problem, cells=0)
+
+
+def test_sbl_moves_the_nodes_beyond_a_failed_edge_to_the_other_tree():
+    """Start tree start -> a -> b -> d, edge a -> b through the wall; goal tree goal -> c; candidate
+    path bridged at b - c. The failed edge goes, and b and d (joined to the goal through the bridge)
+    move to the goal tree as c -> b -> d, unchecked edges staying unchecked."""
+    planner, space, start, goal = _planner("sbl", "interpolate", corridor_problem)
+    planner._plant(start, goal, np.eye(2, 3), np.ones(2))
+    a, b, c, d = (np.array(p) for p in ([-0.5, 0.0, 0.0], [0.5, 0.0, 0.0], [0.7, 0.2, 0.0], [0.5, 0.5, 0.0]))
+    first, second = planner.trees
+    ia, ib, id_ = first.add(0, a[None]), first.add(1, b[None]), first.add(2, d[None])
+    ic = second.add(0, c[None])
+    for k, i in ((0, ia), (0, ib), (0, id_), (1, ic)):
+        planner._grids[k].add(i)
+    assert planner._check(0, ia) and not planner._check(0, ib)
+    planner._cut(0, ib, (ib, ic), None)
+    assert not np.isfinite(first.q[[ib, id_], 0]).any() and np.allclose(first.q[ia], a)
+    assert np.allclose(second.q[second.size - 2:second.size], [b, d])
+    assert list(second.parent[second.size - 2:second.size]) == [ic, second.size - 2]
+    assert planner._via[1].keys().isdisjoint({second.size - 2, second.size - 1}) and ia in planner._via[0]
+    assert sorted(n for cell in planner._grids[1].cells.values() for n in cell) == [0, ic, ic + 1, ic + 2]
+    assert sorted(n for cell in planner._grids[0].cells.values() for n in cell) == [0, ia]
+    assert planner._extras()["lazy"] == {"edges_checked": 2, "edges_removed": 1}
 
 
 def test_shortcut_keeps_the_constraint_and_never_lengthens():

@@ -14,13 +14,14 @@ from manifoldgen.planning.prm import PRM, PRMSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.rrt import RRT, RRTSettings
 from manifoldgen.planning.rrt_connect import RRTConnect, RRTConnectSettings
+from manifoldgen.planning.sbl import SBL, SBLSettings
 from manifoldgen.planning.smoothing import shortcut
 from manifoldgen.registry import Registry
 
 PLANNERS: Registry[Planner] = Registry("planner", Planner)
-for _cls in (RRTConnect, RRT, PRM, KPIECE, CBiRRT):
+for _cls in (RRTConnect, RRT, PRM, KPIECE, CBiRRT, SBL):
     PLANNERS.register(_cls.name)(_cls)
 
 __all__ = ["CBiRRT", "CBiRRTSettings", "DEFAULT_LOCAL", "KPIECE", "KPIECESettings", "LOCAL_PLANNERS", "PLANNERS",
            "PRM", "PRMSettings", "PlanResult", "Planner", "PlannerSettings", "RRT", "RRTConnect",
-           "RRTConnectSettings", "RRTSettings", "make_local", "path_length", "shortcut"]
+           "RRTConnectSettings", "RRTSettings", "SBL", "SBLSettings", "make_local", "path_length", "shortcut"]
