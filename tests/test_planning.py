@@ -114,7 +114,7 @@ def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     _check(result, space, start, goal)
     assert result.extras["local"] == "auto" and result.length > 1.0
     stuck = PLANNERS.get("rrtconnect")(space, ProjectionSampler(space, seed=0), local="interpolate", seed=0,
-                                   settings=RRTConnectSettings(pool=256)).solve(start, goal, 1.0)
+                                   settings=RRTConnectSettings(pool=256)).solve(start, goal, 3.0)
     assert not stuck.solved and stuck.extras["rejected"]["range"] > 0
     assert "refused extensions: no sample within range" in stuck.why()
 
