@@ -11,7 +11,8 @@ What is rechecked, per configuration ``q (n,)`` of the planning group:
   ``tolerance``; inequalities ``G(q, y) <= 0`` (balance: CoM inside the support polygon with margin);
   a user type (``"module:Class"``) cannot be rechecked and is reported as such;
 - the joint limits (manifoldgen's convention: a continuous or unbounded revolute joint is bounded to
-  [-pi, pi]; a floating base's translation by ``base_bounds``, yaw and roll by pi, pitch by pi/2);
+  [-pi, pi]; a floating base's translation by ``base_bounds``, yaw and roll by pi, pitch by pi/2, or by ``base_bounds``'
+  columns 4-6 when it has six);
 - collisions: the robot's self-collision pairs (all pairs, minus those the SRDF disables, those between
   adjacent links and those whose relative pose the group cannot change; when the SRDF disables almost
   nothing, also those in collision in every one of a few hundred random configurations) and, for
@@ -244,9 +245,12 @@ class RobotModel:
             self._set(self.reference, self.model.getJointId(j), float(value))
         bounds = np.asarray(task.get("base_bounds") or [[-2, -2, -1], [2, 2, 2]], float)
         lower, upper = [], []
-        if self.floating_base:
-            lower += [*bounds[0], -np.pi, -np.pi / 2, -np.pi]
-            upper += [*bounds[1], np.pi, np.pi / 2, np.pi]
+        if self.floating_base:  # x, y, z and optionally yaw, pitch, roll (default +-pi, +-pi/2, +-pi)
+            angles = np.array([[-np.pi, -np.pi / 2, -np.pi], [np.pi, np.pi / 2, np.pi]])
+            if bounds.shape[1] == 6:
+                angles = np.clip(bounds[:, 3:], angles[0], angles[1])
+            lower += [*bounds[0, :3], *angles[0]]
+            upper += [*bounds[1, :3], *angles[1]]
         for jid in self.group_ids:
             jm = self.model.joints[jid]
             if jm.nq == 2:  # continuous: one turn

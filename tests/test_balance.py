@@ -1,0 +1,85 @@
+"""Whole-body balance: the built-in balance tasks (centauro, talos), flat feet, and bad input."""
+
+import numpy as np
+import pytest
+import torch
+
+from manifoldgen.constraints import BalanceConstraint, build_constraint, project
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.tasks import get_task
+
+
+@pytest.fixture(scope="module")
+def talos():
+    return get_task("balance", "talos")
+
+
+@pytest.fixture(scope="module")
+def centauro():
+    return get_task("balance", "centauro")
+
+
+def _arguments(task, **changes):
+    return {**task.constraint.arguments, "foot_positions": None, "foot_rotations": None, **changes}
+
+
+def test_balance_tasks_fix_the_feet_where_they_stand(centauro, talos):
+    for task, feet, n in ((centauro, 4, 39), (talos, 2, 34)):
+        c, home = task.constraint, task.home
+        assert task.robot.n == n and c.satisfied(home, task.home_condition)[0]
+        stance = np.asarray(c.arguments["stance"])
+        for foot, p in zip(c.feet, c.foot_positions):  # fixed where they stand in the reference stance, on z = 0
+            np.testing.assert_allclose(task.robot.frame_pose(stance, foot)[0][0], p, atol=1e-9)
+        np.testing.assert_allclose(c.contact_points[:, 2], 0.0, atol=c.tolerance[0])
+        assert len(c.feet) == feet and c.com_depth(home)[0] >= c.margin
+    assert "wheel" not in " ".join(centauro.robot.joints) and "head" not in " ".join(talos.robot.joints)
+
+
+def test_flat_feet_contract(talos, rng):
+    """Talos's soles: Jacobian = finite differences, torch = numpy (differentiable penalty), spec round trip,
+    projection lands on configurations whose soles keep their rotation."""
+    c, robot, y = talos.constraint, talos.robot, np.array([0.98])
+    q = np.clip(talos.home + 0.1 * rng.normal(size=(3, robot.n)), robot.lower, robot.upper)
+    F, J = c.jacobian(q, np.broadcast_to(y, (3, 1)))
+    for i in range(robot.n):
+        dq = np.zeros(robot.n)
+        dq[i] = 1e-6
+        fd = (c.residual(q + dq, y) - c.residual(q - dq, y)) / 2e-6
+        np.testing.assert_allclose(J[:, :, i], fd, atol=1e-5)
+    qt = torch.as_tensor(q).requires_grad_(True)
+    np.testing.assert_allclose(c.residual(qt, torch.tensor(y)).detach().numpy(), F, atol=1e-9)
+    np.testing.assert_allclose(c.inequality(qt, torch.tensor(y)).detach().numpy(), c.inequality(q, y), atol=1e-9)
+    far = qt.detach().clone()
+    far[:, 0] += 0.5  # base 0.5 m forward: feet off their spots and the CoM past the toes
+    far.requires_grad_(True)
+    c.penalty(far, torch.tensor(y)).sum().backward()
+    assert torch.isfinite(far.grad).all() and far.grad.abs().sum() > 0
+    assert (c.inequality(far.detach().numpy(), y) > 0).any()
+    rebuilt = build_constraint(robot, c.spec())
+    assert rebuilt.spec() == c.spec() and np.array_equal(rebuilt.hull, c.hull)
+    res = project(c, q, y)
+    ok = res.q[res.converged]
+    assert len(ok) and c.violation(ok, y).max() < 1e-3
+    for foot, R0 in zip(c.feet, c.foot_rotations):
+        np.testing.assert_allclose(robot.frame_pose(ok, foot)[1], np.broadcast_to(R0, (len(ok), 3, 3)), atol=1e-5)
+
+
+def test_balance_bad_input(centauro, talos):
+    robot = centauro.robot
+    with pytest.raises(ManifoldgenError, match="'wheel_1' does not touch the ground.*contact"):
+        BalanceConstraint(robot, **_arguments(centauro, feet=["wheel_1", "wheel_2", "wheel_3", "wheel_4"]))
+    with pytest.raises(ManifoldgenError, match="no support polygon.*contacts"):
+        BalanceConstraint(talos.robot, **_arguments(talos, flat=False, contacts=None))
+    with pytest.raises(ManifoldgenError, match="no support polygon"):
+        BalanceConstraint(robot, **_arguments(centauro, feet=["contact_1", "contact_2"]))
+    with pytest.raises(ManifoldgenError, match="only 0.09. m inside .* less than the 0.12 m margin.*not balanced"):
+        BalanceConstraint(talos.robot, **_arguments(talos, margin=0.12))
+    leaning = np.array(talos.constraint.arguments["stance"])
+    leaning[0] += 0.2  # the whole robot 0.2 m forward of its fixed soles: CoM past the toes
+    with pytest.raises(ManifoldgenError, match=r"stance's centre of mass \(0\.19.*0\.1.. m outside the support polygon.*not balanced"):
+        fixed = {k: v for k, v in talos.constraint.spec().items() if k != "type"}  # soles where they were
+        BalanceConstraint(talos.robot, **{**fixed, "stance": leaning.tolist()})
+    with pytest.raises(ManifoldgenError, match="needs the feet's 'foot_positions' or a reference 'stance'"):
+        BalanceConstraint(robot, **_arguments(centauro, stance=None))
+    with pytest.raises(ManifoldgenError, match="stance has 3 values"):
+        BalanceConstraint(robot, **_arguments(centauro, stance=[0.0, 0.0, 0.8]))
