@@ -83,3 +83,43 @@ def test_balance_bad_input(centauro, talos):
         BalanceConstraint(robot, **_arguments(centauro, stance=None))
     with pytest.raises(ManifoldgenError, match="stance has 3 values"):
         BalanceConstraint(robot, **_arguments(centauro, stance=[0.0, 0.0, 0.8]))
+
+
+def test_path_stability_counts_states_outside_the_polygon(talos):
+    from manifoldgen.stability import blind_space, path_stability
+    c, home = talos.constraint, talos.home
+    still = path_stability(c, np.stack([home, home]))
+    assert still.stable and still.min_depth == pytest.approx(c.com_depth(home)[0]) and still.max_foot_drift < 1e-6
+    slid = home.copy()
+    slid[0] += 0.15  # the whole robot slides 0.15 m forward: feet leave their spots, CoM passes the toes
+    report = path_stability(c, np.stack([home, slid]), resolution=0.005)
+    x = np.linspace(0, 0.15, report.states)  # the base's x along the 31 states
+    depth = c.com_depth(home[None] + x[:, None] * np.eye(talos.robot.n)[0])
+    assert report.states == 31 and report.unstable == int((depth < 0).sum()) > 0
+    assert report.unstable_fraction == pytest.approx(np.mean(depth < 0)) and not report.stable
+    assert report.max_foot_drift == pytest.approx(0.15, abs=1e-6) and report.min_depth == pytest.approx(depth.min())
+    blind = blind_space(talos.robot, None)
+    assert blind.valid(slid[None])[0] and blind.problem(slid) is None  # the blind baseline sees no problem
+    with pytest.raises(ManifoldgenError, match="no balance constraint"):
+        path_stability(get_task("pose", "panda").constraint, np.zeros((1, 7)))
+
+
+def test_bench_records_stability_per_run(talos, tmp_path):
+    """A balance task's bench record carries each solved path's stability, as path_stability finds it."""
+    import json
+
+    from manifoldgen.bench.planning import Experiment, Method, build, run_once
+    from manifoldgen.stability import path_stability
+    goal = talos.home.copy()
+    goal[20] -= 0.8  # left shoulder forward
+    scene = tmp_path / "open.json"
+    scene.write_text(json.dumps({"name": "open", "obstacles": [], "start": talos.home.tolist(), "goal": goal.tolist(),
+                                 "condition": talos.home_condition.tolist()}))
+    experiment = Experiment(scene=str(scene), task="balance", robot="talos", time_limit=20.0)
+    for spec in ("blind=rrtconnect:straight@blind", "rrtconnect:interpolate@project"):
+        record = run_once(experiment, Method.parse(spec), 0)
+        assert record["solved"], record.get("why") or record.get("error")
+        stability = path_stability(talos.constraint, np.asarray(record["path"]))
+        assert record["stability"] == stability.to_dict() and stability.states > 100
+    with pytest.raises(ManifoldgenError, match="rrtconnect:straight@blind"):
+        build(experiment, Method.parse("rrtconnect@blind"), 0)

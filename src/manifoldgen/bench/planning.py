@@ -8,8 +8,13 @@ A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
   :mod:`manifoldgen.ompl_bridge`);
 - ``SAMPLER``: a sampler spec for :func:`manifoldgen.specs.make_sampler` (``cvae:DIR``,
   ``pg:DATASET.npz``, ``project``, ``uniform``); ``pg`` alone means a PG dataset of
-  ``pg_rows`` configurations at the scene's condition, collected once into the output folder.
-  Our planners default to ``uniform``; OMPL's tree planners take no sampler.
+  ``pg_rows`` configurations at the scene's condition, collected once into the output folder;
+  ``blind`` means uniform samples in a space of joint limits and collisions only, ignoring the task
+  constraint (the balance-blind baseline). Our planners default to ``uniform``; OMPL's tree
+  planners take no sampler.
+
+For a balance task every solved path's static stability is recorded too (``stability``: the share of
+states whose centre of mass leaves the support polygon, feet drift; :mod:`manifoldgen.stability`).
 
 Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Runs execute in
 worker processes (each builds its own robot, checker, sampler and planner, with one torch
@@ -41,6 +46,7 @@ CONFIG_FILE = "config.json"
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
+BLIND = "blind"  # the sampler spec of the balance-blind baseline (see manifoldgen.stability.blind_space)
 
 
 @dataclass(frozen=True)
@@ -158,8 +164,16 @@ def build(experiment: Experiment, method: Method, seed: int):
 
     task = get_task(experiment.task, experiment.robot)
     scene = get_scene(task, experiment.scene)
-    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-    sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
+    if method.sampler == BLIND:  # the balance-blind baseline: uniform samples, limits and collisions only
+        from manifoldgen.stability import blind_space
+        if method.is_ompl or method.local != "straight":
+            raise ManifoldgenError(f"method '{method.spec}': the blind baseline has no constraint to walk on; "
+                                   "give one of our planners with straight segments, e.g. rrtconnect:straight@blind")
+        space = blind_space(task.robot, scene.checker(task.robot))
+        sampler = make_sampler("uniform", space, seed)
+    else:
+        space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+        sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
@@ -193,6 +207,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
                 "valid": False, "worst_violation": float("nan"), "reason": "", "error": str(exc)}
     report = space.validate_path(result.path) if result.solved else None
     summary = result.to_dict()
+    stability = _stability(experiment, result.path) if result.solved else None
     late = result.time_s > experiment.time_limit  # a planner may overrun its deadline inside one step
     return {**record, "solved": bool(result.solved and report.valid and not late),
             "planner_solved": bool(result.solved), "late": bool(late),
@@ -202,7 +217,17 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "valid": bool(report.valid) if report else False,
             "worst_violation": report.worst_violation if report else float("nan"),
             "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"],
+            **({"stability": stability} if stability else {}),
             **({"path": result.path.tolist()} if run == 0 and result.solved else {})}  # run 0's path, for pictures
+
+
+def _stability(experiment: Experiment, path: np.ndarray) -> dict | None:
+    """A solved path's static stability (:func:`manifoldgen.stability.path_stability`) for a balance task, else None."""
+    from manifoldgen.stability import balance_part, path_stability
+    from manifoldgen.tasks import get_task
+
+    constraint = get_task(experiment.task, experiment.robot).constraint
+    return path_stability(constraint, path).to_dict() if balance_part(constraint) is not None else None
 
 
 def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) -> None:

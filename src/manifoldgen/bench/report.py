@@ -94,6 +94,27 @@ def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) 
     return "\n".join(lines) + "\n"
 
 
+def stability_table(records: list[dict], methods: list[str]) -> str:
+    """Markdown: per method, the static stability of its solved paths (balance tasks; '' when no record has it):
+    mean and worst share of states whose CoM leaves the support polygon, paths with any such state, the
+    smallest CoM depth inside the polygon (m, negative: outside) and the largest foot drift (m)."""
+    rows = []
+    for method in methods:
+        found = [r["stability"] for r in records if r["method"] == method and r["solved"] and r.get("stability")]
+        if not found:
+            continue
+        unstable = [s["unstable_fraction"] for s in found]
+        rows.append([method, str(len(found)), f"{100 * np.mean(unstable):.1f}", f"{100 * np.max(unstable):.1f}",
+                     f"{sum(u > 0 for u in unstable)} / {len(found)}", f"{min(s['min_depth'] for s in found):.3f}",
+                     f"{max(s['max_foot_drift'] for s in found):.3f}"])
+    if not rows:
+        return ""
+    header = ["Method", "Solved paths", "CoM outside polygon, mean (% of states)", "worst path (%)",
+              "Paths with an unstable state", "Min CoM depth (m)", "Max foot drift (m)"]
+    return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+                     + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
+
+
 def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylabel: str, *,
              solved_only: bool = False, log: bool = True) -> bytes:
     """PNG bytes: one box per method of ``key`` (``time`` counts failures at the limit)."""
@@ -124,6 +145,12 @@ def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylab
     return buffer.getvalue()
 
 
+def _stability_section(records: list[dict], methods: list[str]) -> str:
+    table = stability_table(records, methods)
+    return ("\nStatic stability along the solved paths (every state every "
+            f"{ValidationSettings.resolution} rad):\n\n" + table) if table else ""
+
+
 def write_report(records: list[dict], out_dir: str | Path, title: str, *, methods: list[str] | None = None,
                  baseline: str | None = None, notes: str = "") -> tuple[str, list[MethodSummary]]:
     """Write ``results.md``, ``time.png`` and ``length.png`` to ``out_dir``; return the table and summaries."""
@@ -139,7 +166,7 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "Constraint::project; Atlas and TangentBundle project through charts and count 0). The worst "
             "violation is max |F_i| / tol_i over every state of every solved path, checked every "
             f"{ValidationSettings.resolution} rad."
-            "\n\n" + table + "\n![time](time.png)\n\n![length](length.png)\n")
+            "\n\n" + table + _stability_section(records, order) + "\n![time](time.png)\n\n![length](length.png)\n")
     atomic_write_text(out_dir / "results.md", text)
     atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",
                                                       "time (s, failures at the limit)"))
