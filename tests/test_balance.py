@@ -1,11 +1,16 @@
 """Whole-body balance: the built-in balance tasks (centauro, talos), flat feet, and bad input."""
 
+import json
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 
 from manifoldgen.constraints import BalanceConstraint, build_constraint, project
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import save_npz
 from manifoldgen.tasks import get_task
 
 
@@ -104,18 +109,22 @@ def test_path_stability_counts_states_outside_the_polygon(talos):
         path_stability(get_task("pose", "panda").constraint, np.zeros((1, 7)))
 
 
-def test_bench_records_stability_per_run(talos, tmp_path):
-    """A balance task's bench record carries each solved path's stability, as path_stability finds it."""
-    import json
-
-    from manifoldgen.bench.planning import Experiment, Method, build, run_once
-    from manifoldgen.stability import path_stability
+@pytest.fixture(scope="module")
+def open_scene(talos, tmp_path_factory):
+    """A talos scene without obstacles: the left shoulder swings forward (a query solved in seconds)."""
     goal = talos.home.copy()
-    goal[20] -= 0.8  # left shoulder forward
-    scene = tmp_path / "open.json"
+    goal[20] -= 0.8
+    scene = tmp_path_factory.mktemp("scene") / "open.json"
     scene.write_text(json.dumps({"name": "open", "obstacles": [], "start": talos.home.tolist(), "goal": goal.tolist(),
                                  "condition": talos.home_condition.tolist()}))
-    experiment = Experiment(scene=str(scene), task="balance", robot="talos", time_limit=20.0)
+    return scene
+
+
+def test_bench_records_stability_per_run(talos, open_scene):
+    """A balance task's bench record carries each solved path's stability, as path_stability finds it."""
+    from manifoldgen.bench.planning import Experiment, Method, build, run_once
+    from manifoldgen.stability import path_stability
+    experiment = Experiment(scene=str(open_scene), task="balance", robot="talos", time_limit=20.0)
     for spec in ("blind=rrtconnect:straight@blind", "rrtconnect:interpolate@project"):
         record = run_once(experiment, Method.parse(spec), 0)
         assert record["solved"], record.get("why") or record.get("error")
@@ -123,3 +132,30 @@ def test_bench_records_stability_per_run(talos, tmp_path):
         assert record["stability"] == stability.to_dict() and stability.states > 100
     with pytest.raises(ManifoldgenError, match="rrtconnect:straight@blind"):
         build(experiment, Method.parse("rrtconnect@blind"), 0)
+
+
+def test_outside_checker_rechecks_balance_paths(talos, open_scene, tmp_path):
+    """examples/check_path.py (pinocchio + coal only) rechecks feet, the CoM against the support polygon with
+    pinocchio's centerOfMass, limits and collisions from the path file alone; a path that slides the robot off
+    its feet is refused with its unstable states counted."""
+    from manifoldgen.planning.query import run_query
+    from manifoldgen.scene import get_scene
+    from manifoldgen.stability import path_stability
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+    from check_path import outside_check
+    from recheck import EXIT_INVALID, EXIT_VALID
+
+    result, meta = run_query(talos, get_scene(talos, str(open_scene)), "project", "rrtconnect", seed=0, time_limit=20.0)
+    assert result.solved
+    ours = path_stability(talos.constraint, result.path, meta["validation"]["resolution"])
+    middle = result.path[:2].mean(axis=0)
+    middle[0] += 0.15  # a detour with the whole robot 0.15 m forward: feet dragged, CoM past the toes
+    for name, path in (("ok", result.path), ("slid", np.insert(result.path, 1, middle, axis=0))):
+        save_npz(tmp_path / f"{name}.npz", meta, path=path)
+    report = outside_check(tmp_path / "ok.npz")
+    assert report["status"] == EXIT_VALID and report["stability"]["unstable"] == 0
+    assert report["stability"]["states"] == ours.states
+    assert report["stability"]["min_depth"] == pytest.approx(ours.min_depth, abs=1e-6)  # pinocchio's CoM = ours
+    bad = outside_check(tmp_path / "slid.npz")
+    assert bad["status"] == EXIT_INVALID and "left_sole_link position x" in bad["reason"]
+    assert bad["stability"]["unstable"] > 0 and bad["stability"]["max_foot_drift"] == pytest.approx(0.15, abs=0.01)
