@@ -125,7 +125,7 @@ def test_bench_records_stability_per_run(talos, open_scene):
     from manifoldgen.bench.planning import Experiment, Method, build, run_once
     from manifoldgen.stability import path_stability
     experiment = Experiment(scene=str(open_scene), task="balance", robot="talos", time_limit=20.0)
-    for spec in ("blind=rrtconnect:straight@blind", "rrtconnect:interpolate@project"):
+    for spec in ("blind=rrtconnect:straight@blind", "rrtconnect:interpolate@project", "rrtconnect@feet-only"):
         record = run_once(experiment, Method.parse(spec), 0)
         assert record["solved"], record.get("why") or record.get("error")
         stability = path_stability(talos.constraint, np.asarray(record["path"]))

@@ -5,7 +5,8 @@ constraint set) state by state, every ``resolution`` rad along its segments: how
 mass's ground projection lies inside the support polygon (negative: outside, the robot tips over),
 how far the feet have moved from their fixed spots. :func:`blind_space` is the space of a planner that
 ignores balance: joint limits and collisions only (uniform samples, the feet free to leave the ground),
-the baseline whose paths the paper says make the robot fall "most of the time".
+the baseline whose paths the paper says make the robot fall "most of the time"; :func:`feet_only_space`
+keeps the feet on their spots (and the base height) but ignores the centre of mass.
 """
 
 from __future__ import annotations
@@ -93,3 +94,13 @@ def blind_space(robot: Robot, checker: CollisionChecker | None,
                 settings: ValidationSettings = ValidationSettings()) -> ConstrainedSpace:
     """The balance-blind planner's space: joint limits and ``checker``'s collisions, no task constraint."""
     return ConstrainedSpace(_NoConstraint(robot), np.zeros(0), checker, settings)
+
+
+def feet_only_space(constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
+                    settings: ValidationSettings = ValidationSettings()) -> ConstrainedSpace:
+    """The space of a planner blind to the centre of mass: ``constraint`` (a balance constraint) with its CoM
+    inequality switched off (the feet stay on their spots, the base at its height), limits, collisions."""
+    if not isinstance(constraint, BalanceConstraint):
+        raise ManifoldgenError("the feet-only baseline needs a task whose constraint is a balance constraint")
+    arguments = {k: v for k, v in constraint.spec().items() if k != "type"}
+    return ConstrainedSpace(BalanceConstraint(constraint.robot, **{**arguments, "margin": -1e9}), y, checker, settings)

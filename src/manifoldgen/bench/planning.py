@@ -10,8 +10,9 @@ A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
   ``pg:DATASET.npz``, ``project``, ``uniform``); ``pg`` alone means a PG dataset of
   ``pg_rows`` configurations at the scene's condition, collected once into the output folder;
   ``blind`` means uniform samples in a space of joint limits and collisions only, ignoring the task
-  constraint (the balance-blind baseline). Our planners default to ``uniform``; OMPL's tree
-  planners take no sampler.
+  constraint (the balance-blind baseline); ``feet-only`` means uniform seeds projected onto the
+  balance constraint without its CoM inequality (blind to the centre of mass only). Our planners
+  default to ``uniform``; OMPL's tree planners take no sampler.
 
 For a balance task every solved path's static stability is recorded too (``stability``: the share of
 states whose centre of mass leaves the support polygon, feet drift; :mod:`manifoldgen.stability`).
@@ -47,6 +48,7 @@ PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 10
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
 BLIND = "blind"  # the sampler spec of the balance-blind baseline (see manifoldgen.stability.blind_space)
+FEET_ONLY = "feet-only"  # the CoM-blind baseline: feet kept, CoM ignored (manifoldgen.stability.feet_only_space)
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,10 @@ def build(experiment: Experiment, method: Method, seed: int):
                                    "give one of our planners with straight segments, e.g. rrtconnect:straight@blind")
         space = blind_space(task.robot, scene.checker(task.robot))
         sampler = make_sampler("uniform", space, seed)
+    elif method.sampler == FEET_ONLY:  # blind to the centre of mass only: feet kept, uniform seeds projected
+        from manifoldgen.stability import feet_only_space
+        space = feet_only_space(task.constraint, scene.condition, scene.checker(task.robot))
+        sampler = make_sampler("project", space, seed)
     else:
         space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
         sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
