@@ -159,3 +159,20 @@ def test_outside_checker_rechecks_balance_paths(talos, open_scene, tmp_path):
     bad = outside_check(tmp_path / "slid.npz")
     assert bad["status"] == EXIT_INVALID and "left_sole_link position x" in bad["reason"]
     assert bad["stability"]["unstable"] > 0 and bad["stability"]["max_foot_drift"] == pytest.approx(0.15, abs=0.01)
+
+
+def test_balance_snapshots_draw_the_support_polygon_and_the_com(talos, tmp_path):
+    """Paper Fig. 6: the strip shows the support polygon (green) and the CoM projection (green inside)."""
+    import matplotlib.image
+
+    from manifoldgen.demos import DEMOS
+    from manifoldgen.scene import Scene
+    from manifoldgen.viz.snapshots import draw_snapshots
+    goal = talos.home.copy()
+    goal[20] -= 0.8
+    scene = Scene("open", [], None, talos.home, goal, talos.home_condition)
+    out = draw_snapshots(np.stack([talos.home, goal]), talos, scene, tmp_path / "strip.png", count=2)
+    pixels = matplotlib.image.imread(out)[..., :3]
+    green = np.all(np.abs(pixels - np.array([0.0, 128 / 255, 0.0])) < 0.02, axis=2)
+    assert green.sum() > 50  # matplotlib's "green": the polygon and the CoM's ground projection
+    assert DEMOS["balance"] == "manifoldgen.demos.balance"
