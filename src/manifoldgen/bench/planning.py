@@ -33,6 +33,7 @@ import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, fields
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -157,15 +158,23 @@ class Experiment:
         return asdict(self)
 
 
-def build(experiment: Experiment, method: Method, seed: int):
-    """(planner, scene, space) for one run, built from scratch."""
+@lru_cache(maxsize=None)
+def _scene(task: str, robot: str, scene: str):
+    """The task and its scene with end-effector targets solved, once per worker process (solving a
+    whole-body target projects hundreds of seeds; the answer depends on nothing else)."""
     from manifoldgen.scene import get_scene
-    from manifoldgen.space import ConstrainedSpace
-    from manifoldgen.specs import make_sampler
     from manifoldgen.tasks import get_task
 
-    task = get_task(experiment.task, experiment.robot)
-    scene = get_scene(task, experiment.scene)
+    task_obj = get_task(task, robot)
+    return task_obj, get_scene(task_obj, scene)
+
+
+def build(experiment: Experiment, method: Method, seed: int):
+    """(planner, scene, space) for one run, built from scratch (the scene's solved query is reused)."""
+    from manifoldgen.space import ConstrainedSpace
+    from manifoldgen.specs import make_sampler
+
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
     if method.sampler == BLIND:  # the balance-blind baseline: uniform samples, limits and collisions only
         from manifoldgen.stability import blind_space
         if method.is_ompl or method.local != "straight":

@@ -97,7 +97,8 @@ def markdown_table(summaries: list[MethodSummary], baseline: str | None = None) 
 def stability_table(records: list[dict], methods: list[str]) -> str:
     """Markdown: per method, the static stability of its solved paths (balance tasks; '' when no record has it):
     mean and worst share of states whose CoM leaves the support polygon, paths with any such state, the
-    smallest CoM depth inside the polygon (m, negative: outside) and the largest foot drift (m)."""
+    smallest CoM depth inside the polygon (m, negative: outside), the mean share of states with a foot off
+    its fixed spot by more than the tolerance, and the largest foot drift (m)."""
     rows = []
     for method in methods:
         found = [r["stability"] for r in records if r["method"] == method and r["solved"] and r.get("stability")]
@@ -106,11 +107,13 @@ def stability_table(records: list[dict], methods: list[str]) -> str:
         unstable = [s["unstable_fraction"] for s in found]
         rows.append([method, str(len(found)), f"{100 * np.mean(unstable):.1f}", f"{100 * np.max(unstable):.1f}",
                      f"{sum(u > 0 for u in unstable)} / {len(found)}", f"{min(s['min_depth'] for s in found):.3f}",
+                     f"{100 * np.mean([s['feet_moved_fraction'] for s in found]):.1f}",
                      f"{max(s['max_foot_drift'] for s in found):.3f}"])
     if not rows:
         return ""
     header = ["Method", "Solved paths", "CoM outside polygon, mean (% of states)", "worst path (%)",
-              "Paths with an unstable state", "Min CoM depth (m)", "Max foot drift (m)"]
+              "Paths with an unstable state", "Min CoM depth (m)", "Feet off their spots, mean (% of states)",
+              "Max foot drift (m)"]
     return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
                      + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
 
