@@ -31,6 +31,6 @@ for r in $robots; do
     -m "cvae-rrtconnect=rrtconnect@cvae:$d-cvae,batch=256" -m "cvae-rrt=rrt@cvae:$d-cvae,batch=256" \
     -m "cvae-kpiece=kpiece@cvae:$d-cvae,batch=256" -m "project-rrtconnect=rrtconnect@project" \
     -m "cbirrt=cbirrt:project@uniform" -m "ompl-projected=ompl-projected-rrtconnect" \
-    -m "ompl-atlas=ompl-atlas-rrtconnect" -m "blind=rrtconnect:straight@blind" \
+    -m "ompl-atlas=ompl-atlas-rrtconnect" -m "blind=rrtconnect:direct@blind" \
     -m "cgan-rrtconnect=rrtconnect@cgan:$d-cgan,batch=256" -m "feet-only=rrtconnect@feet-only"
 done

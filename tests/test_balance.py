@@ -125,12 +125,12 @@ def test_bench_records_stability_per_run(talos, open_scene):
     from manifoldgen.bench.planning import Experiment, Method, build, run_once
     from manifoldgen.stability import path_stability
     experiment = Experiment(scene=str(open_scene), task="balance", robot="talos", time_limit=20.0)
-    for spec in ("blind=rrtconnect:straight@blind", "rrtconnect:interpolate@project", "rrtconnect@feet-only"):
+    for spec in ("blind=rrtconnect:direct@blind", "rrtconnect:interpolate@project", "rrtconnect@feet-only"):
         record = run_once(experiment, Method.parse(spec), 0)
         assert record["solved"], record.get("why") or record.get("error")
         stability = path_stability(talos.constraint, np.asarray(record["path"]))
         assert record["stability"] == stability.to_dict() and stability.states > 100
-    with pytest.raises(ManifoldgenError, match="rrtconnect:straight@blind"):
+    with pytest.raises(ManifoldgenError, match="rrtconnect:direct@blind"):
         build(experiment, Method.parse("rrtconnect@blind"), 0)
 
 
@@ -176,3 +176,19 @@ def test_balance_snapshots_draw_the_support_polygon_and_the_com(talos, tmp_path)
     green = np.all(np.abs(pixels - np.array([0.0, 128 / 255, 0.0])) < 0.02, axis=2)
     assert green.sum() > 50  # matplotlib's "green": the polygon and the CoM's ground projection
     assert DEMOS["balance"] == "manifoldgen.demos.balance"
+
+
+def test_unreachable_hand_target_and_bad_base_bounds(talos):
+    """A reach target no balanced configuration attains is refused with the fix; so are malformed base bounds."""
+    from manifoldgen.robot import Robot
+    from manifoldgen.targets import solve_target
+    with pytest.raises(ManifoldgenError, match="no collision-free configuration on the task's manifold .* gripper_left_"
+                                               "base_link at the goal target .* move the target within reach"):
+        solve_target(talos.constraint, talos.home_condition, {"position": [1.5, 0.3, 0.9],
+                                                             "frame": "gripper_left_base_link"}, None, "goal")
+    with pytest.raises(ManifoldgenError, match=r"base_bounds must be \[\[low\], \[high\]\] of x, y, z"):
+        Robot.load("talos", ["torso_1_joint"], floating_base=True, base_bounds=[[0, 0], [1, 1]])
+    angled = Robot.load("talos", ["torso_1_joint"], floating_base=True,
+                        base_bounds=[[-1, -1, 0, -0.5, -0.2, -9], [1, 1, 2, 0.5, 0.2, 9]])
+    np.testing.assert_allclose(angled.lower[:6], [-1, -1, 0, -0.5, -0.2, -np.pi])
+    np.testing.assert_allclose(angled.upper[:6], [1, 1, 2, 0.5, 0.2, np.pi])

@@ -177,9 +177,9 @@ def build(experiment: Experiment, method: Method, seed: int):
     task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
     if method.sampler == BLIND:  # the balance-blind baseline: uniform samples, limits and collisions only
         from manifoldgen.stability import blind_space
-        if method.is_ompl or method.local != "straight":
+        if method.is_ompl or method.local != "direct":
             raise ManifoldgenError(f"method '{method.spec}': the blind baseline has no constraint to walk on; "
-                                   "give one of our planners with straight segments, e.g. rrtconnect:straight@blind")
+                                   "give one of our planners with straight segments, e.g. rrtconnect:direct@blind")
         space = blind_space(task.robot, scene.checker(task.robot))
         sampler = make_sampler("uniform", space, seed)
     elif method.sampler == FEET_ONLY:  # blind to the centre of mass only: feet kept, uniform seeds projected

@@ -5,7 +5,7 @@ constraints, the paper); it cannot steer toward a far target (the chord leaves t
 so the tree planners extend it through stepping stones: pooled samples within reach.
 ``project`` walks toward the target in steps of at most ``step`` rad, projecting every step
 onto the manifold (CBiRRT, OMPL's ProjectedStateSpace), each short segment checked the same
-way. ``straight`` steers straight toward any target without stepping stones (plain RRT; for a space
+way. ``direct`` steers straight toward any target without stepping stones (plain RRT; for a space
 without a constraint). ``auto``, the default, is ``interpolate`` that walks where straight segments cannot work:
 toward targets with no stepping stone within reach, and where a chord leaves the manifold (a
 chord that hits an obstacle is not walked: the obstacle blocks a walk too). Every check goes to
@@ -143,11 +143,11 @@ class Interpolate(LocalPlanner):
         return self.straight(a, b, max_distance)
 
 
-class Straight(LocalPlanner):
+class Direct(LocalPlanner):
     """Straight segments of at most the planner's range toward any target, no stepping stones: plain
     RRT steering, for a space without a constraint (the balance-blind baseline)."""
 
-    name = "straight"
+    name = "direct"
     stones, walks = False, False
 
     def steer(self, a, b, max_distance=np.inf):
@@ -184,7 +184,7 @@ class Auto(LocalPlanner):
 
 
 LOCAL_PLANNERS: dict[str, type[LocalPlanner]] = {"auto": Auto, "interpolate": Interpolate, "project": Project,
-                                                 "straight": Straight}
+                                                 "direct": Direct}
 
 
 def make_local(name: str, space: ConstrainedSpace, **options) -> LocalPlanner:
