@@ -32,6 +32,7 @@ PER_CONDITION = 400  # x 4 pelvis heights
 EPOCHS = 12
 SAMPLES = 2000
 HAND = "arm1_8"  # centauro's left hand
+PLANNER = {"pool": 32, "pool_batch": 64}  # few stepping stones: the learned samples are dear (39 joints, projected)
 
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:
@@ -60,8 +61,8 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     figures["refined_valid"] = float(task.constraint.satisfied(refined, y).mean())
 
     console.rule("4. plan the reach")
-    sampler = f"cvae:{output / 'cvae'},refine={REFINE}"
-    result, meta = run_query(task, scene, sampler, "rrtconnect", seed=seed, time_limit=30.0)
+    sampler = f"cvae:{output / 'cvae'},refine={REFINE},batch=256"
+    result, meta = run_query(task, scene, sampler, "rrtconnect", seed=seed, time_limit=30.0, settings=PLANNER)
     save_path(output / "reach-path.npz", result, meta)
     report = meta["validation"]  # run_query re-checked the path densely (constraint, CoM, limits, collisions)
     plot_path(result.path, task.robot, HAND, scene, output / "reach-path.png",
