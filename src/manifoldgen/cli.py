@@ -310,7 +310,8 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
                  "cvae=rrtconnect:interpolate@cvae:DIR, "
-                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR "
+                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR; balance "
+                 "tasks: rrtconnect:direct@blind (balance-blind), rrtconnect@feet-only (CoM-blind) "
                  "(default: the shipped model, PG, CBiRRT, OMPL Projected/Atlas/TangentBundle, uniform)")
 
 
