@@ -6,7 +6,9 @@ obstacles and held tool, the validation resolution; see docs/file-formats.md) an
 URDF/SRDF, and checks every straight segment between consecutive waypoints at states every
 ``meta["validation"]["resolution"]`` (Euclidean, in the group's coordinates) against the constraint
 (every built-in type recomputed with pinocchio; tolerance per component; inequalities <= 0), the joint
-limits, self-collision, the obstacles and the held tool, without importing manifoldgen.
+limits, self-collision, the obstacles and the held tool, without importing manifoldgen. For a balance
+constraint it also reports static stability state by state: the centre of mass (pinocchio's
+``centerOfMass``) against the support polygon of the fixed feet, and how far the feet moved.
 
     python examples/check_path.py p.npz [more.npz ...] [--urdf PATH] [--srdf PATH] [--resolution R]
     -> p.npz: 20 waypoints, 1,144 states checked every 0.005; worst constraint use 0.87 of tolerance,
@@ -25,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
-                     print_reports, read_npz)
+from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, BalancePart, CannotRecheck, Checker,  # noqa: E402
+                     State, print_reports, read_npz)
 
 DEFAULT_RESOLUTION = 0.005  # what manifoldgen used before paths recorded their resolution
 ENDPOINT_TOLERANCE = 1e-6
@@ -48,7 +50,8 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
     """Recheck one path file. Returns ``status`` (exit code), ``line`` (verdict), ``details``, ``valid``,
     ``reason`` (the first problem), ``worst`` (max |F_i| / tol_i over the states), ``violations`` (states
     outside tolerance or violating an inequality), ``collisions``, ``outside`` (states outside the limits),
-    ``states``, ``resolution``, ``meta`` and ``path``."""
+    ``states``, ``resolution``, ``meta``, ``path`` and, for a balance constraint, ``stability`` (``states``,
+    ``unstable``: states whose CoM is outside the support polygon, ``min_depth`` m, ``max_foot_drift`` m; else None)."""
     empty = {"worst": float("inf"), "collisions": 0, "outside": 0, "violations": 0, "states": 0, "valid": False,
              "meta": {}, "path": np.zeros((0, 0)), "details": []}
     try:
@@ -86,10 +89,16 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
                     reason = reason or f"the path does not {what} at the recorded {key} {recorded.round(4).tolist()}"
     worst, violations, collisions, outside, count = 0.0, 0, 0, 0, 0
     rechecked = True
+    balance = [p for p in checker.constraint.parts if isinstance(p, BalancePart)]
+    depths, drifts = [], []
     if len(path) and np.all(np.isfinite(path)):
         states, segment = densify(path, resolution)
         count = len(states)
         for i, (q, seg) in enumerate(zip(states, segment)):
+            if balance:  # static stability with pinocchio's own centre of mass and frame placements
+                state = State(checker.robot, q)
+                depths.append(min(b.com_depth(state) for b in balance))
+                drifts.append(max(b.foot_drift(state) for b in balance))
             v = checker.judge(q, y, explain=not reason)
             worst = max(worst, v.worst)
             rechecked &= v.ok_constraint is not None
@@ -99,6 +108,14 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
             if not v.ok and not reason:
                 reason = f"segment {seg} (state {i}): " + "; ".join(v.reasons)
     valid = not reason
+    stability = None
+    if depths:
+        depths_a = np.asarray(depths)
+        stability = {"states": len(depths), "unstable": int((depths_a < 0).sum()), "min_depth": float(depths_a.min()),
+                     "max_foot_drift": float(max(drifts))}
+        details.append(f"balance: the CoM (pinocchio.centerOfMass) is outside the support polygon in "
+                       f"{stability['unstable']} of {len(depths)} states, at least {100 * depths_a.min():.1f} cm inside "
+                       f"otherwise; feet at most {1000 * stability['max_foot_drift']:.1f} mm from their fixed positions")
     if reason:
         details.append(f"first problem: {reason}")
     user = ", ".join(checker.constraint.user_types)
@@ -115,7 +132,7 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
             f"states violating the constraint, {collisions} in collision, {outside} outside the limits: {word}")
     return {"status": status, "line": line, "details": details, "valid": valid, "reason": reason, "worst": worst,
             "violations": violations, "collisions": collisions, "outside": outside, "states": count,
-            "resolution": resolution, "meta": meta, "path": path}
+            "resolution": resolution, "meta": meta, "path": path, "stability": stability}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,7 +11,8 @@ What is rechecked, per configuration ``q (n,)`` of the planning group:
   ``tolerance``; inequalities ``G(q, y) <= 0`` (balance: CoM inside the support polygon with margin);
   a user type (``"module:Class"``) cannot be rechecked and is reported as such;
 - the joint limits (manifoldgen's convention: a continuous or unbounded revolute joint is bounded to
-  [-pi, pi]; a floating base's translation by ``base_bounds``, yaw and roll by pi, pitch by pi/2);
+  [-pi, pi]; a floating base's translation by ``base_bounds``, yaw and roll by pi, pitch by pi/2, or by ``base_bounds``'
+  columns 4-6 when it has six);
 - collisions: the robot's self-collision pairs (all pairs, minus those the SRDF disables, those between
   adjacent links and those whose relative pose the group cannot change; when the SRDF disables almost
   nothing, also those in collision in every one of a few hundred random configurations) and, for
@@ -244,9 +245,12 @@ class RobotModel:
             self._set(self.reference, self.model.getJointId(j), float(value))
         bounds = np.asarray(task.get("base_bounds") or [[-2, -2, -1], [2, 2, 2]], float)
         lower, upper = [], []
-        if self.floating_base:
-            lower += [*bounds[0], -np.pi, -np.pi / 2, -np.pi]
-            upper += [*bounds[1], np.pi, np.pi / 2, np.pi]
+        if self.floating_base:  # x, y, z and optionally yaw, pitch, roll (default +-pi, +-pi/2, +-pi)
+            angles = np.array([[-np.pi, -np.pi / 2, -np.pi], [np.pi, np.pi / 2, np.pi]])
+            if bounds.shape[1] == 6:
+                angles = np.clip(bounds[:, 3:], angles[0], angles[1])
+            lower += [*bounds[0, :3], *angles[0]]
+            upper += [*bounds[1, :3], *angles[1]]
         for jid in self.group_ids:
             jm = self.model.joints[jid]
             if jm.nq == 2:  # continuous: one turn
@@ -496,8 +500,10 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
 
 
 class BalancePart(Part):
-    """Equalities ``[p_foot(q) - foot_position for each foot, p_base(q).z - y]``; inequalities, one per
-    support-polygon edge: ``n_e . com_xy(q) - (n_e . v_e - margin) <= 0`` (outward unit normals)."""
+    """Equalities ``[p_foot(q) - foot_position for each foot, (flat feet:) log3(foot_rotation^T R_foot(q)) for each
+    foot, p_base(q).z - y]``; inequalities, one per support-polygon edge: ``n_e . com_xy(q) - (n_e . v_e - margin)
+    <= 0`` (outward unit normals). The polygon is the hull of the contact points: each foot's ``contacts`` (points
+    in the foot frame; default its origin) at the fixed foot pose."""
 
     type = "balance"
 
@@ -507,24 +513,41 @@ class BalancePart(Part):
         self.base_name = spec["base_frame"]
         self.base = robot.frame(self.base_name)
         self.targets = np.asarray(spec["foot_positions"], float).reshape(len(self.feet), 3)
+        self.flat = bool(spec.get("flat", False))
+        self.rotations = (np.asarray(spec["foot_rotations"], float).reshape(len(self.feet), 3, 3) if self.flat
+                          else np.broadcast_to(np.eye(3), (len(self.feet), 3, 3)))
+        local = np.asarray(spec.get("contacts") or [[0.0, 0.0, 0.0]], float).reshape(-1, 3)
+        self.contacts = (self.targets[:, None] + local @ np.transpose(self.rotations, (0, 2, 1))).reshape(-1, 3)
         self.margin = float(spec.get("margin", 0.02))
-        hull = convex_hull(self.targets[:, :2])
+        hull = convex_hull(self.contacts[:, :2])
         if len(hull) < 3:
             raise CannotRecheck(f"balance feet {self.feet} span no support polygon")
         edges = np.roll(hull, -1, axis=0) - hull
         self.normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) / np.linalg.norm(edges, axis=1)[:, None]
         self.offsets = np.einsum("ij,ij->i", self.normals, hull)
         self.hull = hull
-        self.k, self.m = 1, 3 * len(self.feet) + 1
+        self.k, self.m = 1, 3 * len(self.feet) * (2 if self.flat else 1) + 1
         self.tolerance = np.full(self.m, float(spec.get("tolerance", 0.01)))
-        self.labels = [f"{f} position {c} (m)" for f in self.feet for c in "xyz"] + [f"{self.base_name} height (m)"]
+        self.labels = ([f"{f} position {c} (m)" for f in self.feet for c in "xyz"]
+                       + ([f"{f} rotation about {c} (rad)" for f in self.feet for c in "xyz"] if self.flat else [])
+                       + [f"{self.base_name} height (m)"])
 
     def residual(self, s, y):
-        feet = [s.pose(i)[0] - t for i, t in zip(self.ids, self.targets)]
-        return np.concatenate([*feet, s.pose(self.base)[0][2:] - y])
+        poses = [s.pose(i) for i in self.ids]
+        feet = [p - t for (p, _), t in zip(poses, self.targets)]
+        turns = [pin.log3(R0.T @ R) for (_, R), R0 in zip(poses, self.rotations)] if self.flat else []
+        return np.concatenate([*feet, *turns, s.pose(self.base)[0][2:] - y])
 
     def inequality(self, s, y):
         return self.normals @ s.com()[:2] - (self.offsets - self.margin)
+
+    def com_depth(self, s) -> float:
+        """How far (m) the CoM's ground projection lies inside the support polygon (negative: outside)."""
+        return float(np.min(self.offsets - self.normals @ s.com()[:2]))
+
+    def foot_drift(self, s) -> float:
+        """The largest distance (m) of a foot from its fixed position."""
+        return float(max(np.linalg.norm(s.pose(i)[0] - t) for i, t in zip(self.ids, self.targets)))
 
     def inequality_labels(self):
         return [f"CoM beyond support edge {a.round(3).tolist()}-{b.round(3).tolist()} less its {self.margin} m margin"

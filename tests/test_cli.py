@@ -53,6 +53,8 @@ def test_missing_output_directory(tmp_path):
 def test_tasks_lists_every_robot_with_its_range():
     result = runner.invoke(app, ["tasks"], terminal_width=200)
     assert result.exit_code == 0, result.output
-    for robot, low, high in [("panda", "0.2", "0.7"), ("pr2", "0.5", "1"), ("centauro", "-0.2", "0.3")]:
-        line = next(line for line in result.output.splitlines() if f" {robot} " in line)
+    for task, robot, low, high in [("pose", "panda", "0.2", "0.7"), ("pose", "pr2", "0.5", "1"),
+                                   ("pose", "centauro", "-0.2", "0.3"), ("balance", "centauro", "0.7", "0.85"),
+                                   ("balance", "talos", "0.94", "1.02")]:
+        line = next(line for line in result.output.splitlines() if line.startswith(task) and f" {robot} " in line)
         assert f"[{low}, {high}] m" in line

@@ -116,7 +116,7 @@ def _fd_check(constraint, q, y, eps=1e-6, atol=1e-5):
 
 
 FACING = np.diag([-1.0, -1.0, 1.0])  # two grippers facing each other across a tray
-FEET = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
+FEET = ["contact_1", "contact_2", "contact_3", "contact_4"]
 
 
 @pytest.fixture(scope="module")
@@ -130,14 +130,17 @@ def pr2_both_arms():
 @pytest.fixture(scope="module")
 def centauro_floating():
     robot = Robot.load("centauro", floating_base=True)
-    stance = np.clip(np.zeros(robot.n), robot.lower, robot.upper)
-    stance[2] = 0.7
+    stance = np.zeros(robot.n)  # the SRDF's homing pose (the reference), base raised until the wheels touch z = 0
+    for i, joint in enumerate(robot.joints[6:]):
+        stance[6 + i] = robot.reference[robot.model.joints[robot.model.getJointId(joint)].idx_q]
+    stance = np.clip(stance, robot.lower, robot.upper)
+    stance[2] -= np.mean([robot.frame_pose(stance, f)[0][0, 2] for f in FEET])
     return robot, stance
 
 
 def _balance(robot, stance):
     return BalanceConstraint(robot, FEET, np.stack([robot.frame_pose(stance, f)[0][0] for f in FEET]), "pelvis",
-                             [[0.6], [0.7]])
+                             [[0.7], [0.8]])
 
 
 # every constraint type: (name, factory(panda, pr2, centauro) -> (constraint, seeds (B, n), y (k,)))
@@ -156,7 +159,7 @@ CASES = {
     "closed_chain": lambda t, p, c: (ClosedChainConstraint(p, "r_gripper_tool_frame", "l_gripper_tool_frame",
                                                            FACING, [[0.3], [0.5]]), None, [0.4]),
     "balance": lambda t, p, c: (_balance(*c), c[1] + 0.1 * np.random.default_rng(1).normal(size=(40, c[0].n)),
-                                [0.65]),
+                                [0.75]),
     "set": lambda t, p, c: (ConstraintSet([OrientationConstraint(t.robot, "panda_hand_tcp", (0, 0, 1), (0, 0, -1)),
                                            PlaneConstraint(t.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])]),
                             None, [0.4]),
@@ -205,12 +208,12 @@ def test_closed_chain_between_pr2_grippers(pr2_both_arms, rng):
 def test_balance_on_centauro_with_floating_base(centauro_floating, rng):
     robot, stance = centauro_floating
     c = _balance(robot, stance)
-    assert c.satisfied(stance, [0.7])[0] and np.all(c.inequality(stance, [0.7]) < 0)
-    res = project(c, np.clip(stance + 0.2 * rng.normal(size=(100, robot.n)), robot.lower, robot.upper), [0.65])
+    assert c.satisfied(stance, [stance[2]])[0] and np.all(c.inequality(stance, [stance[2]]) < 0)
+    res = project(c, np.clip(stance + 0.2 * rng.normal(size=(100, robot.n)), robot.lower, robot.upper), [0.75])
     assert res.converged.mean() > 0.9
     moved = res.q[res.converged]
     shifted = moved.copy()
     shifted[:, 0] += 1.0  # slide the base 1 m forward with the legs unchanged: feet leave their spots
-    assert not c.satisfied(shifted, [0.65]).any()
-    G = c.inequality(moved, [0.65])
-    assert np.array_equal(c.satisfied(moved, [0.65]), np.all(G <= 0, axis=1) & robot.within_limits(moved))
+    assert not c.satisfied(shifted, [0.75]).any()
+    G = c.inequality(moved, [0.75])
+    assert np.array_equal(c.satisfied(moved, [0.75]), np.all(G <= 0, axis=1) & robot.within_limits(moved))

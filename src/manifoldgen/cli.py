@@ -135,7 +135,7 @@ def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to 
 
 @app.command()
 @friendly
-def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene)"),
+def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene), balance (centauro, reach scene)"),
          output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
          seed: int = typer.Option(0)):
     """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""
@@ -185,8 +185,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values)
     save_path(output, result, meta)
-    plot_path(result.path, task_obj.robot, meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name),
-              scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+    frame = (scene_obj.targets.get("goal") or scene_obj.targets.get("start") or {}).get("frame") \
+        or meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name)  # a reach traces its hand
+    plot_path(result.path, task_obj.robot, frame, scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
     if snapshots is not None and result.solved:
         from manifoldgen.viz.snapshots import draw_snapshots
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)
@@ -367,7 +368,8 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
                  "cvae=rrtconnect:interpolate@cvae:DIR, "
-                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR "
+                 "pg=rrtconnect@pg, cbirrt@uniform, ompl-projected-rrtconnect, ompl-joint-prm@cvae:DIR; balance "
+                 "tasks: rrtconnect:direct@blind (balance-blind), rrtconnect@feet-only (CoM-blind) "
                  "(default: the shipped model, PG, CBiRRT, OMPL Projected/Atlas/TangentBundle, uniform)")
 
 

@@ -206,7 +206,7 @@ class Robot:
         self.reference = reference  # (model.nq,) full pinocchio configuration for locked joints
         self.floating_base = floating_base
         self._joint_ids = [model.getJointId(j) for j in joints if j not in BASE_JOINTS]
-        self.base_bounds = np.asarray(base_bounds, float)  # (2, 3) floating-base translation low, high
+        self.base_bounds = np.asarray(base_bounds, float)  # (2, 3) or (2, 6) floating-base low, high
         self.lower, self.upper = self._limits(base_bounds)
         self._links = self._build_links()
 
@@ -221,7 +221,8 @@ class Robot:
         joints: the planning group, in order (default: every movable joint that is not a mimic).
         reference: values of locked joints (default: the SRDF's first group state, else neutral).
         floating_base: prepend the six coordinates of ``BASE_JOINTS``, bounded by
-        ``base_bounds`` (translation low, high; angles are bounded by ±pi).
+        ``base_bounds`` (low, high of x, y, z and optionally yaw, pitch, roll; angles default to ±pi,
+        pitch ±pi/2).
         srdf: an SRDF path (default: the robot's own; for a URDF path, the ``.srdf`` beside it).
         """
         source = os.fspath(robot)
@@ -252,8 +253,15 @@ class Robot:
     def _limits(self, base_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lower, upper = [], []
         if self.floating_base:
-            lower += [*base_bounds[0], -np.pi, -np.pi / 2, -np.pi]
-            upper += [*base_bounds[1], np.pi, np.pi / 2, np.pi]
+            angles = np.array([[-np.pi, -np.pi / 2, -np.pi], [np.pi, np.pi / 2, np.pi]])
+            bounds = np.asarray(base_bounds, float)
+            if bounds.shape not in ((2, 3), (2, 6)) or np.any(bounds[0] > bounds[1]):
+                raise ManifoldgenError(f"base_bounds must be [[low], [high]] of x, y, z (and optionally yaw, "
+                                       f"pitch, roll), low <= high; got {bounds.tolist()}")
+            if bounds.shape[1] == 6:
+                angles = np.clip(bounds[:, 3:], angles[0], angles[1])
+            lower += [*bounds[0, :3], *angles[0]]
+            upper += [*bounds[1, :3], *angles[1]]
         for jid in self._joint_ids:
             jm = self.model.joints[jid]
             if jm.nq == 2:  # continuous joint: the angle is bounded to one turn

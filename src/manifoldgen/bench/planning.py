@@ -9,8 +9,14 @@ A *method* is written ``[LABEL=]PLANNER[:LOCAL][@SAMPLER]``:
   ``projected``, ``atlas`` or ``tangent``, the callbacks compiled; see :mod:`manifoldgen.ompl_native`);
 - ``SAMPLER``: a sampler spec for :func:`manifoldgen.specs.make_sampler` (``cvae:DIR``,
   ``pg:DATASET.npz``, ``project``, ``uniform``); ``pg`` alone means a PG dataset of
-  ``pg_rows`` configurations at the scene's condition, collected once into the output folder.
-  Our planners default to ``uniform``; OMPL's tree planners take no sampler.
+  ``pg_rows`` configurations at the scene's condition, collected once into the output folder;
+  ``blind`` means uniform samples in a space of joint limits and collisions only, ignoring the task
+  constraint (the balance-blind baseline); ``feet-only`` means uniform seeds projected onto the
+  balance constraint without its CoM inequality (blind to the centre of mass only). Our planners
+  default to ``uniform``; OMPL's tree planners take no sampler.
+
+For a balance task every solved path's static stability is recorded too (``stability``: the share of
+states whose centre of mass leaves the support polygon, feet drift; :mod:`manifoldgen.stability`).
 
 Run ``r`` of every method uses seed ``seed + r`` for its sampler and planner. Runs execute in
 worker processes (each builds its own robot, checker, sampler and planner, with one torch
@@ -32,6 +38,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, fields
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +56,8 @@ PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 10
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
 NATIVE_PREFIX = "ompl-native-"
+BLIND = "blind"  # the sampler spec of the balance-blind baseline (see manifoldgen.stability.blind_space)
+FEET_ONLY = "feet-only"  # the CoM-blind baseline: feet kept, CoM ignored (manifoldgen.stability.feet_only_space)
 
 
 @dataclass(frozen=True)
@@ -162,17 +171,37 @@ class Experiment:
         return asdict(self)
 
 
-def build(experiment: Experiment, method: Method, seed: int):
-    """(planner, scene, space) for one run, built from scratch."""
+@lru_cache(maxsize=None)
+def _scene(task: str, robot: str, scene: str):
+    """The task and its scene with end-effector targets solved, once per worker process (solving a
+    whole-body target projects hundreds of seeds; the answer depends on nothing else)."""
     from manifoldgen.scene import get_scene
-    from manifoldgen.space import ConstrainedSpace
-    from manifoldgen.specs import make_sampler
     from manifoldgen.tasks import get_task
 
-    task = get_task(experiment.task, experiment.robot)
-    scene = get_scene(task, experiment.scene)
-    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-    sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
+    task_obj = get_task(task, robot)
+    return task_obj, get_scene(task_obj, scene)
+
+
+def build(experiment: Experiment, method: Method, seed: int):
+    """(planner, scene, space) for one run, built from scratch (the scene's solved query is reused)."""
+    from manifoldgen.space import ConstrainedSpace
+    from manifoldgen.specs import make_sampler
+
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
+    if method.sampler == BLIND:  # the balance-blind baseline: uniform samples, limits and collisions only
+        from manifoldgen.stability import blind_space
+        if method.is_ompl or method.local != "direct":
+            raise ManifoldgenError(f"method '{method.spec}': the blind baseline has no constraint to walk on; "
+                                   "give one of our planners with straight segments, e.g. rrtconnect:direct@blind")
+        space = blind_space(task.robot, scene.checker(task.robot))
+        sampler = make_sampler("uniform", space, seed)
+    elif method.sampler == FEET_ONLY:  # blind to the centre of mass only: feet kept, uniform seeds projected
+        from manifoldgen.stability import feet_only_space
+        space = feet_only_space(task.constraint, scene.condition, scene.checker(task.robot))
+        sampler = make_sampler("project", space, seed)
+    else:
+        space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+        sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
@@ -234,6 +263,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
                 "valid": False, "worst_violation": float("nan"), "reason": "", "error": str(exc)}
     report = space.validate_path(result.path) if result.solved else None
     summary = result.to_dict()
+    stability = _stability(experiment, result.path) if result.solved else None
     late = result.time_s > experiment.time_limit  # a planner may overrun its deadline inside one step
     return {**record, "solved": bool(result.solved and report.valid and not late),
             "planner_solved": bool(result.solved), "late": bool(late),
@@ -243,7 +273,17 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "valid": bool(report.valid) if report else False,
             "worst_violation": report.worst_violation if report else float("nan"),
             "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"],
+            **({"stability": stability} if stability else {}),
             **({"path": result.path.tolist()} if run == 0 and result.solved else {})}  # run 0's path, for pictures
+
+
+def _stability(experiment: Experiment, path: np.ndarray) -> dict | None:
+    """A solved path's static stability (:func:`manifoldgen.stability.path_stability`) for a balance task, else None."""
+    from manifoldgen.stability import balance_part, path_stability
+    from manifoldgen.tasks import get_task
+
+    constraint = get_task(experiment.task, experiment.robot).constraint
+    return path_stability(constraint, path).to_dict() if balance_part(constraint) is not None else None
 
 
 def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) -> None:

@@ -113,6 +113,30 @@ def operations_table(records: list[dict], methods: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def stability_table(records: list[dict], methods: list[str]) -> str:
+    """Markdown: per method, the static stability of its solved paths (balance tasks; '' when no record has it):
+    mean and worst share of states whose CoM leaves the support polygon, paths with any such state, the
+    smallest CoM depth inside the polygon (m, negative: outside), the mean share of states with a foot off
+    its fixed spot by more than the tolerance, and the largest foot drift (m)."""
+    rows = []
+    for method in methods:
+        found = [r["stability"] for r in records if r["method"] == method and r["solved"] and r.get("stability")]
+        if not found:
+            continue
+        unstable = [s["unstable_fraction"] for s in found]
+        rows.append([method, str(len(found)), f"{100 * np.mean(unstable):.1f}", f"{100 * np.max(unstable):.1f}",
+                     f"{sum(u > 0 for u in unstable)} / {len(found)}", f"{min(s['min_depth'] for s in found):.3f}",
+                     f"{100 * np.mean([s['feet_moved_fraction'] for s in found]):.1f}",
+                     f"{max(s['max_foot_drift'] for s in found):.3f}"])
+    if not rows:
+        return ""
+    header = ["Method", "Solved paths", "CoM outside polygon, mean (% of states)", "worst path (%)",
+              "Paths with an unstable state", "Min CoM depth (m)", "Feet off their spots, mean (% of states)",
+              "Max foot drift (m)"]
+    return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+                     + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
+
+
 def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylabel: str, *,
              solved_only: bool = False, log: bool = True) -> bytes:
     """PNG bytes: one box per method of ``key`` (``time`` counts failures at the limit)."""
@@ -143,6 +167,12 @@ def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylab
     return buffer.getvalue()
 
 
+def _stability_section(records: list[dict], methods: list[str]) -> str:
+    table = stability_table(records, methods)
+    return ("\nStatic stability along the solved paths (every state every "
+            f"{ValidationSettings.resolution} rad):\n\n" + table) if table else ""
+
+
 def write_report(records: list[dict], out_dir: str | Path, title: str, *, methods: list[str] | None = None,
                  baseline: str | None = None, notes: str = "") -> tuple[str, list[MethodSummary]]:
     """Write ``results.md``, ``time.png`` and ``length.png`` to ``out_dir``; return the table and summaries."""
@@ -158,7 +188,8 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "Constraint::project; Atlas and TangentBundle project through charts and count 0). The worst "
             "violation is max |F_i| / tol_i over every state of every solved path, checked every "
             f"{ValidationSettings.resolution} rad."
-            "\n\n" + table + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own, "
+            "\n\n" + table + _stability_section(records, order)
+            + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own, "
             "plus the C++ baseline's; FK: configurations whose constraint kinematics was computed, Jacobians "
             "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "
             "each with its own FK of every link; samples: from our samplers, or drawn by the C++ OMPL baseline's "

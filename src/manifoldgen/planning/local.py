@@ -5,7 +5,8 @@ constraints, the paper); it cannot steer toward a far target (the chord leaves t
 so the tree planners extend it through stepping stones: pooled samples within reach.
 ``project`` walks toward the target in steps of at most ``step`` rad, projecting every step
 onto the manifold (CBiRRT, OMPL's ProjectedStateSpace), each short segment checked the same
-way. ``auto``, the default, is ``interpolate`` that walks where straight segments cannot work:
+way. ``direct`` steers straight toward any target without stepping stones (plain RRT; for a space
+without a constraint). ``auto``, the default, is ``interpolate`` that walks where straight segments cannot work:
 toward targets with no stepping stone within reach, and where a chord leaves the manifold (a
 chord that hits an obstacle is not walked: the obstacle blocks a walk too). Every check goes to
 the :class:`~manifoldgen.space.ConstrainedSpace`.
@@ -141,6 +142,17 @@ class Interpolate(LocalPlanner):
         return self.straight(a, b, max_distance)
 
 
+class Direct(LocalPlanner):
+    """Straight segments of at most the planner's range toward any target, no stepping stones: plain
+    RRT steering, for a space without a constraint (the balance-blind baseline)."""
+
+    name = "direct"
+    stones, walks = False, False
+
+    def steer(self, a, b, max_distance=np.inf):
+        return self.straight(a, b, max_distance)
+
+
 class Project(LocalPlanner):
     """Walks on the manifold (see :meth:`LocalPlanner.walk`)."""
 
@@ -170,7 +182,8 @@ class Auto(LocalPlanner):
         return waypoints if reached else None
 
 
-LOCAL_PLANNERS: dict[str, type[LocalPlanner]] = {"auto": Auto, "interpolate": Interpolate, "project": Project}
+LOCAL_PLANNERS: dict[str, type[LocalPlanner]] = {"auto": Auto, "interpolate": Interpolate, "project": Project,
+                                                 "direct": Direct}
 
 
 def make_local(name: str, space: ConstrainedSpace, **options) -> LocalPlanner:

@@ -3,7 +3,11 @@ t5) rendered with matplotlib (no display), for any task.
 
 Each view draws the robot's collision geometry (each part reduced to the convex hull of at most
 ``HULL_POINTS`` of its vertices, shaded by a fixed light), the scene's obstacles (grey), the held
-tool (red) and the traced frames' path (magenta) with their position at that time.
+tool (red) and the traced frames' path (magenta) with their position at that time: the frames of
+the scene's end-effector targets, else those the task's constraint names. For a balance task
+(paper Fig. 6) each view also draws the support polygon on the ground (green) and the centre of
+mass with its ground projection (a dot: green inside the polygon, red outside; the title gives its
+depth inside, in cm).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, load_npz
 from manifoldgen.scene import Scene
 from manifoldgen.space import densify
+from manifoldgen.stability import balance_part
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.viewer.meshes import Part, part_poses, robot_parts, scene_parts
 from manifoldgen.viewer.source import traced_frames
@@ -50,9 +55,15 @@ def draw_snapshots(path: np.ndarray, task: Task, scene: Scene, out: str | Path, 
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(states, axis=0), axis=1))])
     picks = np.searchsorted(s, np.linspace(0, s[-1], count)).clip(0, len(states) - 1)
     poses = part_poses(robot, parts, states[picks])
-    traces = [robot.frame_pose(states, f)[0] for f in traced_frames(task)]
+    frames = list(dict.fromkeys(t["frame"] for t in scene.targets.values() if t.get("frame"))) or traced_frames(task)
+    traces = [robot.frame_pose(states, f)[0] for f in frames]
     world = [[(p.vertices @ T[:3, :3].T + T[:3, 3]) for p, T in zip(parts, poses[i])] for i in range(count)]
-    points = np.concatenate([v for views in world for v in views] + traces)
+    balance = balance_part(task.constraint)
+    if balance is not None:
+        polygon = np.column_stack([balance.hull, np.full(len(balance.hull), balance.ground)])
+        com, depth = robot.com(states[picks]), balance.com_depth(states[picks])
+    points = np.concatenate([v for views in world for v in views] + traces
+                            + ([polygon] if balance is not None else []))
     low, high = points.min(0), points.max(0)
     fig = plt.figure(figsize=(3.2 * count, 3.6))
     for i in range(count):
@@ -66,17 +77,31 @@ def draw_snapshots(path: np.ndarray, task: Task, scene: Scene, out: str | Path, 
         for trace in traces:
             ax.plot(*trace.T, color="m", lw=1.0)
             ax.plot(*trace[picks[i]], "o", color="m", ms=4)
+        title = f"t{i}: {s[picks[i]] / max(s[-1], 1e-12):.0%} of the path"
+        if balance is not None:
+            _draw_balance(ax, polygon, com[i], balance.ground, depth[i])
+            title += f"\nCoM {100 * depth[i]:.1f} cm inside" if depth[i] >= 0 else f"\nCoM {-100 * depth[i]:.1f} cm OUTSIDE"
         ax.set_xlim(low[0], high[0])
         ax.set_ylim(low[1], high[1])
         ax.set_zlim(low[2], high[2])
         ax.set_box_aspect(np.maximum(high - low, 1e-3))
         ax.view_init(elev=22, azim=-60)
         ax.set_axis_off()
-        ax.set_title(f"t{i}: {s[picks[i]] / max(s[-1], 1e-12):.0%} of the path", fontsize=9)
+        ax.set_title(title, fontsize=9)
     fig.suptitle(f"{robot.name} {task.name}, scene {scene.name}: {len(path)} waypoints, {s[-1]:.2f} rad", fontsize=10)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.88, wspace=0)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.88 if balance is None else 0.8, wspace=0)
     save_figure(fig, out)
     return Path(out)
+
+
+def _draw_balance(ax, polygon: np.ndarray, com: np.ndarray, ground: float, depth: float) -> None:
+    """The support polygon ``(H, 3)`` on the ground, the CoM ``(3,)`` and its ground projection."""
+    closed = np.vstack([polygon, polygon[:1]])
+    ax.plot(*closed.T, color="green", lw=1.5, zorder=5)
+    color = "green" if depth >= 0 else "red"
+    ax.plot([com[0], com[0]], [com[1], com[1]], [com[2], ground], ":", color=color, lw=1.0, zorder=6)
+    ax.plot(*com, "o", color="k", ms=4, zorder=6)
+    ax.plot(com[0], com[1], ground, "o", color=color, ms=6, zorder=6)
 
 
 def _reduced(part: Part) -> Part:

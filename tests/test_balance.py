@@ -1,0 +1,194 @@
+"""Whole-body balance: the built-in balance tasks (centauro, talos), flat feet, and bad input."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from manifoldgen.constraints import BalanceConstraint, build_constraint, project
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import save_npz
+from manifoldgen.tasks import get_task
+
+
+@pytest.fixture(scope="module")
+def talos():
+    return get_task("balance", "talos")
+
+
+@pytest.fixture(scope="module")
+def centauro():
+    return get_task("balance", "centauro")
+
+
+def _arguments(task, **changes):
+    return {**task.constraint.arguments, "foot_positions": None, "foot_rotations": None, **changes}
+
+
+def test_balance_tasks_fix_the_feet_where_they_stand(centauro, talos):
+    for task, feet, n in ((centauro, 4, 39), (talos, 2, 34)):
+        c, home = task.constraint, task.home
+        assert task.robot.n == n and c.satisfied(home, task.home_condition)[0]
+        stance = np.asarray(c.arguments["stance"])
+        for foot, p in zip(c.feet, c.foot_positions):  # fixed where they stand in the reference stance, on z = 0
+            np.testing.assert_allclose(task.robot.frame_pose(stance, foot)[0][0], p, atol=1e-9)
+        np.testing.assert_allclose(c.contact_points[:, 2], 0.0, atol=c.tolerance[0])
+        assert len(c.feet) == feet and c.com_depth(home)[0] >= c.margin
+    assert "wheel" not in " ".join(centauro.robot.joints) and "head" not in " ".join(talos.robot.joints)
+
+
+def test_flat_feet_contract(talos, rng):
+    """Talos's soles: Jacobian = finite differences, torch = numpy (differentiable penalty), spec round trip,
+    projection lands on configurations whose soles keep their rotation."""
+    c, robot, y = talos.constraint, talos.robot, np.array([0.98])
+    q = np.clip(talos.home + 0.1 * rng.normal(size=(3, robot.n)), robot.lower, robot.upper)
+    F, J = c.jacobian(q, np.broadcast_to(y, (3, 1)))
+    for i in range(robot.n):
+        dq = np.zeros(robot.n)
+        dq[i] = 1e-6
+        fd = (c.residual(q + dq, y) - c.residual(q - dq, y)) / 2e-6
+        np.testing.assert_allclose(J[:, :, i], fd, atol=1e-5)
+    qt = torch.as_tensor(q).requires_grad_(True)
+    np.testing.assert_allclose(c.residual(qt, torch.tensor(y)).detach().numpy(), F, atol=1e-9)
+    np.testing.assert_allclose(c.inequality(qt, torch.tensor(y)).detach().numpy(), c.inequality(q, y), atol=1e-9)
+    far = qt.detach().clone()
+    far[:, 0] += 0.5  # base 0.5 m forward: feet off their spots and the CoM past the toes
+    far.requires_grad_(True)
+    c.penalty(far, torch.tensor(y)).sum().backward()
+    assert torch.isfinite(far.grad).all() and far.grad.abs().sum() > 0
+    assert (c.inequality(far.detach().numpy(), y) > 0).any()
+    rebuilt = build_constraint(robot, c.spec())
+    assert rebuilt.spec() == c.spec() and np.array_equal(rebuilt.hull, c.hull)
+    res = project(c, q, y)
+    ok = res.q[res.converged]
+    assert len(ok) and c.violation(ok, y).max() < 1e-3
+    for foot, R0 in zip(c.feet, c.foot_rotations):
+        np.testing.assert_allclose(robot.frame_pose(ok, foot)[1], np.broadcast_to(R0, (len(ok), 3, 3)), atol=1e-5)
+
+
+def test_balance_bad_input(centauro, talos):
+    robot = centauro.robot
+    with pytest.raises(ManifoldgenError, match="'wheel_1' does not touch the ground.*contact"):
+        BalanceConstraint(robot, **_arguments(centauro, feet=["wheel_1", "wheel_2", "wheel_3", "wheel_4"]))
+    with pytest.raises(ManifoldgenError, match="no support polygon.*contacts"):
+        BalanceConstraint(talos.robot, **_arguments(talos, flat=False, contacts=None))
+    with pytest.raises(ManifoldgenError, match="no support polygon"):
+        BalanceConstraint(robot, **_arguments(centauro, feet=["contact_1", "contact_2"]))
+    with pytest.raises(ManifoldgenError, match="only 0.09. m inside .* less than the 0.12 m margin.*not balanced"):
+        BalanceConstraint(talos.robot, **_arguments(talos, margin=0.12))
+    leaning = np.array(talos.constraint.arguments["stance"])
+    leaning[0] += 0.2  # the whole robot 0.2 m forward of its fixed soles: CoM past the toes
+    with pytest.raises(ManifoldgenError, match=r"stance's centre of mass \(0\.19.*0\.1.. m outside the support polygon.*not balanced"):
+        fixed = {k: v for k, v in talos.constraint.spec().items() if k != "type"}  # soles where they were
+        BalanceConstraint(talos.robot, **{**fixed, "stance": leaning.tolist()})
+    with pytest.raises(ManifoldgenError, match="needs the feet's 'foot_positions' or a reference 'stance'"):
+        BalanceConstraint(robot, **_arguments(centauro, stance=None))
+    with pytest.raises(ManifoldgenError, match="stance has 3 values"):
+        BalanceConstraint(robot, **_arguments(centauro, stance=[0.0, 0.0, 0.8]))
+
+
+def test_path_stability_counts_states_outside_the_polygon(talos):
+    from manifoldgen.stability import blind_space, path_stability
+    c, home = talos.constraint, talos.home
+    still = path_stability(c, np.stack([home, home]))
+    assert still.stable and still.min_depth == pytest.approx(c.com_depth(home)[0]) and still.max_foot_drift < 1e-6
+    slid = home.copy()
+    slid[0] += 0.15  # the whole robot slides 0.15 m forward: feet leave their spots, CoM passes the toes
+    report = path_stability(c, np.stack([home, slid]), resolution=0.005)
+    x = np.linspace(0, 0.15, report.states)  # the base's x along the 31 states
+    depth = c.com_depth(home[None] + x[:, None] * np.eye(talos.robot.n)[0])
+    assert report.states == 31 and report.unstable == int((depth < 0).sum()) > 0
+    assert report.unstable_fraction == pytest.approx(np.mean(depth < 0)) and not report.stable
+    assert report.max_foot_drift == pytest.approx(0.15, abs=1e-6) and report.min_depth == pytest.approx(depth.min())
+    blind = blind_space(talos.robot, None)
+    assert blind.valid(slid[None])[0] and blind.problem(slid) is None  # the blind baseline sees no problem
+    with pytest.raises(ManifoldgenError, match="no balance constraint"):
+        path_stability(get_task("pose", "panda").constraint, np.zeros((1, 7)))
+
+
+@pytest.fixture(scope="module")
+def open_scene(talos, tmp_path_factory):
+    """A talos scene without obstacles: the left shoulder swings forward (a query solved in seconds)."""
+    goal = talos.home.copy()
+    goal[20] -= 0.8
+    scene = tmp_path_factory.mktemp("scene") / "open.json"
+    scene.write_text(json.dumps({"name": "open", "obstacles": [], "start": talos.home.tolist(), "goal": goal.tolist(),
+                                 "condition": talos.home_condition.tolist()}))
+    return scene
+
+
+def test_bench_records_stability_per_run(talos, open_scene):
+    """A balance task's bench record carries each solved path's stability, as path_stability finds it."""
+    from manifoldgen.bench.planning import Experiment, Method, build, run_once
+    from manifoldgen.stability import path_stability
+    experiment = Experiment(scene=str(open_scene), task="balance", robot="talos", time_limit=20.0)
+    for spec in ("blind=rrtconnect:direct@blind", "rrtconnect:interpolate@project", "rrtconnect@feet-only"):
+        record = run_once(experiment, Method.parse(spec), 0)
+        assert record["solved"], record.get("why") or record.get("error")
+        stability = path_stability(talos.constraint, np.asarray(record["path"]))
+        assert record["stability"] == stability.to_dict() and stability.states > 100
+    with pytest.raises(ManifoldgenError, match="rrtconnect:direct@blind"):
+        build(experiment, Method.parse("rrtconnect@blind"), 0)
+
+
+def test_outside_checker_rechecks_balance_paths(talos, open_scene, tmp_path):
+    """examples/check_path.py (pinocchio + coal only) rechecks feet, the CoM against the support polygon with
+    pinocchio's centerOfMass, limits and collisions from the path file alone; a path that slides the robot off
+    its feet is refused with its unstable states counted."""
+    from manifoldgen.planning.query import run_query
+    from manifoldgen.scene import get_scene
+    from manifoldgen.stability import path_stability
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+    from check_path import outside_check
+    from recheck import EXIT_INVALID, EXIT_VALID
+
+    result, meta = run_query(talos, get_scene(talos, str(open_scene)), "project", "rrtconnect", seed=0, time_limit=20.0)
+    assert result.solved
+    ours = path_stability(talos.constraint, result.path, meta["validation"]["resolution"])
+    middle = result.path[:2].mean(axis=0)
+    middle[0] += 0.15  # a detour with the whole robot 0.15 m forward: feet dragged, CoM past the toes
+    for name, path in (("ok", result.path), ("slid", np.insert(result.path, 1, middle, axis=0))):
+        save_npz(tmp_path / f"{name}.npz", meta, path=path)
+    report = outside_check(tmp_path / "ok.npz")
+    assert report["status"] == EXIT_VALID and report["stability"]["unstable"] == 0
+    assert report["stability"]["states"] == ours.states
+    assert report["stability"]["min_depth"] == pytest.approx(ours.min_depth, abs=1e-6)  # pinocchio's CoM = ours
+    bad = outside_check(tmp_path / "slid.npz")
+    assert bad["status"] == EXIT_INVALID and "left_sole_link position x" in bad["reason"]
+    assert bad["stability"]["unstable"] > 0 and bad["stability"]["max_foot_drift"] == pytest.approx(0.15, abs=0.01)
+
+
+def test_balance_snapshots_draw_the_support_polygon_and_the_com(talos, tmp_path):
+    """Paper Fig. 6: the strip shows the support polygon (green) and the CoM projection (green inside)."""
+    import matplotlib.image
+
+    from manifoldgen.demos import DEMOS
+    from manifoldgen.scene import Scene
+    from manifoldgen.viz.snapshots import draw_snapshots
+    goal = talos.home.copy()
+    goal[20] -= 0.8
+    scene = Scene("open", [], None, talos.home, goal, talos.home_condition)
+    out = draw_snapshots(np.stack([talos.home, goal]), talos, scene, tmp_path / "strip.png", count=2)
+    pixels = matplotlib.image.imread(out)[..., :3]
+    green = np.all(np.abs(pixels - np.array([0.0, 128 / 255, 0.0])) < 0.02, axis=2)
+    assert green.sum() > 50  # matplotlib's "green": the polygon and the CoM's ground projection
+    assert DEMOS["balance"] == "manifoldgen.demos.balance"
+
+
+def test_unreachable_hand_target_and_bad_base_bounds(talos):
+    """A reach target no balanced configuration attains is refused with the fix; so are malformed base bounds."""
+    from manifoldgen.robot import Robot
+    from manifoldgen.targets import solve_target
+    with pytest.raises(ManifoldgenError, match="no collision-free configuration on the task's manifold .* gripper_left_"
+                                               "base_link at the goal target .* move the target within reach"):
+        solve_target(talos.constraint, talos.home_condition, {"position": [1.5, 0.3, 0.9],
+                                                             "frame": "gripper_left_base_link"}, None, "goal")
+    with pytest.raises(ManifoldgenError, match=r"base_bounds must be \[\[low\], \[high\]\] of x, y, z"):
+        Robot.load("talos", ["torso_1_joint"], floating_base=True, base_bounds=[[0, 0], [1, 1]])
+    angled = Robot.load("talos", ["torso_1_joint"], floating_base=True,
+                        base_bounds=[[-1, -1, 0, -0.5, -0.2, -9], [1, 1, 2, 0.5, 0.2, 9]])
+    np.testing.assert_allclose(angled.lower[:6], [-1, -1, 0, -0.5, -0.2, -np.pi])
+    np.testing.assert_allclose(angled.upper[:6], [1, 1, 2, 0.5, 0.2, np.pi])
