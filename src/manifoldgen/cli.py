@@ -309,7 +309,7 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
 def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
                     baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
-                    config: Path | None = None, snapshots: bool = False) -> None:
+                    config: Path | None = None, snapshots: bool = False, physics: bool = False) -> None:
     from manifoldgen.bench.planning import (OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment, Method,
                                             default_baseline, default_methods, run_bench)
     from manifoldgen.scene import get_scene
@@ -329,7 +329,10 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
     experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,
                             paper["time_limit"] if time_limit is None else time_limit, seed,
-                            planner_settings=parse_settings(settings, config, known, "planner"))
+                            planner_settings=parse_settings(settings, config, known, "planner"), physics=physics)
+    if physics and not task_obj.robot.floating_base:
+        raise ManifoldgenError(f"--physics executes paths of a robot standing on its feet; {task_obj.robot.name} "
+                               f"in task {task_obj.name} has a fixed base: leave --physics out")
     if not methods and not models and not builtin:
         raise ManifoldgenError(f"give --methods or --model for task {task_obj.name}: the shipped model is for the "
                                "panda pose task; e.g. -m rrtconnect@project -m cbirrt@uniform -m cvae=rrtconnect@cvae:DIR")
@@ -360,10 +363,12 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                                                   "(repeatable; each planner takes those it has)"),
                config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
                snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "
-                                              "method's run-0 path, when solved")):
+                                              "method's run-0 path, when solved"),
+               physics: bool = typer.Option(False, help="Balance tasks: execute every solved path quasi-statically "
+                                            "in MuJoCo and record whether the robot stays upright")):
     """Any task's scene (a task file's or a scene .json): every method on the same query and seeds."""
     _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot, settings, config, snapshots)
+                    task, robot, settings, config, snapshots, physics)
 
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "

@@ -166,6 +166,7 @@ class Experiment:
     seed: int = 0
     resolution: float = 0.05
     planner_settings: dict = field(default_factory=dict)  # our planners' settings (each takes those it has)
+    physics: bool = False  # execute every solved path in MuJoCo (balance tasks; manifoldgen.physics)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -264,6 +265,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
     report = space.validate_path(result.path) if result.solved else None
     summary = result.to_dict()
     stability = _stability(experiment, result.path) if result.solved else None
+    physics = _physics(experiment, result.path) if stability and experiment.physics else None
     late = result.time_s > experiment.time_limit  # a planner may overrun its deadline inside one step
     return {**record, "solved": bool(result.solved and report.valid and not late),
             "planner_solved": bool(result.solved), "late": bool(late),
@@ -274,6 +276,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "worst_violation": report.worst_violation if report else float("nan"),
             "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"],
             **({"stability": stability} if stability else {}),
+            **({"physics": physics} if physics else {}),
             **({"path": result.path.tolist()} if run == 0 and result.solved else {})}  # run 0's path, for pictures
 
 
@@ -284,6 +287,17 @@ def _stability(experiment: Experiment, path: np.ndarray) -> dict | None:
 
     constraint = get_task(experiment.task, experiment.robot).constraint
     return path_stability(constraint, path).to_dict() if balance_part(constraint) is not None else None
+
+
+def _physics(experiment: Experiment, path: np.ndarray) -> dict:
+    """The verdict of executing a solved balance path in MuJoCo (:func:`manifoldgen.physics.check_path`)."""
+    from manifoldgen.physics import balance_feet, check_path
+    from manifoldgen.tasks import get_task
+
+    task = get_task(experiment.task, experiment.robot)
+    result = check_path(task.robot, path, balance_feet(task.constraint.spec()))
+    return {key: getattr(result, key) for key in ("upright", "stable", "fell", "max_tilt_deg", "max_slip_m",
+                                                  "base_drift_m", "cpu_s")}
 
 
 def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) -> None:

@@ -117,8 +117,10 @@ def stability_table(records: list[dict], methods: list[str]) -> str:
     """Markdown: per method, the static stability of its solved paths (balance tasks; '' when no record has it):
     mean and worst share of states whose CoM leaves the support polygon, paths with any such state, the
     smallest CoM depth inside the polygon (m, negative: outside), the mean share of states with a foot off
-    its fixed spot by more than the tolerance, and the largest foot drift (m)."""
+    its fixed spot by more than the tolerance, and the largest foot drift (m); with ``bench plan --physics``,
+    the paths that stayed upright in MuJoCo and their largest base tilt (degrees) and foot slip (m)."""
     rows = []
+    physics = any(r.get("physics") for r in records)
     for method in methods:
         found = [r["stability"] for r in records if r["method"] == method and r["solved"] and r.get("stability")]
         if not found:
@@ -128,11 +130,15 @@ def stability_table(records: list[dict], methods: list[str]) -> str:
                      f"{sum(u > 0 for u in unstable)} / {len(found)}", f"{min(s['min_depth'] for s in found):.3f}",
                      f"{100 * np.mean([s['feet_moved_fraction'] for s in found]):.1f}",
                      f"{max(s['max_foot_drift'] for s in found):.3f}"])
+        if physics:
+            ran = [r["physics"] for r in records if r["method"] == method and r["solved"] and r.get("physics")]
+            rows[-1] += ([f"{sum(p['upright'] for p in ran)} / {len(ran)}", f"{max(p['max_tilt_deg'] for p in ran):.2f}",
+                          f"{max(p['max_slip_m'] for p in ran):.3f}"] if ran else ["-", "-", "-"])
     if not rows:
         return ""
     header = ["Method", "Solved paths", "CoM outside polygon, mean (% of states)", "worst path (%)",
               "Paths with an unstable state", "Min CoM depth (m)", "Feet off their spots, mean (% of states)",
-              "Max foot drift (m)"]
+              "Max foot drift (m)"] + (["Upright in MuJoCo", "Max tilt (deg)", "Max foot slip (m)"] if physics else [])
     return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
                      + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
 

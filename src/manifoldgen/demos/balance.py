@@ -3,8 +3,8 @@
 Collect a small dataset of statically stable configurations (feet fixed, CoM inside the support
 polygon), train a CVAE briefly with the residual and CoM-margin penalties, measure its samples'
 accuracy, plan the left hand's reach past the obstacle with the learned sampler, validate the path
-densely, check static stability state by state (CoM over the support polygon, feet on their spots)
-and draw the snapshots with the support polygon and the CoM's ground projection (paper Fig. 6).
+densely, check static stability state by state (CoM over the support polygon, feet on their spots),
+execute the path quasi-statically in MuJoCo (does the robot stay upright?) and draw the snapshots with the support polygon and the CoM's ground projection (paper Fig. 6).
 """
 
 from __future__ import annotations
@@ -18,13 +18,14 @@ from rich.table import Table
 
 from manifoldgen.data import collect
 from manifoldgen.models import get_model_class
+from manifoldgen.physics import balance_feet, check_path
 from manifoldgen.planning.query import run_query, save_path
 from manifoldgen.runtime import REFINE, set_torch_threads
 from manifoldgen.sampling import generate
 from manifoldgen.scene import get_scene
 from manifoldgen.stability import path_stability
 from manifoldgen.tasks import get_task
-from manifoldgen.training import CHECKPOINT_STATE
+from manifoldgen.training import CHECKPOINT
 from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
 
@@ -51,7 +52,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
 
     console.rule("2. train a CVAE (residual + CoM-margin penalty)")
     model = get_model_class("cvae")()
-    interrupted = (output / "cvae" / CHECKPOINT_STATE).exists()  # a previous demo was stopped mid-training
+    interrupted = (output / "cvae" / CHECKPOINT).exists()  # a previous demo was stopped mid-training
     log = model.fit(dataset, epochs=EPOCHS, seed=seed, out=output / "cvae", resume=interrupted)
     figures["train_s"], figures["epochs"] = log.seconds, len(log.history)
 
@@ -76,8 +77,10 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
         figures["stability"] = stability.to_dict()
         draw_snapshots(result.path, task, scene, output / "reach-snapshots.png")
 
-    # 6. PHYSICS CHECK (issue 9, item 5): the integrator calls the quasi-static physics execution of
-    # `result.path` (manifoldgen.physics, built on another branch) here and adds its verdict to `figures`.
+    if result.solved:
+        console.rule("6. execute the path in MuJoCo")
+        physics = check_path(task.robot, result.path, balance_feet(task.constraint.spec()), progress=True)
+        figures["physics"] = physics.to_dict()
 
     table = Table("step", "result", title="manifoldgen demo: centauro, balance task, reach scene")
     table.add_row("dataset", f"{figures['rows']} stable configurations at pelvis heights "
@@ -94,6 +97,11 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
         table.add_row("static stability", f"{s['states']} states: CoM outside the support polygon in {s['unstable']} "
                       f"({s['unstable_fraction']:.1%}), at least {100 * s['min_depth']:.1f} cm inside; feet moved "
                       f"at most {1000 * s['max_foot_drift']:.1f} mm")
+    if "physics" in figures:
+        p = figures["physics"]
+        table.add_row("physics (MuJoCo)", f"{'UPRIGHT' if p['upright'] else 'FELL' if p['fell'] else 'TILTED'}: base tilt "
+                      f"at most {p['max_tilt_deg']:.2f} deg, feet slipped at most {1000 * p['max_slip_m']:.1f} mm, base "
+                      f"drifted {100 * p['base_drift_m']:.1f} cm ({p['simulated_s']:.0f} s simulated)")
     table.add_row("files", f"{output / 'balance.npz'}, {output / 'cvae'}/, {output / 'reach-path.npz'}, "
                   f"{output / 'reach-path.png'}, {output / 'reach-snapshots.png'}")
     console.print(table)
