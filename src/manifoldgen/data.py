@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
+from manifoldgen.scene import task_checker
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task, task_from_meta
 
@@ -87,7 +87,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
         out = check_output_path(out)
         partial = out.with_name(out.name + ".partial")
         _prepare_partial(partial, meta)
-    checker = CollisionChecker(task.robot)
+    checker = task_checker(task)
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
         for c, y in enumerate(values):

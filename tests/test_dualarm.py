@@ -1,0 +1,105 @@
+"""The dual-arm tray (paper Section V-B): task files on pr2 and baxter, collected rows, the tray as an object
+checked against the robot and the scene, and its bad inputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from manifoldgen.collision import CollisionChecker
+from manifoldgen.data import collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.scene import Attached, Scene, task_checker
+from manifoldgen.tasks import get_task, load_task_file, task_from_spec
+
+ROBOTS = ("pr2", "baxter")
+
+
+@pytest.fixture(scope="module", params=ROBOTS)
+def task(request):
+    return get_task("dualarm", request.param)
+
+
+def tray_pose(task, q):
+    """World position (3,) and rotation (3, 3) of the tray's centre at ``q (n,)``."""
+    held = Attached.from_dict(task.attached)
+    p, R = task.robot.frame_pose(q[None], held.frame)
+    return p[0] + R[0] @ held.shape.pose.position, R[0]
+
+
+def test_task_files_hold_the_tray_at_home(task):
+    c = task.constraint
+    assert c.condition.names == ("distance", "pitch") and len(c.condition.grid) == 24  # 6 d x 4 pitch
+    np.testing.assert_allclose(np.unique(np.diff(np.unique(c.condition.grid[:, 1]))), np.pi / 4, atol=1e-6)
+    assert np.all(c.tolerance == 0.01) and c.m == 9
+    assert c.satisfied(task.home, task.home_condition)[0]
+    assert not task_checker(task).in_collision(task.home)[0]
+    rebuilt = task_from_spec(json.loads(json.dumps(task.spec())))
+    assert rebuilt.attached == task.attached and rebuilt.spec() == task.spec()
+    # the grippers are d apart, and the tray is level at pitch 0
+    part = c.parts[0]
+    pa = task.robot.frame_pose(task.home[None], part.frame_a)[0][0]
+    pb = task.robot.frame_pose(task.home[None], part.frame_b)[0][0]
+    assert np.linalg.norm(pb - pa) == pytest.approx(task.home_condition[0], abs=0.01)
+    thin = int(np.argmin(Attached.from_dict(task.attached).shape.size))
+    assert abs(tray_pose(task, task.home)[1][2, thin]) > 0.999  # the thin axis is vertical
+
+
+def test_collected_rows_satisfy_the_residuals_and_keep_the_tray_clear(task):
+    corners = np.array([[0.2, -np.pi / 4], [0.7, np.pi / 2]])
+    data = collect(task, 6, seed=1, conditions=corners, batch=128, progress=False)
+    assert len(data) == 12
+    for y in corners:
+        rows = data.q[np.all(data.y == y, axis=1)]
+        assert len(rows) == 6 and task.constraint.satisfied(rows, y).all()
+        _, R = tray_pose(task, rows[0])
+        pitch = task.constraint.parts[1]
+        np.testing.assert_allclose(pin.log3(pitch.target(np.array([[y[1]]]))[0].T @ R), 0, atol=0.011)
+    assert not task_checker(task).in_collision(data.q).any()
+    assert data.meta["task"]["attached"]["name"] == "tray"
+
+
+def test_only_the_tray_hits_an_obstacle_and_its_holding_links_are_ignored():
+    task = get_task("dualarm", "pr2")
+    centre, _ = tray_pose(task, task.home)
+    block = {"name": "block", "type": "box", "size": [0.05, 0.05, 0.05],
+             "pose": {"position": (centre + [0.05, 0.0, 0.03]).tolist()}}
+    scene = Scene.from_json(json.dumps({"obstacles": [block], "start": task.home.tolist(),
+                                        "goal": task.home.tolist(), "condition": [0.3, 0.0]}))
+    scene.attached = Attached.from_dict(task.attached)
+    checker = scene.checker(task.robot)
+    assert checker.in_collision(task.home)[0]
+    assert checker.collisions(task.home) == [("tray", "block")]
+    robot_only = CollisionChecker(task.robot, obstacles=[o.geometry_object() for o in scene.obstacles])
+    assert not robot_only.in_collision(task.home)[0]
+    # the fingers pinch the tray: without touch links the same configuration collides with them
+    held = Attached.from_dict(task.attached)
+    strict = CollisionChecker(task.robot, attached=[held.geometry_object(task.robot)], touch=[[]])
+    assert any("finger" in a + b for a, b in strict.collisions(task.home))
+    assert not task_checker(task).in_collision(task.home)[0]
+
+
+def _variant(tmp_path, robot: str, old: str, new: str):
+    text = get_task("dualarm", robot).file.read_text()
+    assert old in text
+    path = tmp_path / f"dualarm-{robot}.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_a_tray_through_the_robot_at_home_is_one_clear_line(tmp_path):
+    path = _variant(tmp_path, "pr2", "pose = { position = [0.13, 0.0, -0.15] }",
+                    "pose = { position = [-0.4, 0.0, -0.15] }")  # back through the wrists
+    with pytest.raises(ManifoldgenError, match=r"line \d+: the held box 'tray' collides with the robot at home") \
+            as info:
+        load_task_file(path)
+    assert "\n" not in str(info.value)
+
+
+def test_closed_chain_frames_on_one_arm_are_refused(tmp_path):
+    path = _variant(tmp_path, "pr2", 'frame_b = "l_gripper_tool_frame"', 'frame_b = "r_wrist_flex_link"')
+    with pytest.raises(ManifoldgenError, match="on one kinematic chain"):
+        load_task_file(path)
