@@ -91,8 +91,8 @@ def _variant(tmp_path, robot: str, old: str, new: str):
 
 
 def test_a_tray_through_the_robot_at_home_is_one_clear_line(tmp_path):
-    path = _variant(tmp_path, "pr2", "pose = { position = [0.13, 0.0, -0.15] }",
-                    "pose = { position = [-0.4, 0.0, -0.15] }")  # back through the wrists
+    path = _variant(tmp_path, "pr2", "pose = { position = [0.13, 0.15, 0.0] }",
+                    "pose = { position = [-0.4, 0.15, 0.0] }")  # back through the wrists
     with pytest.raises(ManifoldgenError, match=r"line \d+: the held box 'tray' collides with the robot at home") \
             as info:
         load_task_file(path)
@@ -103,3 +103,23 @@ def test_closed_chain_frames_on_one_arm_are_refused(tmp_path):
     path = _variant(tmp_path, "pr2", 'frame_b = "l_gripper_tool_frame"', 'frame_b = "r_wrist_flex_link"')
     with pytest.raises(ManifoldgenError, match="on one kinematic chain"):
         load_task_file(path)
+
+
+def _scene_variant(tmp_path, **changes):
+    data = json.loads((get_task("dualarm", "pr2").scenes["tray-over"]).read_text())
+    data.update(changes)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"condition": [3.0, 0.0]}, r"no configuration of pr2 satisfies the task at condition distance = 3, pitch = 0 "),
+    ({"start": {"position": [2.0, -0.5, 0.5]}}, r"puts r_gripper_tool_frame at the start target .*within reach"),
+])
+def test_unreachable_conditions_and_targets_are_one_clear_line(tmp_path, changes, message):
+    from manifoldgen.scene import get_scene
+
+    with pytest.raises(ManifoldgenError, match=message) as info:
+        get_scene(get_task("dualarm", "pr2"), _scene_variant(tmp_path, **changes))
+    assert "\n" not in str(info.value)

@@ -343,5 +343,5 @@ def _checked(scene: Scene, task: Task, name: str) -> Scene:
     scene.targets = {end: getattr(scene, end) for end in ("start", "goal") if isinstance(getattr(scene, end), dict)}
     if scene.targets:
         scene.start, scene.goal = resolve_query(task.constraint, scene.condition, scene.start, scene.goal,
-                                                scene.checker(task.robot))
+                                                scene.checker(task.robot), near=task.home)
     return scene
