@@ -4,6 +4,10 @@ checked against the robot and the scene, and its bad inputs."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -13,6 +17,7 @@ from manifoldgen.collision import CollisionChecker
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import Attached, Scene, task_checker
+from manifoldgen.space import ConstrainedSpace, densify
 from manifoldgen.tasks import get_task, load_task_file, task_from_spec
 
 ROBOTS = ("pr2", "baxter")
@@ -123,3 +128,53 @@ def test_unreachable_conditions_and_targets_are_one_clear_line(tmp_path, changes
     with pytest.raises(ManifoldgenError, match=message) as info:
         get_scene(get_task("dualarm", "pr2"), _scene_variant(tmp_path, **changes))
     assert "\n" not in str(info.value)
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def _outside_check(tmp_path, *files) -> subprocess.CompletedProcess:
+    """examples/check_path.py on ``files`` with manifoldgen made unimportable."""
+    fake = tmp_path / "no_manifoldgen" / "manifoldgen"
+    fake.mkdir(parents=True, exist_ok=True)
+    (fake / "__init__.py").write_text("raise ImportError('an outside checker must not import manifoldgen')\n")
+    return subprocess.run([sys.executable, str(EXAMPLES / "check_path.py"), *map(str, files)], capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": str(tmp_path / "no_manifoldgen")}, timeout=120)
+
+
+def test_a_planned_tray_path_is_valid_state_by_state_and_outside(tmp_path):
+    """The tray carried along the table (the tray-over scene without its block, so that it plans in a second):
+    the path holds the chain and the tray's rotation at every state, inside and outside manifoldgen; the same
+    path with a post in the tray's way is refused for the tray's collision alone."""
+    from manifoldgen.planning.query import run_query, save_path
+    from manifoldgen.scene import get_scene
+
+    task = get_task("dualarm", "pr2")
+    data = json.loads(task.scenes["tray-over"].read_text())
+    data["obstacles"] = [o for o in data["obstacles"] if o["name"] == "table"]
+    (tmp_path / "along.json").write_text(json.dumps(data))
+    scene = get_scene(task, str(tmp_path / "along.json"))
+    result, meta = run_query(task, scene, "project", "rrtconnect", seed=0, time_limit=20.0)
+    assert result.solved and meta["validation"]["valid"]
+    space_report = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot)).validate_path(
+        result.path)
+    assert space_report.valid and space_report.worst_violation <= 1.0 and space_report.states_checked > 10
+    assert [o.get("name") for o in meta["scene"]] == ["table", "tray"] and meta["task"]["attached"]["name"] == "tray"
+    save_path(tmp_path / "ok.npz", result, meta)
+    # a post standing where the tray passes at the path's middle, clear of the robot's links
+    states = densify(result.path, 0.01)[0]
+    centre, _ = tray_pose(task, states[len(states) // 2])
+    post = {"name": "post", "type": "box", "size": [0.04, 0.04, 0.04],
+            "pose": {"position": (centre + [0.1, 0.0, 0.0]).tolist(), "quaternion": [0, 0, 0, 1]}}
+    robot_only = CollisionChecker(task.robot, obstacles=[Scene.from_json(json.dumps(
+        {"obstacles": [post], "start": [0.0], "goal": [0.0], "condition": [0.0]})).obstacles[0].geometry_object()])
+    assert not robot_only.in_collision(states).any()
+    hit = {**meta, "scene": [*meta["scene"][:-1], post, meta["scene"][-1]]}
+    save_path(tmp_path / "hit.npz", result, hit)
+    out = _outside_check(tmp_path, tmp_path / "ok.npz", tmp_path / "hit.npz")
+    lines = out.stdout.strip().splitlines()
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "1 obstacle(s), 1 held object(s)" in out.stdout and "2 obstacle(s), 1 held object(s)" in out.stdout
+    assert next(x for x in lines if x.startswith(str(tmp_path / "ok.npz"))).endswith(": VALID")
+    assert "collision: tray with post" in out.stdout
+    assert next(x for x in lines if x.startswith(str(tmp_path / "hit.npz"))).endswith(": INVALID")

@@ -120,7 +120,8 @@ def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to 
 
 @app.command()
 @friendly
-def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene)"),
+def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene) or dualarm (pr2 "
+                                     "carries a tray over a block)"),
          output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
          seed: int = typer.Option(0)):
     """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""

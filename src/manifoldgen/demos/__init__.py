@@ -13,7 +13,7 @@ from rich.console import Console
 
 from manifoldgen.errors import ManifoldgenError
 
-DEMOS = {"pose": "manifoldgen.demos.pose"}
+DEMOS = {"pose": "manifoldgen.demos.pose", "dualarm": "manifoldgen.demos.dualarm"}
 
 
 def run(name: str, output: Path, seed: int, console: Console) -> dict:
