@@ -27,6 +27,7 @@ import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, fields
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -149,15 +150,22 @@ class Experiment:
         return asdict(self)
 
 
-def build(experiment: Experiment, method: Method, seed: int):
-    """(planner, scene, space) for one run, built from scratch."""
+@lru_cache(maxsize=4)
+def _scene(task: str, robot: str, scene: str):
+    """(task, scene) with the scene's end-effector targets solved once per worker process (deterministic)."""
     from manifoldgen.scene import get_scene
-    from manifoldgen.space import ConstrainedSpace
-    from manifoldgen.specs import make_sampler
     from manifoldgen.tasks import get_task
 
-    task = get_task(experiment.task, experiment.robot)
-    scene = get_scene(task, experiment.scene)
+    task_obj = get_task(task, robot)
+    return task_obj, get_scene(task_obj, scene)
+
+
+def build(experiment: Experiment, method: Method, seed: int):
+    """(planner, scene, space) for one run, built from scratch (the task and the solved scene are reused)."""
+    from manifoldgen.space import ConstrainedSpace
+    from manifoldgen.specs import make_sampler
+
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.is_ompl:

@@ -61,13 +61,14 @@ def default_conditions(values: np.ndarray) -> tuple[list[float], list[float]]:
     return [float(x) for x in v], [round(x, 6) for x in picks] + [round(float(v[-1] + step / 2), 6)]
 
 
-def default_grid_conditions(grid: np.ndarray) -> tuple[list[tuple], list[tuple]]:
-    """For a (V, k) training grid with k > 1: seen = 4 training values spread over the grid (first, two inner,
-    last); unseen = for each axis, the midpoint of its two central values with the others at a central
-    training value, and one point midway on every axis."""
+def default_grid_conditions(grid: np.ndarray, count: int = 4) -> tuple[list[tuple], list[tuple]]:
+    """For a (V, k) training grid with k > 1: seen = ``count`` training values along the grid's diagonal (each
+    axis's values from first to last); unseen = for each axis, the midpoint of its two central values with the
+    others at a central training value, and one point midway on every axis."""
     grid = np.asarray(grid, float)
-    seen = [tuple(map(float, grid[i])) for i in sorted({0, len(grid) // 3, 2 * len(grid) // 3, len(grid) - 1})]
     axes = [np.unique(grid[:, i]) for i in range(grid.shape[1])]
+    picks = [[v[int(round(j))] for j in np.linspace(0, len(v) - 1, count)] for v in axes]
+    seen = list(dict.fromkeys(tuple(float(p[c]) for p in picks) for c in range(count)))
     centre = [v[(len(v) - 1) // 2] for v in axes]
     mids = [(v[(len(v) - 1) // 2] + v[min(len(v) - 1, (len(v) + 1) // 2)]) / 2 for v in axes]
     unseen = [tuple(round(float(mids[i] if j == i else centre[j]), 6) for j in range(len(axes)))
