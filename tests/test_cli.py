@@ -54,5 +54,8 @@ def test_tasks_lists_every_robot_with_its_range():
     result = runner.invoke(app, ["tasks"], terminal_width=200)
     assert result.exit_code == 0, result.output
     for robot, low, high in [("panda", "0.2", "0.7"), ("pr2", "0.5", "1"), ("centauro", "-0.2", "0.3")]:
-        line = next(line for line in result.output.splitlines() if f" {robot} " in line)
+        line = next(line for line in result.output.splitlines() if line.startswith("pose") and f" {robot} " in line)
         assert f"[{low}, {high}] m" in line
+    for robot in ("pr2", "baxter"):
+        line = next(line for line in result.output.splitlines() if line.startswith("dualarm") and f" {robot} " in line)
+        assert "distance in [0.2, 0.7] m, pitch in [-0.785398, 1.5708] rad" in line

@@ -163,7 +163,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     save_path(output, result, meta)
     picture = output.with_suffix(".png")
     frame = constrained_frame(task_obj.constraint) or task_obj.robot.model.frames[-1].name
-    plot_path(result.path, task_obj.robot, frame, scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+    plot_path(result.path, task_obj.robot, frame, scene_obj, picture,
+              f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
     if snapshots is not None and result.solved:
         from manifoldgen.viz.snapshots import draw_snapshots
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)

@@ -78,7 +78,8 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
     if not on.converged.any():
         names = ", ".join(f"{n} = {v:g}" for n, v in zip(constraint.condition.names, np.ravel(y)))
         raise ManifoldgenError(f"no configuration of {robot.name} satisfies the task at condition {names} "
-                               f"({SEEDS} projected seeds); choose a condition inside {constraint.condition.describe()}")
+                               f"({SEEDS} projected seeds); choose a condition inside "
+                               f"{constraint.condition.describe()}")
     q = on.q[on.converged]
     q = q[ConstrainedSpace(both, yy, checker).valid(q)]
     if not len(q):
