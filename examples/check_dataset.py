@@ -3,9 +3,10 @@
 It reads only the .npz file (``q (N, n)``, ``y (N, k)``, ``meta``; see docs/file-formats.md) and the
 robot's URDF/SRDF (found by its example-robot-data name or recorded path, verified by sha256), and
 rechecks every row without importing manifoldgen: the constraint's residuals recomputed with
-pinocchio for every built-in type (pose, orientation, plane, joint_linear, closed_chain, balance and
-sets of them) against the file's per-component tolerance, its inequalities (balance: CoM inside the
-support polygon with margin), the joint limits and self-collision.
+pinocchio for every built-in type (pose, orientation, plane, joint_linear, closed_chain, rotation, balance
+and sets of them) against the file's per-component tolerance, its inequalities (balance: CoM inside the
+support polygon with margin), the joint limits, self-collision and the object the task holds (a tray:
+``meta.task.attached``) against the robot.
 
     python examples/check_dataset.py pose.npz [more.npz ...] [--urdf PATH] [--srdf PATH] [--show N]
     -> pose.npz: 240 rows, pose on panda; within tolerance 100.00%, within limits 100.00%,

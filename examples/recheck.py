@@ -37,7 +37,7 @@ EXIT_VALID, EXIT_INVALID, EXIT_USAGE, EXIT_CANNOT = 0, 1, 2, 3
 LIMIT_MARGIN = 1e-9  # rad or m, as manifoldgen's within_limits
 ALWAYS_SAMPLES = 200  # random configurations for the "always colliding" pairs (robots whose SRDF disables few)
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
-BUILTIN_TYPES = ("pose", "orientation", "plane", "joint_linear", "closed_chain", "balance", "set")
+BUILTIN_TYPES = ("pose", "orientation", "plane", "joint_linear", "closed_chain", "rotation", "balance", "set")
 AXES = {"x": 0, "y": 1, "z": 2}
 # example-robot-data names that no file stem gives: name -> (folder, URDF stem) (as manifoldgen's robot.py)
 ALIASES = {"anymal": ("anymal_b_simple_description", "anymal"), "anymal_b": ("anymal_b_simple_description", "anymal"),
@@ -460,6 +460,26 @@ class JointLinearPart(Part):
         return self.A @ s.q - y
 
 
+class RotationPart(Part):
+    """``log3((Rot(axis, y) rotation)^T R(q))``: a fixed world rotation turned by the angle y about a world axis."""
+
+    type = "rotation"
+
+    def __init__(self, robot: RobotModel, spec: dict):
+        self.frame_name = spec["frame"]
+        self.fid = robot.frame(self.frame_name)
+        self.base = _rotation(spec["rotation"], "rotation constraint's rotation")
+        self.axis = _unit(spec.get("axis", (0, 1, 0)), "rotation constraint's axis")
+        self.k, self.m = 1, 3
+        self.tolerance = np.full(3, float(spec.get("tolerance", 0.01)))
+        self.labels = [f"{self.frame_name} rotation about {a} (rad)" for a in "xyz"]
+
+    def residual(self, s, y):
+        _, R = s.pose(self.fid)
+        target = pin.exp3(self.axis * float(y[0])) @ self.base
+        return pin.log3(target.T @ R)
+
+
 class ClosedChainPart(Part):
     """``[R_a^T (p_b - p_a) - y axis, log3(rotation^T R_a^T R_b)]``."""
 
@@ -566,7 +586,8 @@ class UserPart(Part):
         self.labels = []
 
 
-PART_TYPES = {c.type: c for c in (PosePart, OrientationPart, PlanePart, JointLinearPart, ClosedChainPart, BalancePart)}
+PART_TYPES = {c.type: c for c in (PosePart, OrientationPart, PlanePart, JointLinearPart, ClosedChainPart, RotationPart,
+                                   BalancePart)}
 
 
 def leaves(robot: RobotModel, spec: dict) -> list[Part]:
@@ -793,6 +814,16 @@ class Collisions:
                 for p, r in zip(self.geom.collisionPairs, self.gdata.collisionResults) if r.isCollision()]
 
 
+def with_held(meta: dict, scene: list[dict] | None) -> list[dict]:
+    """The scene's objects plus the object the task holds in every scene (``meta.task.attached``: a tray), unless
+    the scene already lists it (path files do; datasets have no scene)."""
+    items = list(scene or [])
+    held = (meta.get("task") or {}).get("attached")
+    if isinstance(held, dict) and not any(o.get("attached_to") and o.get("name") == held.get("name") for o in items):
+        items.append(held)
+    return items
+
+
 # ---------------------------------------------------------------------- one configuration
 class Checker:
     """Everything needed to judge configurations of one file: robot, constraint, collisions."""
@@ -803,7 +834,7 @@ class Checker:
         self.files = locate_robot(meta, urdf, srdf, near)
         self.robot = RobotModel(meta, self.files)
         self.constraint = ConstraintCheck(self.robot, meta, k)
-        self.collisions = Collisions(self.robot, scene)
+        self.collisions = Collisions(self.robot, with_held(meta, scene))
         self.notes = [*self.files.notes, *self.constraint.notes, *self.collisions.notes]
         if self.constraint.user_types:
             what = ", ".join(f"'{t}'" for t in self.constraint.user_types)

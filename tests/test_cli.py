@@ -58,3 +58,6 @@ def test_tasks_lists_every_robot_with_its_range():
                                    ("balance", "talos", "0.94", "1.02")]:
         line = next(line for line in result.output.splitlines() if line.startswith(task) and f" {robot} " in line)
         assert f"[{low}, {high}] m" in line
+    for robot in ("pr2", "baxter"):
+        line = next(line for line in result.output.splitlines() if line.startswith("dualarm") and f" {robot} " in line)
+        assert "distance in [0.2, 0.7] m, pitch in [-0.785398, 1.5708] rad" in line

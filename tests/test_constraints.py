@@ -6,7 +6,7 @@ import pytest
 
 from manifoldgen.constraints import (BalanceConstraint, ClosedChainConstraint, Condition, Constraint, ConstraintSet,
                                      JointLinearConstraint, OrientationConstraint, PlaneConstraint, PoseConstraint,
-                                     array_namespace, build_constraint, project)
+                                     RotationConstraint, array_namespace, build_constraint, project)
 from manifoldgen.robot import Robot
 from manifoldgen.constraints.so3 import jlog3, log3
 from manifoldgen.errors import ManifoldgenError
@@ -158,6 +158,8 @@ CASES = {
                                      None, [0.3]),
     "closed_chain": lambda t, p, c: (ClosedChainConstraint(p, "r_gripper_tool_frame", "l_gripper_tool_frame",
                                                            FACING, [[0.3], [0.5]]), None, [0.4]),
+    "rotation": lambda t, p, c: (RotationConstraint(p, "r_gripper_tool_frame", np.eye(3), [[-0.5], [0.5]]),
+                                 None, [0.3]),
     "balance": lambda t, p, c: (_balance(*c), c[1] + 0.1 * np.random.default_rng(1).normal(size=(40, c[0].n)),
                                 [0.75]),
     "set": lambda t, p, c: (ConstraintSet([OrientationConstraint(t.robot, "panda_hand_tcp", (0, 0, 1), (0, 0, -1)),

@@ -83,3 +83,13 @@ def test_sampling_bench_writes_report(panda_task, tmp_path):
     assert "| 100 |" in (out / "table.md").read_text()
     for png in ("fig2_samples.png", "residuals.png", "coverage.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_default_conditions_on_a_two_dimensional_grid():
+    from manifoldgen.bench.sampling import default_grid_conditions
+
+    grid = np.array([[d, p] for d in (0.2, 0.3, 0.4, 0.5) for p in (-0.5, 0.0, 0.5)])
+    seen, unseen = default_grid_conditions(grid)
+    assert seen == [(0.2, -0.5), (0.3, 0.0), (0.4, 0.0), (0.5, 0.5)] and all(list(y) in grid.tolist() for y in seen)
+    assert unseen == [(0.35, 0.0), (0.3, 0.25), (0.35, 0.25)]
+    assert not any(list(y) in grid.tolist() for y in unseen)

@@ -157,5 +157,6 @@ def test_scene_lookup_errors(tmp_path, panda_task):
     (tmp_path / "broken.json").write_text("{")
     with pytest.raises(ManifoldgenError, match="not valid JSON"):
         get_scene(panda_task, str(tmp_path / "broken.json"))
-    assert {(r, n) for _, r, n in NAMED} == {("panda", "wall"), ("panda", "maze"), ("pr2", "wall"), ("centauro", "reach"),
-                                             ("talos", "reach"), ("centauro", "drinkcan")}
+    assert set(NAMED) == {("pose", "panda", "wall"), ("pose", "panda", "maze"), ("pose", "pr2", "wall"),
+                          ("balance", "centauro", "reach"), ("balance", "talos", "reach"), ("drinkcan", "centauro", "drinkcan"),
+                          *(("dualarm", r, n) for r in ("pr2", "baxter") for n in ("tray-over", "tray-shelf"))}

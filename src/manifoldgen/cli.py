@@ -135,7 +135,8 @@ def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to 
 
 @app.command()
 @friendly
-def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene), balance (centauro, reach scene)"),
+def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda, wall scene), dualarm (pr2 "
+                                     "carries a tray over a block), balance (centauro, reach scene)"),
          output: Path = typer.Option(Path("demo-out"), "-o", "--output", help="Folder for the demo's files"),
          seed: int = typer.Option(0)):
     """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""
@@ -167,6 +168,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
+    from manifoldgen.targets import constrained_frame
     from manifoldgen.viz.path import plot_path
     from manifoldgen.specs import parse_spec
     set_torch_threads()
@@ -186,8 +188,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
                              local=local, smooth=smooth, settings=values)
     save_path(output, result, meta)
     frame = (scene_obj.targets.get("goal") or scene_obj.targets.get("start") or {}).get("frame") \
-        or meta["constraint"].get("frame", task_obj.robot.model.frames[-1].name)  # a reach traces its hand
-    plot_path(result.path, task_obj.robot, frame, scene_obj, picture, f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+        or constrained_frame(task_obj.constraint) or task_obj.robot.model.frames[-1].name  # a reach traces its hand
+    plot_path(result.path, task_obj.robot, frame, scene_obj, picture,
+              f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
     if snapshots is not None and result.solved:
         from manifoldgen.viz.snapshots import draw_snapshots
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)
@@ -281,6 +284,17 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
                   f"{info['raw_valid_rate']:.2%}, after refine {refine}: {info['refined_valid_rate']:.2%}")
 
 
+def _condition_rows(texts: list[str] | None) -> list[list[float]] | None:
+    """``["0.3,0", ...]`` -> ``[[0.3, 0.0], ...]`` (None when none given)."""
+    if not texts:
+        return None
+    try:
+        return [[float(v) for v in text.split(",")] for text in texts]
+    except ValueError:
+        raise ManifoldgenError(f"conditions must be numbers, comma-separated per condition (e.g. 0.3,0); got "
+                               f"{texts}") from None
+
+
 @bench_app.command("sampling")
 @friendly
 def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained model directories"),
@@ -290,18 +304,19 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                    reference: int = typer.Option(3000, help="Reference projection samples per condition"),
                    repeats: int = typer.Option(7, help="Timing repeats (median)"),
                    threads: int = typer.Option(2, help="torch CPU threads for sampling"),
-                   seen: list[float] = typer.Option(None, help="Seen conditions to score (repeatable; default: the "
-                                                    "training values)"),
-                   unseen: list[float] = typer.Option(None, help="Unseen conditions to score (repeatable; default: "
-                                                      "midpoints and one step past the top); unreachable ones are "
-                                                      "skipped with a warning"),
+                   seen: list[str] = typer.Option(None, help="Seen conditions to score (repeatable; k values "
+                                                  "comma-separated, e.g. 0.3,0; default: the training values)"),
+                   unseen: list[str] = typer.Option(None, help="Unseen conditions to score (repeatable; default: "
+                                                    "midpoints and one step past the top); unreachable ones are "
+                                                    "skipped with a warning"),
                    seed: int = typer.Option(0)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
     from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
     check_output_path(output, model_dirs, directory=True, writes=OUTPUT_FILES)
     set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
-                       repeats=repeats, seed=seed, threads=max(1, threads), seen=seen or None, unseen=unseen or None)
+                       repeats=repeats, seed=seed, threads=max(1, threads), seen=_condition_rows(seen),
+                       unseen=_condition_rows(unseen))
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 

@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
+from manifoldgen.scene import task_checker
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task, task_from_meta
 
@@ -124,7 +124,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
 
 def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, partial: Path | None, batch: int,
              max_batches: int, give_up: int, progress: bool, meta: dict) -> Dataset:
-    checker = CollisionChecker(task.robot)
+    checker = task_checker(task)
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
         for c, y in enumerate(values):

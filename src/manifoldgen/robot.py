@@ -209,6 +209,7 @@ class Robot:
         self.base_bounds = np.asarray(base_bounds, float)  # (2, 3) or (2, 6) floating-base low, high
         self.lower, self.upper = self._limits(base_bounds)
         self._links = self._build_links()
+        self._jacobians: tuple[bytes, dict] = (b"", {})  # the latest q's frame Jacobians (see frame_jacobian)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -395,13 +396,23 @@ class Robot:
         """Position (B, 3), rotation (B, 3, 3) and world-aligned Jacobian (B, 6, n) of ``frame``.
 
         Rows 0-2: linear velocity of the frame origin, rows 3-5: angular velocity, both in
-        world axes (pinocchio's LOCAL_WORLD_ALIGNED).
+        world axes (pinocchio's LOCAL_WORLD_ALIGNED). The results for the latest ``q`` are kept (read-only),
+        so the parts of a constraint set that share a frame (the dual-arm tray's) compute it once.
         """
         q = as_batch(q, self.n)
-        f = self.model.frames[self.frame_id(frame)]
-        world, met = self._world(q, [f.parentJoint], axes=True)
-        T = world[f.parentJoint] @ f.placement.homogeneous
-        return T[:, :3, 3], T[:, :3, :3], self._point_jacobian(T[:, :3, 3], met, len(q), angular=True)
+        key = q.tobytes() + str(q.shape).encode()
+        if self._jacobians[0] != key:
+            self._jacobians = (key, {})
+        kept = self._jacobians[1]
+        if frame not in kept:
+            f = self.model.frames[self.frame_id(frame)]
+            world, met = self._world(q, [f.parentJoint], axes=True)
+            T = world[f.parentJoint] @ f.placement.homogeneous
+            out = (T[:, :3, 3], T[:, :3, :3], self._point_jacobian(T[:, :3, 3], met, len(q), angular=True))
+            for a in out:
+                a.setflags(write=False)
+            kept[frame] = out
+        return kept[frame]
 
     def _point_jacobian(self, point: np.ndarray, met: dict, batch: int, angular: bool) -> np.ndarray:
         J = np.zeros((batch, 6 if angular else 3, self.n))

@@ -250,11 +250,7 @@ class Scene:
 
     def checker(self, robot: Robot) -> CollisionChecker:
         """Self, robot-scene and tool collisions for ``robot``."""
-        obstacles = [o.geometry_object() for o in self.obstacles]
-        if self.attached is None:
-            return CollisionChecker(robot, obstacles=obstacles)
-        return CollisionChecker(robot, obstacles=obstacles, attached=[self.attached.geometry_object(robot)],
-                                touch=[self.attached.resolved_touch_links(robot)])
+        return held_checker(robot, self.attached, [o.geometry_object() for o in self.obstacles])
 
     def to_meta(self, robot: Robot | None = None) -> list[dict]:
         """JSON-ready objects: obstacles with world ``pose``; the tool last, with ``attached_to``
@@ -327,6 +323,20 @@ class Scene:
         return cls.from_json(text, str(path))
 
 
+def held_checker(robot: Robot, held: Attached | None, obstacles: list[pin.GeometryObject] | None = None,
+                 ) -> CollisionChecker:
+    """Self-collision, ``obstacles`` and the ``held`` object (None: nothing held) for ``robot``."""
+    if held is None:
+        return CollisionChecker(robot, obstacles=obstacles)
+    return CollisionChecker(robot, obstacles=obstacles, attached=[held.geometry_object(robot)],
+                            touch=[held.resolved_touch_links(robot)])
+
+
+def task_checker(task: Task) -> CollisionChecker:
+    """Self-collision and the object the task holds (its tray), with no scene: what collection checks."""
+    return held_checker(task.robot, None if task.attached is None else Attached.from_dict(task.attached))
+
+
 def get_scene(task: Task, name: str) -> Scene:
     """A scene the task file names (``wall``, ``maze``) or a scene JSON file for its robot."""
     if name in task.scenes:
@@ -351,8 +361,13 @@ def _checked(scene: Scene, task: Task, name: str) -> Scene:
     if scene.condition.shape != (k,):
         raise ManifoldgenError(f"scene {name}: condition needs {k} value(s) ({', '.join(task.condition.names)}), "
                                f"got {len(scene.condition)}")
+    if task.attached is not None:
+        if scene.attached is not None:
+            raise ManifoldgenError(f"scene {name} attaches '{scene.attached.shape.name}' but task {task.name} already "
+                                   f"holds '{task.attached['name']}'; drop the scene's 'attached'")
+        scene.attached = Attached.from_dict(task.attached)
     scene.targets = {end: getattr(scene, end) for end in ("start", "goal") if isinstance(getattr(scene, end), dict)}
     if scene.targets:
         scene.start, scene.goal = resolve_query(task.constraint, scene.condition, scene.start, scene.goal,
-                                                scene.checker(task.robot))
+                                                scene.checker(task.robot), near=task.home)
     return scene

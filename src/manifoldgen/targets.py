@@ -6,6 +6,9 @@ on the task's manifold at the scene's condition that reach the target (within th
 0.01 m and 0.01 rad), by projecting uniform seeds onto the task constraint and the target together,
 then onto the task constraint alone, keeping the collision-free ones; when both ends are
 targets, the pair of solutions closest in joint space is chosen (one IK branch, no flip on the way).
+Given a configuration ``near`` (the task's home), half the seeds are drawn around it and the pair
+chosen also stays close to it: both ends on the home's branch (for the dual-arm tray: the continuous
+roll joints, cut at +-pi, away from the cut).
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ from manifoldgen.constraints import Constraint, ConstraintSet, PoseConstraint, p
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.space import ConstrainedSpace
 
-SEEDS = 512  # uniform seeds projected per target
+SEEDS = 512  # seeds projected per target
+NEAR_SPREAD = 0.3  # rad: standard deviation of the seeds drawn around ``near``
 TARGET_KEYS = ("position", "quaternion", "frame")
 
 
@@ -49,8 +53,9 @@ def constrained_frame(constraint: Constraint) -> str | None:
 
 
 def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: CollisionChecker | None,
-                 what: str, seed: int = 0) -> np.ndarray:
-    """(S, n) distinct collision-free configurations on ``constraint`` at ``y`` that reach ``target``."""
+                 what: str, seed: int = 0, near: np.ndarray | None = None) -> np.ndarray:
+    """(S, n) distinct collision-free configurations on ``constraint`` at ``y`` that reach ``target``
+    (half the seeds around ``near (n,)`` when given)."""
     robot = constraint.robot
     frame = target.get("frame") or constrained_frame(constraint)
     if frame is None:
@@ -63,8 +68,18 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
                            orientation_axes=("x", "y", "z") if "quaternion" in target else ())
     both = ConstraintSet([constraint, reach])
     yy = np.concatenate([np.asarray(y, float).reshape(-1), target["position"]])
-    near = project(both, robot.sample_uniform(SEEDS, np.random.default_rng(seed)), yy, max_iters=100).q
-    on = project(constraint, near, y)  # tight on the task's manifold; the target need not lie exactly on it
+    rng = np.random.default_rng(seed)
+    seeds = robot.sample_uniform(SEEDS, rng)
+    if near is not None:
+        half = SEEDS // 2
+        seeds[:half] = np.clip(near + rng.normal(0.0, NEAR_SPREAD, (half, robot.n)), robot.lower, robot.upper)
+    reached = project(both, seeds, yy, max_iters=100).q
+    on = project(constraint, reached, y)  # tight on the task's manifold; the target need not lie exactly on it
+    if not on.converged.any():
+        names = ", ".join(f"{n} = {v:g}" for n, v in zip(constraint.condition.names, np.ravel(y)))
+        raise ManifoldgenError(f"no configuration of {robot.name} satisfies the task at condition {names} "
+                               f"({SEEDS} projected seeds); choose a condition inside "
+                               f"{constraint.condition.describe()}")
     q = on.q[on.converged]
     q = q[ConstrainedSpace(both, yy, checker).valid(q)]
     if not len(q):
@@ -75,12 +90,16 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
 
 
 def resolve_query(constraint: Constraint, y: np.ndarray, start, goal, checker: CollisionChecker | None,
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Start and goal as configurations (n,): joint vectors are kept; targets solved, on consistent branches."""
+                  near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Start and goal as configurations (n,): joint vectors are kept; targets solved, on consistent branches
+    (and close to ``near (n,)`` when given)."""
     ends = {"start": start, "goal": goal}
-    options = {k: (solve_target(constraint, y, v, checker, k) if isinstance(v, dict) else np.asarray(v)[None])
-               for k, v in ends.items()}
+    options = {k: (solve_target(constraint, y, v, checker, k, near=near) if isinstance(v, dict)
+                   else np.asarray(v)[None]) for k, v in ends.items()}
     d = np.linalg.norm(options["start"][:, None] - options["goal"][None], axis=2)
+    if near is not None:
+        d += (np.linalg.norm(options["start"] - near, axis=1)[:, None]
+              + np.linalg.norm(options["goal"] - near, axis=1)[None])
     i, j = np.unravel_index(np.argmin(d), d.shape)
     return options["start"][i], options["goal"][j]
 

@@ -3,7 +3,8 @@
 ``run_sampling_bench(model_dirs, out)`` times ``model.sample`` for 100 ... 100k rows (warm,
 median of repeats), measures the raw and refined within-tolerance rates and the k-NN
 precision/recall/density/coverage and MMD against a dense reference set (fresh projection
-samples) at training conditions and at unseen ones between and beyond them, and writes
+samples) at training conditions and at unseen ones between and beyond them (for k > 1 conditions,
+such as the dual-arm tray's (d, pitch): a few training values and midpoints along each axis), and writes
 ``results.json``, ``table.md``, ``fig2_samples.png`` (paper Fig. 2), ``residuals.png`` and
 ``coverage.png`` into ``out``.
 """
@@ -62,6 +63,42 @@ def default_conditions(values: np.ndarray) -> tuple[list[float], list[float]]:
     return [float(x) for x in v], [round(x, 6) for x in picks] + [round(float(v[-1] + step / 2), 6)]
 
 
+def default_grid_conditions(grid: np.ndarray, count: int = 4) -> tuple[list[tuple], list[tuple]]:
+    """For a (V, k) training grid with k > 1: seen = ``count`` training values along the grid's diagonal (each
+    axis's values from first to last); unseen = for each axis, the midpoint of its two central values with the
+    others at a central training value, and one point midway on every axis."""
+    grid = np.asarray(grid, float)
+    axes = [np.unique(grid[:, i]) for i in range(grid.shape[1])]
+    picks = [[v[int(round(j))] for j in np.linspace(0, len(v) - 1, count)] for v in axes]
+    seen = list(dict.fromkeys(tuple(float(p[c]) for p in picks) for c in range(count)))
+    centre = [v[(len(v) - 1) // 2] for v in axes]
+    mids = [(v[(len(v) - 1) // 2] + v[min(len(v) - 1, (len(v) + 1) // 2)]) / 2 for v in axes]
+    unseen = [tuple(round(float(mids[i] if j == i else centre[j]), 6) for j in range(len(axes)))
+              for i in range(len(axes))]
+    return seen, unseen + [tuple(round(float(m), 6) for m in mids)]
+
+
+def _rows(values, k: int) -> list[tuple]:
+    """Conditions as k-tuples (a bare number is one value of a k = 1 condition)."""
+    out = []
+    for v in values:
+        row = tuple(float(x) for x in np.ravel(v))
+        if len(row) != k:
+            raise ManifoldgenError(f"condition {list(row)} has {len(row)} value(s); the task has {k}: give "
+                                   f"{k} comma-separated values")
+        out.append(row)
+    return out
+
+
+def _key(y: tuple) -> str:
+    """One condition's name in results and tables: ``0.3`` (k = 1) or ``0.3,0`` (k > 1)."""
+    return str(y[0]) if len(y) == 1 else ",".join(f"{v:g}" for v in y)
+
+
+def _plain(ys: list[tuple]) -> list:
+    return [y[0] if len(y) == 1 else list(y) for y in ys]
+
+
 def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples: int = 3000, refine: int = 3,
                        reference_rows: int = 3000, repeats: int = 7, counts: tuple[int, ...] = COUNTS,
                        seen: list[float] | None = None, unseen: list[float] | None = None, seed: int = 0,
@@ -84,10 +121,12 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     task = task_from_meta(first.meta)
     for path, model in models.items():
         check_made_for(model.meta, task.constraint, f"model {path}")
-    if task.condition.k != 1:
-        raise ManifoldgenError("the sampling benchmark handles one-dimensional conditions only")
-    default_seen, default_unseen = default_conditions(task.condition.values)
-    seen, unseen = seen or default_seen, unseen or default_unseen
+    k = task.condition.k
+    if k == 0:
+        raise ManifoldgenError("the sampling benchmark needs a conditioned task (its condition has no values)")
+    default_seen, default_unseen = (default_conditions(task.condition.values) if k == 1
+                                    else default_grid_conditions(task.condition.grid))
+    seen, unseen = _rows(seen or default_seen, k), _rows(unseen or default_unseen, k)
     conditions = [*seen, *unseen]
     check_seed(seed + 1000 + len(conditions), "--seed (+ 1000 + i seeds the reference set of condition i)")
     robot, constraint = task.robot, task.constraint
@@ -96,9 +135,9 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     with progress_bar("reference sets", total=len(conditions), enabled=progress) as bar:
         for i, y in enumerate(conditions):
             try:
-                reference[y] = collect(task, reference_rows, seed + 1000 + i, conditions=[[y]], progress=False).q
+                reference[y] = collect(task, reference_rows, seed + 1000 + i, conditions=[y], progress=False).q
             except ManifoldgenError as exc:  # a condition the robot cannot reach is reported and skipped
-                warnings.warn(f"condition {y:g} skipped: {exc}")
+                warnings.warn(f"condition {_key(y)} skipped: {exc}")
             bar.advance(1)
     seen, unseen = [y for y in seen if y in reference], [y for y in unseen if y in reference]
     conditions = [*seen, *unseen]
@@ -107,7 +146,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
                                f"({task.condition.describe()})")
 
     results: dict = {"task": task.name, "robot": robot.name, "samples": samples, "refine": refine,
-                     "reference_rows": reference_rows, "seen": seen, "unseen": unseen,
+                     "reference_rows": reference_rows, "seen": _plain(seen), "unseen": _plain(unseen),
                      "threads": threads, "models": {}}
     valid_rows: dict[str, np.ndarray] = {}
     violations: dict[str, np.ndarray] = {}
@@ -116,18 +155,19 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
             name = _label(model, label, models)
             entry = {"dir": label, "model": model.name, "per_condition": {}}
             entry["time_ms"] = {str(n): t for n, t in
-                                time_sampling(model, np.array([seen[len(seen) // 2]]), counts, repeats, seed,
+                                time_sampling(model, np.array(seen[len(seen) // 2]), counts, repeats, seed,
                                               threads).items()}
             bar.advance(1)
             generator = torch.Generator().manual_seed(seed)
             valid, viol = [], []
             for y in conditions:
-                q = model.sample([y], samples, generator)
-                acc, _ = accuracy(constraint, q, np.full((samples, 1), y), refine)
+                ys = np.tile(np.asarray(y), (samples, 1))
+                q = model.sample(list(y), samples, generator)
+                acc, _ = accuracy(constraint, q, ys, refine)
                 cov = coverage_metrics(reference[y], q, robot.lower, robot.upper)
-                entry["per_condition"][str(y)] = {**acc.to_dict(), **cov, "seen": y in seen}
+                entry["per_condition"][_key(y)] = {**acc.to_dict(), **cov, "seen": y in seen}
                 if y in seen:
-                    ok = constraint.satisfied(q, np.full((samples, 1), y))
+                    ok = constraint.satisfied(q, ys)
                     valid.append(q[ok])
                     viol.append(acc.residual)
                 bar.advance(1)
@@ -159,9 +199,9 @@ def _label(model: ConditionalSampler, label: str, models: dict) -> str:
     return f"{model.name} ({Path(label).name if names.count(Path(label).name) == 1 else label})"
 
 
-def _average(per_condition: dict, ys: list[float]) -> dict:
+def _average(per_condition: dict, ys: list[tuple]) -> dict:
     keys = ("raw", "refined", "precision", "recall", "density", "coverage", "mmd")
-    rows = [per_condition[str(y)] for y in ys]
+    rows = [per_condition[_key(y)] for y in ys]
     return {k: float(np.mean([r[k] for r in rows])) if rows else float("nan") for k in keys}
 
 
@@ -184,7 +224,8 @@ def markdown_table(results: dict) -> str:
             if not ys:
                 continue
             a = results["models"][m][part]
-            lines.append(f"| {m} | {part} {', '.join(f'{y:g}' for y in ys)} | {a['raw']:.1%} | {a['refined']:.2%} | "
+            named = ", ".join(f"{y:g}" if np.ndim(y) == 0 else "(" + ", ".join(f"{v:g}" for v in y) + ")" for y in ys)
+            lines.append(f"| {m} | {part} {named} | {a['raw']:.1%} | {a['refined']:.2%} | "
                          f"{a['precision']:.3f} | {a['recall']:.3f} | {a['density']:.3f} | {a['coverage']:.3f} | "
                          f"{a['mmd']:.4f} |")
     lines += ["", "## Per condition", "", "| model | y | raw valid | refined | recall | coverage |",

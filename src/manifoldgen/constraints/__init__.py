@@ -14,7 +14,8 @@ from manifoldgen.constraints.orientation import OrientationConstraint
 from manifoldgen.constraints.plane import PlaneConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.projection import Projection, project
+from manifoldgen.constraints.rotation import RotationConstraint
 
 __all__ = ["CONSTRAINTS", "BalanceConstraint", "ClosedChainConstraint", "Condition", "Constraint", "ConstraintSet",
            "JointLinearConstraint", "OrientationConstraint", "PlaneConstraint", "PoseConstraint", "Projection",
-           "array_namespace", "as_like", "build_constraint", "project"]
+           "RotationConstraint", "array_namespace", "as_like", "build_constraint", "project"]

@@ -27,6 +27,10 @@ class ClosedChainConstraint(Constraint):
         robot.frame_id(frame_a), robot.frame_id(frame_b)
         if frame_a == frame_b:
             raise ManifoldgenError(f"closed chain frames are both '{frame_a}'; give two different frames")
+        ja, jb = (robot.model.frames[robot.frame_id(f)].parentJoint for f in (frame_a, frame_b))
+        if ja == jb or ja in robot._ancestors(jb) or jb in robot._ancestors(ja):
+            raise ManifoldgenError(f"closed chain frames '{frame_a}' and '{frame_b}' are on one kinematic chain (one "
+                                   "arm): nothing closes; give a frame on each arm (e.g. the two grippers)")
         self.robot, self.frame_a, self.frame_b = robot, frame_a, frame_b
         self.rotation = rotation_matrix(rotation, "closed chain rotation")
         self.axis = unit(axis, "closed chain axis")

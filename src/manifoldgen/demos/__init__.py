@@ -13,7 +13,8 @@ from rich.console import Console
 
 from manifoldgen.errors import ManifoldgenError
 
-DEMOS = {"pose": "manifoldgen.demos.pose", "balance": "manifoldgen.demos.balance"}
+DEMOS = {"pose": "manifoldgen.demos.pose", "dualarm": "manifoldgen.demos.dualarm",
+         "balance": "manifoldgen.demos.balance"}
 
 
 def run(name: str, output: Path, seed: int, console: Console) -> dict:

@@ -30,7 +30,8 @@ TASK_KEYS = {"name": "task name", "description": "one line for `manifoldgen task
              "srdf": "SRDF path", "group": "planning group joints", "floating_base": "true for a free-flying base",
              "base_bounds": "[[x, y, z low], [x, y, z high]] of a floating base", "locked": "joint = value table",
              "home": "a configuration near the manifold (projected)", "home_condition": "the condition of home",
-             "constraints": "[[constraints]] tables", "scenes": "name = scene file table"}
+             "constraints": "[[constraints]] tables", "scenes": "name = scene file table",
+             "attached": "[attached] table: an object the robot holds (a tray), as a scene's held object"}
 HOME_SEEDS = 256  # uniform seeds projected when a task gives no home
 
 
@@ -47,6 +48,7 @@ class Task:
     notes: str = ""
     scenes: dict[str, Path] = field(default_factory=dict)
     file: Path | None = None  # the task file it was read from
+    attached: dict | None = None  # an object the robot holds in every scene (JSON-ready, see scene.Attached)
 
     @property
     def condition(self) -> Condition:
@@ -60,7 +62,8 @@ class Task:
                 "group": [j for j in r.joints if j not in _base_joints(r)], "floating_base": r.floating_base,
                 "base_bounds": r.base_bounds.tolist(), "locked": r.locked, "constraint": self.constraint.spec(),
                 "home": self.home.tolist(), "home_condition": self.home_condition.tolist(),
-                "task_file": None if self.file is None else str(self.file)}
+                "task_file": None if self.file is None else str(self.file),
+                **({"attached": self.attached} if self.attached is not None else {})}
 
     def meta(self) -> dict:
         """The ``meta`` fields every file made for this task carries (an outside checker needs only these)."""
@@ -91,6 +94,7 @@ def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
     task = _finish(spec["name"], robot, constraint, spec.get("home"), spec.get("home_condition"),
                    spec.get("description", ""), {})
     task.file = Path(spec["task_file"]) if spec.get("task_file") else None
+    task.attached = spec.get("attached")
     return task
 
 
@@ -229,7 +233,32 @@ def load_task_file(path: str | Path) -> Task:
     except ManifoldgenError as exc:
         raise ManifoldgenError(f"{where('home')}: {exc}") from None
     task.file = path.resolve()
+    if "attached" in data:
+        try:
+            task.attached = _held(task, data["attached"])
+        except ManifoldgenError as exc:
+            raise ManifoldgenError(f"{where('attached')}: {exc}") from None
     return task
+
+
+def _held(task: Task, table) -> dict:
+    """The task file's ``[attached]`` table as a held object's JSON-ready dict, refusing one that does not
+    parse or that collides with the robot at the task's home (the links holding it excepted)."""
+    from manifoldgen.scene import Attached, held_checker  # scene builds on tasks
+
+    if not isinstance(table, dict):
+        raise ManifoldgenError("'attached' must be one table: type, size (box), pose {position, quaternion} in "
+                               "the 'attached_to' frame, touch_links (the links holding it)")
+    held = Attached.from_dict(table)
+    task.robot.frame_id(held.frame)
+    held.resolved_touch_links(task.robot)
+    name = held.shape.name
+    hits = [pair for pair in held_checker(task.robot, held).collisions(task.home) if name in pair]
+    if hits:
+        links = ", ".join(b if a == name else a for a, b in hits[:3])
+        raise ManifoldgenError(f"the held {held.shape.type} '{name}' collides with the robot at home ({links}); "
+                               "move or shrink it, or add the links that hold it to touch_links")
+    return held.to_dict()
 
 
 def _importable_from(folder: Path) -> None:

@@ -56,13 +56,17 @@ def plot_residuals(violations: dict[str, np.ndarray], path: str | Path) -> None:
 
 
 def plot_coverage(results: dict, path: str | Path) -> None:
-    """Raw validity, k-NN recall and coverage per condition value and model (unseen conditions hollow)."""
+    """Raw validity, k-NN recall and coverage per condition value and model (unseen conditions hollow); conditions
+    of several values (``0.3,0``) are placed in order, one tick each."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(14, 3.6))
     panels = (("raw", "raw within-tolerance rate"), ("recall", "k-NN recall vs reference"),
               ("coverage", "k-NN coverage vs reference"))
+    keys = list(next(iter(results["models"].values()))["per_condition"]) if results["models"] else []
+    scalar = all("," not in k for k in keys)
     for name, entry in results["models"].items():
-        items = sorted((float(y), r) for y, r in entry["per_condition"].items())
+        items = (sorted((float(y), r) for y, r in entry["per_condition"].items()) if scalar
+                 else [(keys.index(y), r) for y, r in entry["per_condition"].items()])
         ys = [y for y, _ in items]
         color = None
         for ax, (key, _) in zip(axes, panels):
@@ -75,6 +79,8 @@ def plot_coverage(results: dict, path: str | Path) -> None:
     left = axes[0]
     for ax in axes:
         ax.set_xlabel("condition (hollow: unseen)")
+        if not scalar:
+            ax.set_xticks(range(len(keys)), keys, rotation=45, ha="right", fontsize=7)
         ax.set_ylim(0, 1.02)
     left.legend(fontsize=8)
     save_figure(fig, path)
