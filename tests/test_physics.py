@@ -13,7 +13,7 @@ from manifoldgen.constraints.joint_linear import JointLinearConstraint
 from manifoldgen.constraints.projection import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
-from manifoldgen.physics import PhysicsSettings, check_path, check_path_file
+from manifoldgen.physics import PhysicsSettings, check_path, check_path_file, summary
 from manifoldgen.tasks import load_task_file
 
 pytest.importorskip("mujoco")
@@ -61,15 +61,17 @@ def _save(task, folder, name, waypoints):
     return file
 
 
-def _shift_base(task, x_end, z_end, level, count=7):
+def _shift_base(task, x_end, z_end, level, count=7, pitch_end=0.0):
     """(count, n): the task's home with the base moved to x_end, z_end in steps, the feet kept where they stand (each
-    state projected onto the balance equalities, base_x = x and, when ``level``, base_pitch = 0, from the last)."""
+    state projected onto the balance equalities, base_x = x and, when ``level``, base_pitch = 0 (or stepping to
+    ``pitch_end``), from the last)."""
     rows = [0, 4] if level else [0]
     fixed = np.eye(task.robot.n)[rows]
     feet_and_base = ConstraintSet([task.constraint, JointLinearConstraint(task.robot, fixed, [[0.0] * len(rows)])])
     states = [task.home]
-    for x, z in zip(np.linspace(0.0, x_end, count)[1:], np.linspace(0.687, z_end, count)[1:]):
-        res = project(feet_and_base, states[-1], [z, x, 0.0][:1 + len(rows)])
+    for x, z, pitch in zip(np.linspace(0.0, x_end, count)[1:], np.linspace(0.687, z_end, count)[1:],
+                           np.linspace(0.0, pitch_end, count)[1:]):
+        res = project(feet_and_base, states[-1], [z, x, pitch][:1 + len(rows)])
         assert res.converged[0]
         states.append(res.q[0])
     return np.array(states)
@@ -157,4 +159,41 @@ def test_talos_loads_and_stands():
                         PhysicsSettings(settle_s=0.5, hold_s=0.0))
     assert result.upright and result.max_tilt_deg < 1.0 and result.max_slip_m < 0.005
     assert result.engine["model_error_m"] < 1e-6 and len(result.engine["contact_geoms"]) == 2
+    assert result.engine["wheel_joints"] == [] and "wheels" not in summary(result)  # no wheels: nothing servoed extra
     assert max(result.start_foot_gap_m.values()) < 1e-3
+
+
+def test_locked_wheels_do_not_roll(balance_task):
+    """A path that pitches every leg (base 5 cm down and pitched 0.2 rad, wheel centres kept where they stand): the plan
+    turns each locked wheel with its ankle by 32-39 deg, which on the ground rolls it when the wheel is welded (the old
+    model: 26 mm); servoed not to roll, the wheels stay put (4 mm)."""
+    from dataclasses import replace
+
+    task, robot = balance_task, balance_task.robot
+    path = _shift_base(task, 0.0, 0.637, level=True, pitch_end=0.2)
+    assert task.constraint.satisfied(path, np.linspace(0.687, 0.637, len(path))[:, None]).all()
+    ankles = [robot.frame_pose(path[[0, -1]], f"ankle2_{i}")[1] for i in range(1, 5)]  # each (2, 3, 3)
+    assert min(np.degrees(np.arccos((np.trace(R[0].T @ R[1]) - 1) / 2)) for R in ankles) > 30.0
+    rolled = check_path(robot, path, FEET, replace(FAST, servo_wheels=False))
+    held = check_path(robot, path, FEET, FAST)
+    assert rolled.engine["wheel_joints"] == [] and rolled.engine["welded_joints"] == held.engine["welded_joints"] + 4
+    assert held.engine["wheel_joints"] == [f"j_wheel_{i}" for i in range(1, 5)]
+    assert rolled.upright and rolled.max_slip_m > 0.02 and not rolled.stable  # the wheels rolled
+    assert held.stable and held.max_slip_m < 0.01 and held.max_tilt_deg < 1.0 and held.base_drift_m < 0.01
+    assert held.max_tracking_error_rad < 0.03  # the wheel servos held their targets too
+    assert "wheels servoed not to roll: j_wheel_1" in summary(held)
+
+
+def test_the_balance_task_stands_on_its_wheels():
+    """The balance task's feet are contact frames on the ankle links; the wheels hang from those links by locked joints.
+    The wheel cylinders are contact geometry (they were dropped, and the robot stood 7 cm low on its ankle housings)
+    and the wheel joints are servoed; in the reference stance the plan's contacts are on the ground as they are."""
+    from manifoldgen.tasks import get_task
+
+    task = get_task("balance", "centauro")
+    result = check_path(task.robot, task.home[None], [f"contact_{i}" for i in range(1, 5)],
+                        PhysicsSettings(settle_s=0.3, hold_s=0.0))
+    assert result.engine["wheel_joints"] == [f"j_wheel_{i}" for i in range(1, 5)]
+    assert sum(g.startswith("wheel_") for g in result.engine["contact_geoms"]) == 4
+    assert abs(result.engine["start_shift_m"]) < 1e-3 and max(result.start_foot_gap_m.values()) < 1e-3
+    assert result.stable and result.max_slip_m < 0.005 and result.max_tilt_deg < 1.0

@@ -18,13 +18,22 @@ The model (see docs/physics.md):
 - links, joints and inertias from the URDF (``inertiafromgeom=false``: the URDF's inertials only,
   as pinocchio; the total mass is checked against pinocchio's); visual geometry is discarded;
 - contacts: the feet only. A foot is a frame of the balance constraint; its collision geometry is
-  every collision geometry rigidly attached to that frame's link. Every other collision geometry
-  is dropped (the planner already checked self-collision). A foot mesh in a format MuJoCo cannot
-  read is rebuilt from the vertices pinocchio (coal) loaded;
+  every collision geometry rigidly attached to that frame's link in the plan (through no joint, or down
+  through locked joints: centauro's contact frames are on the ankle links, the wheels hang from them on
+  locked joints). Every other collision geometry is dropped (the planner already checked self-collision).
+  A foot mesh in a format MuJoCo cannot read is rebuilt from the vertices pinocchio (coal) loaded;
 - joints: each one a critically damped PD servo (MuJoCo ``general`` actuator, damping integrated
   implicitly) whose stiffness is ``(2 pi f)^2 M_jj`` with ``M_jj`` the joint's diagonal of the joint-space
   inertia at the first state (armature included): every joint has natural frequency ``f``. Joints
-  outside the planning group are welded at their locked values (their mimic equalities dropped);
+  outside the planning group are welded at their locked values (their mimic equalities dropped), except
+  wheels;
+- wheels (``servo_wheels``, on by default): a locked hinge whose child body is part of a foot's contact
+  geometry and whose axle is within 15 deg of horizontal at the first state. A disc's angle about its axle
+  changes no geometry the plan checks, but welded, a wheel turns with its leg and rolls along the ground.
+  Each wheel is servoed instead (same gains) to its locked value plus the angle, about the axle, from the
+  world's down direction seen from the wheel's parent link at the first state to the same at the planned
+  state (pinocchio's kinematics of the plan): the rim point that touched the ground stays the lowest, the
+  wheel does not roll. ``engine["wheel_joints"]`` names them;
 - time: segment k gets a nominal duration, the larger of ``seconds_per_rad`` times its largest angle change
   (joints and base angles) and ``seconds_per_m`` times its base translation; the whole path is then run on a
   quintic ease-in/ease-out of its total (zero velocity and acceleration at both ends, peak speed the nominal
@@ -72,10 +81,11 @@ class PhysicsSettings:
     fall_tilt_deg: float = 45.0  # fell: the base tilts more than this ...
     fall_drop_m: float = 0.25  # ... or sinks this far below the plan
     slip_threshold_m: float = 0.02  # stable: upright and no foot slides further than this
+    servo_wheels: bool = True  # locked wheels under the feet servoed not to roll (False: welded, as other locked joints)
 
     def __post_init__(self):
         for name, value in asdict(self).items():
-            if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s", "armature")):
+            if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s", "armature", "servo_wheels")):
                 raise ManifoldgenError(f"physics setting {name} must be a positive number, got {value}")
         if self.control_period < self.timestep:
             raise ManifoldgenError(f"control_period ({self.control_period} s) must be at least the timestep "
@@ -148,7 +158,7 @@ def check_path(robot: Robot, path: np.ndarray, feet: list[str], settings: Physic
     if path.ndim != 2 or path.shape[1] != robot.n or len(path) < 1 or not np.isfinite(path).all():
         raise ManifoldgenError(f"the path must be a finite (K, {robot.n}) array for {robot.name}, got {path.shape}")
     wall, cpu = time.perf_counter(), time.process_time()
-    sim = _Simulation(robot, feet, settings)
+    sim = _Simulation(robot, feet, settings, path[0])
     result = sim.run(path, progress)
     result.wall_s, result.cpu_s = time.perf_counter() - wall, time.process_time() - cpu
     return result
@@ -206,26 +216,49 @@ def _foot_links(robot: Robot, feet: list[str]) -> dict[str, tuple[str, np.ndarra
     return out
 
 
-def _welded(spec, body) -> list:
-    """The bodies rigidly attached to ``body`` (no joint between them), ``body`` included."""
+def _welded(spec, body, group: set[str]) -> list:
+    """The bodies rigidly attached to ``body`` in the plan, ``body`` included: up through bodies with no joint,
+    down through bodies with no joint or only joints outside ``group`` (locked: pinocchio holds them rigid)."""
     top = body
     while not top.joints and top.parent is not None and top.parent.name != "world":
         top = top.parent
-    group, stack = [], [top]
+    found, stack = [], [top]
     while stack:
         b = stack.pop()
-        group.append(b)
-        stack.extend(c for c in b.bodies if not c.joints)
-    return group
+        found.append(b)
+        stack.extend(c for c in b.bodies if not any(j.name in group for j in c.joints))
+    return found
 
 
-def _weld_locked(spec, mujoco, robot: Robot, group: set[str]) -> int:
-    """Remove every hinge or slide joint outside ``group``, its child body fixed at the joint's locked value
-    (as rigid as pinocchio's locked joints), and the URDF mimic equalities that name one; returns how many."""
+_WHEEL_TILT = np.sin(np.radians(15.0))  # a wheel's axle is within 15 deg of horizontal at the first state
+
+
+def _find_wheels(spec, mujoco, robot: Robot, group: set[str], foot_bodies: set[str], q0: np.ndarray) -> list:
+    """The locked wheels: hinge joints outside ``group`` whose child body is one of the feet's bodies, has collision
+    geometry, and whose axle is horizontal (within 15 deg) at ``q0``. Each as (joint name, parent link, axle (3,) unit
+    in the parent link's frame)."""
+    wheels = []
+    for body in spec.bodies:
+        if body.name not in foot_bodies or len(body.joints) != 1 or not body.geoms:
+            continue
+        joint = body.joints[0]
+        if joint.name in group or joint.type != mujoco.mjtJoint.mjJNT_HINGE:
+            continue
+        w, x, y, z = np.asarray(body.quat, float) / np.linalg.norm(body.quat)
+        axle = pin.Quaternion(w, x, y, z).matrix() @ (np.asarray(joint.axis, float) / np.linalg.norm(joint.axis))
+        R = robot.frame_pose(q0, body.parent.name)[1][0]
+        if abs((R @ axle)[2]) <= _WHEEL_TILT:
+            wheels.append((joint.name, body.parent.name, axle))
+    return wheels
+
+
+def _weld_locked(spec, mujoco, robot: Robot, group: set[str], keep: set[str] = frozenset()) -> int:
+    """Remove every hinge or slide joint outside ``group`` and ``keep``, its child body fixed at the joint's locked
+    value (as rigid as pinocchio's locked joints), and the URDF mimic equalities that name one; returns how many."""
     welded = set()
     for body in spec.bodies:
         for joint in list(body.joints):
-            if joint.name in group or joint.type not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            if joint.name in group or joint.name in keep or joint.type not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
                 continue
             if len(body.joints) > 1:
                 raise ManifoldgenError(f"link {body.name} of {robot.name} has several joints; the physics check "
@@ -253,7 +286,7 @@ def _weld_locked(spec, mujoco, robot: Robot, group: set[str]) -> int:
 class _Simulation:
     """The MuJoCo model of ``robot`` on a ground plane, with servos and foot sites."""
 
-    def __init__(self, robot: Robot, feet: list[str], settings: PhysicsSettings):
+    def __init__(self, robot: Robot, feet: list[str], settings: PhysicsSettings, q0: np.ndarray):
         mujoco = _mujoco()
         self.mujoco, self.robot, self.feet, self.settings = mujoco, robot, list(feet), settings
         try:
@@ -266,6 +299,8 @@ class _Simulation:
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         links = _foot_links(robot, feet)
+        self.joint_names = list(robot.joints[6:])  # servoed, in the group's order
+        group = set(self.joint_names)
         foot_geoms, dropped, converted = set(), 0, []
         by_name = {b.name: b for b in spec.bodies}
         foot_bodies = {}
@@ -273,10 +308,11 @@ class _Simulation:
             if link not in by_name:
                 raise ManifoldgenError(f"MuJoCo's model of {robot.name} has no link '{link}' (foot '{foot}')")
             body = by_name[link]
-            foot_bodies[foot] = [b.name for b in _welded(spec, body)]
+            foot_bodies[foot] = [b.name for b in _welded(spec, body, group)]
             body.add_site(name=f"foot:{foot}", pos=placement[:3, 3],
                           quat=pin.Quaternion(placement[:3, :3]).coeffs()[[3, 0, 1, 2]])
         contact_bodies = {name for names in foot_bodies.values() for name in names}
+        wheels = _find_wheels(spec, mujoco, robot, group, contact_bodies, q0) if settings.servo_wheels else []
         meshes = {m.name: m for m in spec.meshes}
         for body in spec.bodies:
             for geom in list(body.geoms):
@@ -298,13 +334,18 @@ class _Simulation:
         for mesh in list(spec.meshes):
             if not any(g.meshname == mesh.name for g in spec.geoms):
                 spec.delete(mesh)
-        self.joint_names = list(robot.joints[6:])  # servoed, in the group's order
-        welded = _weld_locked(spec, mujoco, robot, set(self.joint_names))
+        self.wheel_names = [w[0] for w in wheels]
+        self.wheel_parents = [w[1] for w in wheels]
+        self._wheel_frames = [robot.model.frames[robot.frame_id(link)] for link in self.wheel_parents]
+        self.wheel_axles = np.array([w[2] for w in wheels]).reshape(-1, 3)
+        self.wheel_locked = np.array([robot.locked.get(w, 0.0) for w in self.wheel_names])
+        servoed = self.joint_names + self.wheel_names  # actuators in this order: the group's joints, then the wheels
+        welded = _weld_locked(spec, mujoco, robot, group, set(self.wheel_names))
         for j in spec.joints:
-            if j.name in self.joint_names:
+            if j.name in servoed:
                 j.armature = settings.armature
                 j.limited = mujoco.mjtLimited.mjLIMITED_FALSE  # the servos hold the path; limits were planned
-        for name in self.joint_names:
+        for name in servoed:
             spec.add_actuator(name=f"servo:{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
                               gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE)
         try:
@@ -318,11 +359,12 @@ class _Simulation:
                                   {m.body(b).id for b in foot_bodies[f]}] for f in self.feet}
         self.root = m.body(root.name).id
         self.ground = m.geom("ground").id
-        self.qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in self.joint_names])
-        self.dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in self.joint_names])
+        self.qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in servoed], int)
+        self.dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in servoed], int)
         mass = float(m.body_subtreemass[0])
         self.engine = {"engine": "mujoco", "version": mujoco.__version__, "bodies": int(m.nbody - 1),
-                       "servoed_joints": len(self.joint_names), "welded_joints": welded, "mass_kg": mass,
+                       "servoed_joints": len(self.joint_names), "welded_joints": welded,
+                       "wheel_joints": list(self.wheel_names), "mass_kg": mass,
                        "pinocchio_mass_kg": robot.mass, "contact_geoms": sorted(foot_geoms), "dropped_geoms": dropped,
                        "meshes_from_pinocchio": converted}
         if abs(mass - robot.mass) > 1e-6 * max(1.0, robot.mass):
@@ -349,12 +391,47 @@ class _Simulation:
         R = pin.rpy.rpyToMatrix(q[5], q[4], q[3])
         x, y, z, w = pin.Quaternion(R).coeffs()
         qpos[3:7] = w, x, y, z
-        qpos[self.qadr] = q[6:]
+        qpos[self.qadr] = self._targets(q)
         return qpos
+
+    def _targets(self, q: np.ndarray) -> np.ndarray:
+        """Servo targets (servoed,) at the planned configuration q (n,): the group's joints as planned, then each
+        wheel at its locked value plus the angle, about its axle, from the world's down direction seen from the wheel's
+        parent link at the first state to the same at q (both from pinocchio's kinematics of the plan): the wheel's
+        rim point that touched the ground at the first state stays the lowest one, so the wheel does not roll."""
+        if not self.wheel_names:
+            return q[6:]
+        angles = np.empty(len(self.wheel_names))
+        for i, (down, axle) in enumerate(zip(self._downs(q), self.wheel_axles)):
+            down = down - (down @ axle) * axle
+            ref = self._wheel_down[i]
+            if np.linalg.norm(down) < 1e-9:  # axle vertical: keep the previous angle
+                angles[i] = self._wheel_angle[i]
+                continue
+            angle = np.arctan2(axle @ np.cross(ref, down), ref @ down)
+            angles[i] = angle + 2 * np.pi * np.round((self._wheel_angle[i] - angle) / (2 * np.pi))  # continuous
+        self._wheel_angle = angles
+        return np.concatenate([q[6:], self.wheel_locked + angles])
+
+    def _downs(self, q: np.ndarray) -> np.ndarray:
+        """(wheels, 3): the world's -z in each wheel's parent link frame at the planned q (n,) (our Robot's kinematics,
+        one pass for all wheels)."""
+        frames = self._wheel_frames
+        world = self.robot._world(q[None], sorted({f.parentJoint for f in frames}))
+        return np.array([-(world[f.parentJoint][0, :3, :3] @ f.placement.rotation)[2] for f in frames]).reshape(-1, 3)
+
+    def _reset_wheels(self, q0: np.ndarray) -> None:
+        """The wheels' reference: the world's down direction in each parent link's frame at q0, across the axle."""
+        self._wheel_angle = np.zeros(len(self.wheel_names))
+        self._wheel_down = []
+        for down, axle in zip(self._downs(q0), self.wheel_axles):
+            down = down - (down @ axle) * axle
+            self._wheel_down.append(down / np.linalg.norm(down))
 
     def _place(self, q0: np.ndarray) -> tuple[float, dict[str, float]]:
         """Put the robot at q0 with its lowest foot on the ground; returns the height shift and each foot's gap."""
         mujoco, m, d = self.mujoco, self.model, self.data
+        self._reset_wheels(q0)
         d.qpos[:] = self._qpos(q0)
         mujoco.mj_kinematics(m, d)
         gaps = {f: min(mujoco.mj_geomDistance(m, d, g, self.ground, 10.0, None) for g in ids)
@@ -371,6 +448,7 @@ class _Simulation:
             raise RuntimeError(f"internal error: MuJoCo's and pinocchio's models of {self.robot.name} differ by "
                                f"{error:.2e} m at the first state (feet or centre of mass)")
         self.engine["model_error_m"] = float(error)
+        self.engine["start_shift_m"] = float(shift)  # how far the plan's first state was raised to stand on the ground
         return shift, {f: gap - min(gaps.values()) for f, gap in gaps.items()}
 
     def _set_gains(self) -> None:
@@ -411,20 +489,20 @@ class _Simulation:
         max_tilt = max_drift = drift = tracking = 0.0
         slip = np.zeros(len(self.feet))
         fell_at = None
+        target = self._targets(self._plan_at(path, stamps, motion_s, d.time))
         with progress_bar("physics", ticks, enabled=progress) as bar:
             for tick in range(ticks):
-                t = d.time
-                q_plan = self._plan_at(path, stamps, motion_s, t)
-                d.ctrl[:] = q_plan[6:]
+                d.ctrl[:] = target  # the plan at the current time
                 mujoco.mj_step(m, d, substeps)
                 q_plan = self._plan_at(path, stamps, motion_s, d.time)
+                target = self._targets(q_plan)
                 base_plan = q_plan[:3] + [0.0, 0.0, shift]
                 R_plan = pin.rpy.rpyToMatrix(q_plan[5], q_plan[4], q_plan[3])
                 tilt = np.degrees(np.arccos(np.clip(R_plan[:, 2] @ d.xmat[self.root].reshape(3, 3)[:, 2], -1, 1)))
                 drift = float(np.linalg.norm(d.qpos[:3] - base_plan))
                 max_tilt, max_drift = max(max_tilt, tilt), max(max_drift, drift)
                 slip = np.maximum(slip, np.linalg.norm((d.site_xpos[self.foot_sites] - start_feet)[:, :2], axis=1))
-                tracking = max(tracking, float(np.abs(d.qpos[self.qadr] - q_plan[6:]).max()))
+                tracking = max(tracking, float(np.abs(d.qpos[self.qadr] - target).max()))
                 bar.advance()
                 if tilt > s.fall_tilt_deg or d.qpos[2] < base_plan[2] - s.fall_drop_m:
                     fell_at = float(d.time)
@@ -468,6 +546,8 @@ def summary(result: PhysicsResult) -> str:
              f"{len(result.engine['contact_geoms'])} contact geometries, {result.engine['dropped_geoms']} other "
              f"collision geometries dropped; {result.simulated_s:.2f} s simulated in {result.wall_s:.2f} s wall, "
              f"{result.cpu_s:.2f} s CPU"]
+    if wheels := result.engine.get("wheel_joints"):
+        lines.append(f"  wheels servoed not to roll: {', '.join(wheels)}")
     return "\n".join(lines)
 
 
