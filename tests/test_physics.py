@@ -197,3 +197,51 @@ def test_the_balance_task_stands_on_its_wheels():
     assert sum(g.startswith("wheel_") for g in result.engine["contact_geoms"]) == 4
     assert abs(result.engine["start_shift_m"]) < 1e-3 and max(result.start_foot_gap_m.values()) < 1e-3
     assert result.stable and result.max_slip_m < 0.005 and result.max_tilt_deg < 1.0
+
+
+@pytest.fixture(scope="module")
+def talos_task():
+    from manifoldgen.tasks import get_task
+
+    return get_task("balance", "talos")
+
+
+def _talos_shift(task, x_end, count=5):
+    """(count, n): talos's home with the base moved to base_x = x_end in steps, each state projected onto the
+    balance constraint (soles flat where they stand) at base height 0.98 m."""
+    both = ConstraintSet([task.constraint, JointLinearConstraint(task.robot, np.eye(task.robot.n)[[0]], [[0.0]])])
+    states = [task.home]
+    for x in np.linspace(0.0, x_end, count)[1:]:
+        res = project(both, states[-1], [0.98, x])
+        assert res.converged[0]
+        states.append(res.q[0])
+    return np.array(states)
+
+
+def test_talos_stands_on_its_whole_soles(talos_task):
+    """Talos (90 kg) holds its balance task's home: the standing legs' servos are stiff enough for the robot they
+    carry (with the ankles' own inertia alone they sagged and tilted the base 9.5 deg), and it stands on its soles'
+    outlines (boxes from the ankle meshes' flat bottoms), not on the three deepest vertices of their hulls."""
+    result = check_path(talos_task.robot, talos_task.home[None], ["left_sole_link", "right_sole_link"],
+                        PhysicsSettings(settle_s=1.0, hold_s=0.0))
+    assert result.upright and result.max_tilt_deg < 1.0 and result.max_slip_m < 0.002
+    assert result.max_tracking_error_rad < 0.01
+    for lo_x, hi_x, lo_y, hi_y in result.engine["flat_soles"].values():  # the sole: 0.2 m x 0.124 m
+        assert lo_x < -0.1 and hi_x > 0.09 and lo_y < -0.06 and hi_y > 0.06
+    assert {"leg_left_5_joint", "leg_right_5_joint"} <= set(result.engine["stance_servos"])  # ankles
+    assert not any(j.startswith("arm") for j in result.engine["stance_servos"])
+
+
+def test_talos_balanced_path_stays_up_and_unbalanced_falls(talos_task):
+    """The check can still fail on talos: the base 3 cm forward (CoM 4.5 cm inside the margin) stays upright,
+    the base 0.2 m forward with the soles kept (CoM 7.6 cm beyond the constraint's polygon) falls."""
+    feet = ["left_sole_link", "right_sole_link"]
+    settings = PhysicsSettings(settle_s=0.2, hold_s=1.0, seconds_per_rad=1.0, seconds_per_m=5.0)
+    c = talos_task.constraint
+    balanced, unbalanced = _talos_shift(talos_task, 0.03), _talos_shift(talos_task, 0.2)
+    assert c.satisfied(balanced, np.full((len(balanced), 1), 0.98)).all()
+    assert np.abs(c.residual(unbalanced, [0.98])).max() < 1e-5 and c.inequality(unbalanced[-1], [0.98]).max() > 0.09
+    up = check_path(talos_task.robot, balanced, feet, settings)
+    assert up.upright and up.stable and up.max_tilt_deg < 2.0 and up.max_slip_m < 0.01
+    down = check_path(talos_task.robot, unbalanced, feet, settings)
+    assert down.fell and not down.upright

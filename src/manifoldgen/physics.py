@@ -21,10 +21,14 @@ The model (see docs/physics.md):
   every collision geometry rigidly attached to that frame's link in the plan (through no joint, or down
   through locked joints: centauro's contact frames are on the ankle links, the wheels hang from them on
   locked joints). Every other collision geometry is dropped (the planner already checked self-collision).
-  A foot mesh in a format MuJoCo cannot read is rebuilt from the vertices pinocchio (coal) loaded;
+  A foot mesh in a format MuJoCo cannot read is rebuilt from the vertices pinocchio (coal) loaded; a foot
+  mesh with a flat sole becomes a box, its sole's outline; the contacts are stiffer than MuJoCo's default
+  (``contact_timeconst_s``);
 - joints: each one a critically damped PD servo (MuJoCo ``general`` actuator, damping integrated
-  implicitly) whose stiffness is ``(2 pi f)^2 M_jj`` with ``M_jj`` the joint's diagonal of the joint-space
-  inertia at the first state (armature included): every joint has natural frequency ``f``. Joints
+  implicitly, the target taken kv/kp ahead on the plan) whose stiffness is ``(2 pi f)^2 M_jj`` with
+  ``M_jj`` the joint's diagonal of the joint-space inertia at the first state (armature included): every joint
+  has natural frequency ``f``; a joint with a standing foot beyond it (knee, ankle) carries the rest of the
+  robot, and is as stiff as that inertia about its axis at ``stance_frequency_hz`` where that is stiffer. Joints
   outside the planning group are welded at their locked values (their mimic equalities dropped), except
   wheels;
 - wheels (``servo_wheels``, on by default): a locked hinge whose child body is part of a foot's contact
@@ -60,6 +64,8 @@ from manifoldgen.robot import Robot, robots_dir
 
 _MESH_FORMATS = (".stl", ".obj", ".msh")  # what MuJoCo reads itself
 _GAP = 0.005  # m: a foot further above the ground at the start is reported as not touching it
+_SOLE_TOL = 0.002  # m: a foot mesh's vertices this close to its lowest (along the foot frame's z) are its sole
+_SOLE_MIN = 0.02  # m: a sole narrower than this either way is no flat sole (a wheel's or a rounded foot's line)
 _PEAK_SPEED = 1.875  # peak / mean speed of the quintic ease 10u^3 - 15u^4 + 6u^5
 
 
@@ -73,10 +79,12 @@ class PhysicsSettings:
     hold_s: float = 1.0  # s holding the last state after moving
     timestep: float = 0.001  # s, physics step
     control_period: float = 0.005  # s between servo target updates (and measurements)
-    frequency_hz: float = 25.0  # natural frequency of every joint servo
+    frequency_hz: float = 25.0  # natural frequency of every joint servo ...
+    stance_frequency_hz: float = 5.0  # ... and of a joint with a standing foot beyond it, on the robot it carries
     damping_ratio: float = 1.0
     armature: float = 0.01  # kg m^2 added to every joint (a geared motor's rotor)
     friction: float = 0.8  # sliding friction coefficient of foot-ground contacts (rubber on concrete ~0.8)
+    contact_timeconst_s: float = 0.005  # foot-ground contact stiffness (MuJoCo solref time constant; at least 2 steps)
     tilt_threshold_deg: float = 10.0  # upright: the base tilts less than this from the plan, throughout
     fall_tilt_deg: float = 45.0  # fell: the base tilts more than this ...
     fall_drop_m: float = 0.25  # ... or sinks this far below the plan
@@ -87,6 +95,9 @@ class PhysicsSettings:
         for name, value in asdict(self).items():
             if not np.isfinite(value) or value < 0 or (value == 0 and name not in ("settle_s", "hold_s", "armature", "servo_wheels")):
                 raise ManifoldgenError(f"physics setting {name} must be a positive number, got {value}")
+        if self.contact_timeconst_s < 2 * self.timestep:
+            raise ManifoldgenError(f"contact_timeconst_s ({self.contact_timeconst_s} s) must be at least two timesteps "
+                                   f"({2 * self.timestep} s)")
         if self.control_period < self.timestep:
             raise ManifoldgenError(f"control_period ({self.control_period} s) must be at least the timestep "
                                    f"({self.timestep} s)")
@@ -319,6 +330,7 @@ class _Simulation:
                 if body.name in contact_bodies:
                     geom.contype, geom.conaffinity, geom.condim = 0, 1, 3
                     geom.friction = [settings.friction, 0.005, 0.0001]
+                    geom.solref = [settings.contact_timeconst_s, 1.0]
                     geom.name = geom.name or f"{body.name}:contact{len(foot_geoms)}"
                     foot_geoms.add(geom.name)
                     if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
@@ -327,7 +339,8 @@ class _Simulation:
                     spec.delete(geom)
                     dropped += 1
         spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
-                                contype=1, conaffinity=1, friction=[settings.friction, 0.005, 0.0001])
+                                contype=1, conaffinity=1, friction=[settings.friction, 0.005, 0.0001],
+                                solref=[settings.contact_timeconst_s, 1.0])
         if not foot_geoms:
             raise ManifoldgenError(f"the feet {feet} of {robot.name} have no collision geometry to stand on; "
                                    "name foot frames on links with <collision> shapes")
@@ -349,6 +362,7 @@ class _Simulation:
             spec.add_actuator(name=f"servo:{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
                               gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE)
         try:
+            soles = self._flat_soles(spec, foot_bodies, foot_geoms)
             self.model = spec.compile()
         except ValueError as exc:
             raise ManifoldgenError(f"MuJoCo cannot compile {robot.name}: {str(exc).splitlines()[0]}") from exc
@@ -366,10 +380,59 @@ class _Simulation:
                        "servoed_joints": len(self.joint_names), "welded_joints": welded,
                        "wheel_joints": list(self.wheel_names), "mass_kg": mass,
                        "pinocchio_mass_kg": robot.mass, "contact_geoms": sorted(foot_geoms), "dropped_geoms": dropped,
-                       "meshes_from_pinocchio": converted}
+                       "meshes_from_pinocchio": converted, "flat_soles": soles}
         if abs(mass - robot.mass) > 1e-6 * max(1.0, robot.mass):
             raise ManifoldgenError(f"MuJoCo's model of {robot.name} weighs {mass:.3f} kg but pinocchio's "
                                    f"{robot.mass:.3f} kg; the URDF's inertials were not read alike")
+
+    def _flat_soles(self, spec, foot_bodies: dict[str, list[str]], foot_geoms: set[str]) -> dict[str, list[float]]:
+        """Replace each foot mesh with a flat sole by a box: its sole (x, y extents in the foot frame) and 1 cm thick.
+
+        MuJoCo collides a mesh with the ground plane through its convex hull, and a hull that is flat to a fraction
+        of a millimetre (talos's ankle mesh) touches the plane at whichever few vertices are the deepest: talos stood
+        on three points per foot, the front one 4.5 cm behind the toe, a support polygon much smaller than the sole.
+        A box's bottom face touches at its four corners, the sole's outline. The sole is the foot mesh's vertices
+        within ``_SOLE_TOL`` of its lowest along the foot frame's z axis; a footprint narrower than ``_SOLE_MIN`` either
+        way (a wheel, a rounded foot) is no flat sole and its mesh is kept. Returns foot -> [x_min, x_max, y_min,
+        y_max] (m, foot frame) per box."""
+        mujoco = self.mujoco
+        meshes = {g.name: g for g in spec.geoms if g.name in foot_geoms and g.type == mujoco.mjtGeom.mjGEOM_MESH}
+        if not meshes:
+            return {}
+        m = spec.compile()
+        d = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d)
+        soles = {}
+        for foot, bodies in foot_bodies.items():
+            site = m.site(f"foot:{foot}").id
+            R, p = d.site_xmat[site].reshape(3, 3), d.site_xpos[site]
+            for name in [n for n in meshes if m.body(int(m.geom_bodyid[m.geom(n).id])).name in bodies]:
+                geom, g = meshes[name], m.geom(name).id
+                mid = int(m.geom_dataid[g])
+                vert = m.mesh_vert[m.mesh_vertadr[mid]:m.mesh_vertadr[mid] + m.mesh_vertnum[mid]].astype(float)
+                local = (d.geom_xpos[g] + vert @ d.geom_xmat[g].reshape(3, 3).T - p) @ R  # in the foot frame
+                bottom = local[:, 2].min()
+                sole = local[local[:, 2] < bottom + _SOLE_TOL]
+                lo, hi = sole[:, :2].min(axis=0), sole[:, :2].max(axis=0)
+                if (hi - lo).min() < _SOLE_MIN:
+                    continue
+                half = np.array([*(hi - lo) / 2, 0.005])
+                body = int(m.geom_bodyid[g])
+                Rb, pb = d.xmat[body].reshape(3, 3), d.xpos[body]
+                centre = Rb.T @ (p + R @ np.array([*(hi + lo) / 2, bottom + half[2]]) - pb)  # in the geom's body
+                box = spec.body(m.body(body).name).add_geom(
+                    name=f"{name}:sole", type=mujoco.mjtGeom.mjGEOM_BOX, size=half, pos=centre,
+                    quat=pin.Quaternion(Rb.T @ R).coeffs()[[3, 0, 1, 2]], contype=geom.contype,
+                    conaffinity=geom.conaffinity, condim=geom.condim, friction=geom.friction, solref=geom.solref,
+                    group=geom.group)
+                foot_geoms.discard(name)
+                foot_geoms.add(box.name)
+                spec.delete(meshes.pop(name))
+                soles[foot] = [round(float(v), 4) for v in (lo[0], hi[0], lo[1], hi[1])]
+        for mesh in list(spec.meshes):
+            if not any(g.meshname == mesh.name for g in spec.geoms):
+                spec.delete(mesh)
+        return soles
 
     def _convert_mesh(self, spec, mesh) -> list[str]:
         """Replace a mesh MuJoCo cannot read by the vertices pinocchio loaded (MuJoCo takes their convex hull)."""
@@ -459,8 +522,43 @@ class _Simulation:
         inertia = np.diag(M)[self.dadr]
         omega = 2 * np.pi * s.frequency_hz
         kp, kv = omega ** 2 * inertia, 2 * s.damping_ratio * omega * inertia
+        stance, omega_s = self._stance_inertia(), 2 * np.pi * s.stance_frequency_hz
+        stiffer = omega_s ** 2 * stance > kp
+        kp[stiffer], kv[stiffer] = omega_s ** 2 * stance[stiffer], 2 * s.damping_ratio * omega_s * stance[stiffer]
+        self.lead = kv / kp  # s: each servo's target is the plan this far ahead (2 zeta / omega)
+        self.engine["stance_servos"] = [self.joint_names[i] for i in np.flatnonzero(stiffer)]
         m.actuator_gainprm[:, 0] = kp
         m.actuator_biasprm[:, :3] = np.stack([np.zeros_like(kp), -kp, -kv], axis=1)
+
+    def _stance_inertia(self) -> np.ndarray:
+        """Per servoed joint (J,): the inertia it moves when the feet stand on the ground, at the current state.
+
+        ``M_jj`` is the inertia of the joint's subtree (the links beyond it from the base) about its axis: right
+        for an arm or the torso, whose far side is free. A joint with a foot beyond it (hip, knee, ankle of a
+        standing leg) moves the other way round: its foot is held by the ground, and its torque turns the rest of
+        the robot about its axis. Its inertia is that of every link not beyond it (a lower bound: the other foot
+        stands too), about its axis, plus armature; 0 for a joint with no foot beyond it, and for the wheels
+        (servoed after the group's joints: a wheel turns only itself)."""
+        m, d = self.model, self.data
+        parent = m.body_parentid
+        feet = {int(m.geom_bodyid[g]) for ids in self.foot_geom_ids.values() for g in ids}
+        out = np.zeros(len(self.joint_names) + len(self.wheel_names))
+        for i, name in enumerate(self.joint_names):
+            jid = m.joint(name).id
+            top = int(m.jnt_bodyid[jid])
+            beyond = np.zeros(m.nbody, bool)
+            for b in range(1, m.nbody):  # bodies are numbered parents first
+                beyond[b] = b == top or beyond[parent[b]]
+            if not any(beyond[f] for f in feet):
+                continue
+            rest = np.flatnonzero(~beyond[1:]) + 1
+            axis, anchor = d.xaxis[jid], d.xanchor[jid]
+            arm = d.xipos[rest] - anchor
+            arm -= np.outer(arm @ axis, axis)
+            local = np.einsum("kij,i->kj", d.ximat[rest].reshape(-1, 3, 3), axis)  # the axis in each body's frame
+            out[i] = (float(np.sum(m.body_mass[rest] * np.sum(arm ** 2, axis=1)))
+                      + float(np.sum(m.body_inertia[rest] * local ** 2)) + m.dof_armature[self.dadr[i]])
+        return out
 
     # ------------------------------------------------------------------ run
     def schedule(self, path: np.ndarray) -> tuple[np.ndarray, float]:
@@ -492,7 +590,9 @@ class _Simulation:
         target = self._targets(self._plan_at(path, stamps, motion_s, d.time))
         with progress_bar("physics", ticks, enabled=progress) as bar:
             for tick in range(ticks):
-                d.ctrl[:] = target  # the plan at the current time
+                for lead in np.unique(self.lead):  # the target kv / kp ahead: the damping does not lag the plan
+                    ahead = self.lead == lead
+                    d.ctrl[ahead] = self._targets(self._plan_at(path, stamps, motion_s, d.time + lead))[ahead]
                 mujoco.mj_step(m, d, substeps)
                 q_plan = self._plan_at(path, stamps, motion_s, d.time)
                 target = self._targets(q_plan)
