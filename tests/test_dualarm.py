@@ -194,3 +194,19 @@ def test_the_dualarm_demo_is_registered_and_collects_level_tray_rows():
     assert len(data) == 24 and task.constraint.satisfied(data.q, data.y).all()
     _, R = task.robot.frame_pose(data.q, "r_gripper_tool_frame")
     assert np.all(R[:, 2, 2] > 0.9999)  # pitch 0: the tray is level
+
+
+def test_collect_near_home_keeps_rows_on_the_homes_branch():
+    """baxter's tray manifold has many IK branches (roll joints over +-3 rad); uniform seeds spread the rows over
+    all of them, and a unimodal CVAE averages them into a pose far from every query solved near the home.
+    ``near_home`` seeds the projection around the home: valid rows, much closer to it, recorded in the meta."""
+    task = get_task("dualarm", "baxter")
+    y = np.array([[0.3, 0.0]])
+    near = collect(task, 16, seed=2, conditions=y, batch=128, progress=False, near_home=0.5)
+    uniform = collect(task, 16, seed=2, conditions=y, batch=128, progress=False)
+    assert task.constraint.satisfied(near.q, near.y).all() and not task_checker(task).in_collision(near.q).any()
+    gap = [np.median(np.linalg.norm(d.q - task.home, axis=1)) for d in (near, uniform)]
+    assert gap[0] < 0.5 * gap[1]
+    assert near.meta["near_home"] == 0.5 and "near_home" not in uniform.meta
+    with pytest.raises(ManifoldgenError, match="near_home must be"):
+        collect(task, 4, seed=0, conditions=y, near_home=-1.0, progress=False)

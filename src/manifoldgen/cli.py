@@ -85,6 +85,8 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
             seed: int = typer.Option(0),
             condition: list[float] = typer.Option(None, help="Condition values (default: the task's)"),
             strict: bool = typer.Option(False, help="Refuse conditions outside the task's range"),
+            near_home: float = typer.Option(0.0, help="Seeds normal around the task's home with this standard "
+                                            "deviation (rad): rows on the home's IK branch (0: uniform seeds)"),
             output: Path = typer.Option(..., "-o", "--output", help="Dataset .npz to write")):
     """Collect constraint-satisfying configurations (resumes after an interruption)."""
     import time
@@ -96,7 +98,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     task_obj = _task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     start = time.perf_counter()
-    dataset = run_collect(task_obj, per_condition, seed, output, conditions=values)
+    dataset = run_collect(task_obj, per_condition, seed, output, conditions=values, near_home=near_home)
     elapsed = time.perf_counter() - start
     console.print(f"wrote {output}: {len(dataset)} rows x {dataset.q.shape[1]} joints "
                   f"({task_obj.robot.name}, {task_obj.name} task) in {elapsed:.1f} s "

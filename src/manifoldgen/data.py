@@ -78,8 +78,14 @@ class Dataset:
 
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
-            give_up: int = 20, progress: bool = True) -> Dataset:
+            give_up: int = 20, progress: bool = True, near_home: float = 0.0) -> Dataset:
     """Collect ``per_condition`` valid rows at each condition value (default: the task's).
+
+    The seeds projected onto the manifold are uniform in the joint limits, or with ``near_home > 0``
+    normal around the task's home with that standard deviation (rad, clipped to the limits): rows on
+    the home's IK branch (for a task whose manifold has many branches, such as baxter's dual-arm tray,
+    where a unimodal model trained on uniform seeds averages the branches into a pose far from every
+    query solved near the home).
 
     A condition that yields no valid row in its first ``give_up`` batches is an error.
     With ``out``, batches are saved as they finish and the dataset is written atomically
@@ -88,6 +94,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be a positive number of rows, got {per_condition}")
     seed = check_seed(seed)
+    if not np.isfinite(near_home) or near_home < 0:
+        raise ManifoldgenError(f"near_home must be a standard deviation >= 0 rad (0: uniform seeds), got {near_home}")
     if min(batch, max_batches, give_up) <= 0:
         raise ManifoldgenError(f"batch, max_batches and give_up must be positive, got {batch}, {max_batches}, "
                                f"{give_up}")
@@ -99,7 +107,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
         raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
                                f"{MAX_ROWS:,} rows; collect several smaller datasets")
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
-            "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection"}
+            "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection" if not near_home
+            else f"seeds normal around the task home (sd {near_home:g} rad) + damped least-squares projection",
+            **({"near_home": float(near_home)} if near_home else {})}
     partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
         out = check_output_path(out)
@@ -110,7 +120,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
             _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
                                        "max_batches": max_batches, "give_up": give_up})
             owned = True
-        dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta)
+        dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta,
+                           near_home)
         if out is not None:
             dataset.save(out)
     except Exception:  # a failed run leaves nothing behind (an interrupt or a kill keeps the batches to resume)
@@ -123,8 +134,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
 
 
 def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, partial: Path | None, batch: int,
-             max_batches: int, give_up: int, progress: bool, meta: dict) -> Dataset:
-    checker = task_checker(task)
+             max_batches: int, give_up: int, progress: bool, meta: dict, near_home: float = 0.0) -> Dataset:
+    checker, robot = task_checker(task), task.robot
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
         for c, y in enumerate(values):
@@ -138,7 +149,9 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
                     rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
                     rng = np.random.default_rng([seed, c, b])
-                    res = project(task.constraint, task.robot.sample_uniform(batch, rng), y)
+                    seeds = (robot.sample_uniform(batch, rng) if not near_home else
+                             np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper))
+                    res = project(task.constraint, seeds, y)
                     rows = res.q[space.valid(res.q)]
                     if partial is not None:
                         save_npz(partial / f"c{c}-b{b}.npz", {}, q=rows)
