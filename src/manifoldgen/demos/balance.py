@@ -9,23 +9,17 @@ execute the path quasi-statically in MuJoCo (does the robot stay upright?) and d
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
-import torch
 from rich.console import Console
 from rich.table import Table
 
-from manifoldgen.data import collect
-from manifoldgen.models import get_model_class
 from manifoldgen.physics import balance_feet, check_path
-from manifoldgen.planning.query import run_query, save_path
+from manifoldgen.demos.steps import collect_and_train, plan_and_check, sample_accuracy
 from manifoldgen.runtime import REFINE, set_torch_threads
-from manifoldgen.sampling import generate
 from manifoldgen.scene import get_scene
 from manifoldgen.stability import path_stability
 from manifoldgen.tasks import get_task
-from manifoldgen.training import CHECKPOINT
 from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
 
@@ -45,31 +39,14 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     y = scene.condition
     figures: dict = {}
 
-    console.rule("1. collect stable configurations")
-    start = time.perf_counter()
-    dataset = collect(task, PER_CONDITION, seed, output / "balance.npz")
-    figures["rows"], figures["collect_s"] = len(dataset), time.perf_counter() - start
-
-    console.rule("2. train a CVAE (residual + CoM-margin penalty)")
-    model = get_model_class("cvae")()
-    interrupted = (output / "cvae" / CHECKPOINT).exists()  # a previous demo was stopped mid-training
-    log = model.fit(dataset, epochs=EPOCHS, seed=seed, out=output / "cvae", resume=interrupted)
-    figures["train_s"], figures["epochs"] = log.seconds, len(log.history)
-
-    console.rule("3. sample")
-    raw, refined = generate(model, task.constraint, y, SAMPLES, torch.Generator().manual_seed(seed), REFINE)
-    figures["raw_valid"] = float(task.constraint.satisfied(raw, y).mean())  # feet, height AND CoM inside
-    figures["refined_valid"] = float(task.constraint.satisfied(refined, y).mean())
-
-    console.rule("4. plan the reach")
+    model = collect_and_train(task, PER_CONDITION, EPOCHS, seed, output, console, figures, dataset="balance.npz",
+                              what=" stable configurations")
+    sample_accuracy(model, task, y, SAMPLES, seed, console, figures)  # feet, height AND CoM inside
     sampler = f"cvae:{output / 'cvae'},refine={REFINE},batch=256"
-    result, meta = run_query(task, scene, sampler, "rrtconnect", seed=seed, time_limit=30.0, settings=PLANNER)
-    save_path(output / "reach-path.npz", result, meta)
-    report = meta["validation"]  # run_query re-checked the path densely (constraint, CoM, limits, collisions)
+    result, report = plan_and_check(task, scene, sampler, seed, 30.0, output / "reach-path.npz", console, figures,
+                                    title="plan the reach", settings=PLANNER)
     plot_path(result.path, task.robot, HAND, scene, output / "reach-path.png",
               f"reach scene: RRT-Connect + CVAE sampler, seed {seed}")
-    figures.update(solved=result.solved, plan_s=result.time_s, waypoints=len(result.path),
-                   path_valid=bool(report.get("valid")), worst_violation=float(report.get("worst_violation", "nan")))
 
     console.rule("5. static stability along the path")
     if result.solved:

@@ -9,23 +9,17 @@ robot snapshots.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
-import torch
 from rich.console import Console
 from rich.table import Table
 
-from manifoldgen.data import collect
-from manifoldgen.models import get_model_class
-from manifoldgen.planning.query import run_query, save_path
+from manifoldgen.demos.steps import collect_and_train, plan_and_check, sample_accuracy
 from manifoldgen.runtime import REFINE, set_torch_threads
-from manifoldgen.sampling import generate
 from manifoldgen.scene import get_scene
 from manifoldgen.targets import constrained_frame
 from manifoldgen.tasks import get_task
-from manifoldgen.training import CHECKPOINT
 from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
 
@@ -51,35 +45,16 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     conditions = demo_conditions(task)
     figures: dict = {}
 
-    console.rule("1. collect")
-    start = time.perf_counter()
-    dataset = collect(task, PER_CONDITION, seed, output / "dualarm.npz", conditions=conditions)
-    figures["rows"], figures["collect_s"] = len(dataset), time.perf_counter() - start
-
-    console.rule("2. train a CVAE")
-    model = get_model_class("cvae")()
-    interrupted = (output / "cvae" / CHECKPOINT).exists()  # a previous demo was stopped mid-training
-    log = model.fit(dataset, epochs=EPOCHS, seed=seed, out=output / "cvae", resume=interrupted)
-    figures["train_s"], figures["epochs"] = log.seconds, len(log.history)
-
-    console.rule("3. sample")
-    start = time.perf_counter()
-    raw, refined = generate(model, task.constraint, y, SAMPLES, torch.Generator().manual_seed(seed), REFINE)
-    figures["sample_ms"] = (time.perf_counter() - start) * 1000
-    figures["raw_valid"] = float(task.constraint.satisfied(raw, y).mean())
-    figures["refined_valid"] = float(task.constraint.satisfied(refined, y).mean())
-
-    console.rule("4. plan tray-over")
+    model = collect_and_train(task, PER_CONDITION, EPOCHS, seed, output, console, figures, dataset="dualarm.npz",
+                              conditions=conditions)
+    sample_accuracy(model, task, y, SAMPLES, seed, console, figures)
     sampler = f"cvae:{output / 'cvae'},refine={REFINE}"
-    result, meta = run_query(task, scene, sampler, "rrtconnect", seed=seed, time_limit=TIME_LIMIT, smooth=True)
-    save_path(output / "tray-over.npz", result, meta)
-    report = meta["validation"]  # run_query re-checked the path densely
+    result, report = plan_and_check(task, scene, sampler, seed, TIME_LIMIT, output / "tray-over.npz", console,
+                                    figures, title="plan tray-over", smooth=True)
     plot_path(result.path, task.robot, constrained_frame(task.constraint), scene, output / "tray-over.png",
               f"tray-over: RRT-Connect + CVAE sampler, shortcut, seed {seed}")
     if result.solved:
         draw_snapshots(result.path, task, scene, output / "tray-over-snapshots.png")
-    figures.update(solved=result.solved, plan_s=result.time_s, waypoints=len(result.path),
-                   path_valid=bool(report.get("valid")), worst_violation=float(report.get("worst_violation", "nan")))
 
     table = Table("step", "result", title="manifoldgen demo: pr2, dual-arm tray, tray-over scene")
     table.add_row("dataset", f"{figures['rows']} rows at d = {', '.join(f'{v:g}' for v in conditions[:, 0])} m, "
