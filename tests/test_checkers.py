@@ -209,7 +209,7 @@ def test_limits_collisions_and_inequalities_are_rechecked(folder, datasets):
 
     path, dataset = datasets["pose"]
     task = dataset.task()
-    over = corrupt(dataset, folder / "over.npz", [0], 3, task.robot.upper[3] - dataset.q[0, 3] + 0.01)
+    corrupt(dataset, folder / "over.npz", [0], 3, task.robot.upper[3] - dataset.q[0, 3] + 0.01)
     q = task.robot.sample_uniform(400, np.random.default_rng(0))
     clash = q[CollisionChecker(task.robot).in_collision(q)][0]
     rows = dataset.q.copy()

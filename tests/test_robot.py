@@ -6,7 +6,7 @@ import pinocchio as pin
 import pytest
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.robot import Robot, find_robot, known_robots, resolve_robot, robots_dir
+from manifoldgen.robot import Robot, find_robot, known_robots, resolve_robot
 
 PANDA_ARM = [f"panda_joint{i}" for i in range(1, 8)]
 PR2_GROUP = ["torso_lift_joint", "r_shoulder_pan_joint", "r_shoulder_lift_joint", "r_upper_arm_roll_joint",

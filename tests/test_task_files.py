@@ -1,7 +1,6 @@
 """Task files: built-in tasks are files, tasks rebuild from file meta alone, bad task files are one clear line."""
 
 import json
-import textwrap
 
 import numpy as np
 import pytest

@@ -283,18 +283,16 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
 def _stability(experiment: Experiment, path: np.ndarray) -> dict | None:
     """A solved path's static stability (:func:`manifoldgen.stability.path_stability`) for a balance task, else None."""
     from manifoldgen.stability import balance_part, path_stability
-    from manifoldgen.tasks import get_task
 
-    constraint = get_task(experiment.task, experiment.robot).constraint
+    constraint = _scene(experiment.task, experiment.robot, experiment.scene)[0].constraint
     return path_stability(constraint, path).to_dict() if balance_part(constraint) is not None else None
 
 
 def _physics(experiment: Experiment, path: np.ndarray) -> dict:
     """The verdict of executing a solved balance path in MuJoCo (:func:`manifoldgen.physics.check_path`)."""
     from manifoldgen.physics import balance_feet, check_path
-    from manifoldgen.tasks import get_task
 
-    task = get_task(experiment.task, experiment.robot)
+    task = _scene(experiment.task, experiment.robot, experiment.scene)[0]
     result = check_path(task.robot, path, balance_feet(task.constraint.spec()))
     return {key: getattr(result, key) for key in ("upright", "stable", "fell", "max_tilt_deg", "max_slip_m",
                                                   "base_drift_m", "cpu_s")}
@@ -302,12 +300,9 @@ def _physics(experiment: Experiment, path: np.ndarray) -> dict:
 
 def _draw_snapshots(experiment: Experiment, records: list[dict], out_dir: Path) -> None:
     """``LABEL-snapshots.png``: robot snapshots along each method's run-0 path."""
-    from manifoldgen.scene import get_scene
-    from manifoldgen.tasks import get_task
     from manifoldgen.viz.snapshots import draw_snapshots
 
-    task = get_task(experiment.task, experiment.robot)
-    scene = get_scene(task, experiment.scene)
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
     for record in records:
         draw_snapshots(np.asarray(record["path"]), task, scene, out_dir / f"{record['method']}-snapshots.png")
 

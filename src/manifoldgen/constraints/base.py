@@ -18,7 +18,6 @@ import itertools
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import ClassVar
 
 import numpy as np
 from array_api_compat import array_namespace
