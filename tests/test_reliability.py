@@ -75,6 +75,20 @@ def test_failed_collect_leaves_no_partial_folder(panda_task, tmp_path):
 
 
 # ---------------------------------------------------------------------------------------- permissions
+def test_a_failed_write_removes_the_folders_it_created(tmp_path, monkeypatch):
+    """A model saved into a new folder on a full disk leaves no empty folder behind."""
+    import io as stdio
+
+    class Full(stdio.FileIO):
+        def write(self, data):
+            raise OSError(28, "No space left on device")
+    monkeypatch.setattr("manifoldgen.io.os.fdopen", lambda fd, mode="wb": Full(fd, "wb"))
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(ManifoldgenError, match="No space left"):
+        atomic_write_text(tmp_path / "kept" / "new" / "deeper" / "model.json", "{}")
+    assert [p.name for p in tmp_path.rglob("*")] == ["kept"]
+
+
 @pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
 def test_written_files_respect_the_umask(tmp_path, umask, mode, panda_task):
     old = os.umask(umask)

@@ -1,6 +1,9 @@
 """Robot: batched FK, Jacobians and CoM against pinocchio and finite differences; every
 example-robot-data robot by name; URDF + SRDF paths and content identity; bad input."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -93,6 +96,23 @@ def test_unparsable_urdf_is_reported(tmp_path):
     bad.write_text("<robot name='x'><link name='a'></robot")
     with pytest.raises(ManifoldgenError, match="cannot parse URDF"):
         Robot.load(str(bad))
+
+
+@pytest.mark.parametrize("text, detail", [
+    ("<bad/>", "root element is <bad>"),
+    ("<robot name='x'><link name='a'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/>"
+     "</joint></robot>", "does not specify limits"),
+])
+def test_urdf_parser_errors_become_our_one_line(tmp_path, text, detail):
+    """What urdfdom prints on file descriptor 2 ends up in our one line, not before it."""
+    bad = tmp_path / "bad.urdf"
+    bad.write_text(text)
+    script = "from manifoldgen.cli import app; app()"
+    done = subprocess.run([sys.executable, "-c", script, "robots", str(bad)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2
+    lines = (done.stdout + done.stderr).strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: cannot parse URDF") and detail in lines[0], lines
 
 
 def test_unknown_frame_and_bad_shapes():

@@ -44,10 +44,12 @@ def _atomic(path: Path, write) -> None:
     path = Path(path)
     if path.exists() and not path.is_file():
         raise ManifoldgenError(f"{path} exists and is not a regular file (a folder or a device); write elsewhere")
+    new_dirs = [d for d in [path.parent, *path.parent.parents] if not d.exists()]  # deepest first
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp")
     except OSError as exc:
+        _remove_empty(new_dirs)
         raise write_error(path, exc) from None
     try:
         with os.fdopen(fd, "wb") as f:
@@ -57,10 +59,21 @@ def _atomic(path: Path, write) -> None:
         _remove_orphans(path)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
+        _remove_empty(new_dirs)
         raise write_error(path, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
+        _remove_empty(new_dirs)
         raise
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a failed write created (deepest first), where they are still empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 def _remove_orphans(path: Path) -> None:

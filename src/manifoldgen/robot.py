@@ -9,12 +9,15 @@ batches ``q (B, n)`` in numpy. A floating base is six Euclidean coordinates
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import functools
 import hashlib
 import os
 import re
 import site
+import sys
+import tempfile
 import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import dataclass
@@ -230,15 +233,18 @@ class Robot:
         urdf, srdf = resolve_robot(source, srdf)
         name = urdf.stem if _is_path(source) else source
         share = str(robots_dir().parent.parent)
-        try:
-            model = (pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer()) if floating_base
-                     else pin.buildModelFromUrdf(str(urdf)))
-            collision = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION,
-                                              package_dirs=[share, str(urdf.parent.parent)])
-        except (RuntimeError, ValueError) as exc:
-            raise ManifoldgenError(f"cannot parse URDF {urdf}: {str(exc).splitlines()[0]}; "
-                                   "check that the file is a valid URDF") from exc
-        joints = _planning_group(model, _urdf_mimics(urdf), name, joints, floating_base)
+        mimics = _urdf_mimics(urdf)  # parses the XML first: a broken file gets our one line, not urdfdom's
+        with _native_stderr() as said:
+            try:
+                model = (pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer()) if floating_base
+                         else pin.buildModelFromUrdf(str(urdf)))
+                collision = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION,
+                                                  package_dirs=[share, str(urdf.parent.parent)])
+            except (RuntimeError, ValueError) as exc:
+                detail = " ".join(said().split()) or str(exc).splitlines()[0]
+                raise ManifoldgenError(f"cannot parse URDF {urdf}: {detail}; check that the file is a valid "
+                                       "URDF") from exc
+        joints = _planning_group(model, mimics, name, joints, floating_base)
         q_ref = pin.neutral(model)
         if srdf is not None:
             states = _srdf_states(srdf)
@@ -522,7 +528,36 @@ def _urdf_mimics(urdf: Path) -> dict[str, str]:
         root = ET.parse(urdf).getroot()
     except ET.ParseError as exc:
         raise ManifoldgenError(f"cannot parse URDF {urdf}: {exc}; check that the file is a valid URDF") from exc
+    if root.tag != "robot":
+        raise ManifoldgenError(f"cannot parse URDF {urdf}: its root element is <{root.tag}>, not <robot>; check that "
+                               "the file is a valid URDF")
     return {j.get("name"): m.get("joint") for j in root.iter("joint") if (m := j.find("mimic")) is not None}
+
+
+@contextlib.contextmanager
+def _native_stderr():
+    """Hold what C++ libraries (urdfdom) write to file descriptor 2 while the block runs; yields a
+    function returning it, so that a failure says it in our one line. After a block that did not
+    raise, what was held (warnings) is written out as usual."""
+    sys.stderr.flush()
+    saved, held = os.dup(2), tempfile.TemporaryFile()
+
+    def said() -> str:
+        held.seek(0)
+        return held.read().decode(errors="replace")
+
+    os.dup2(held.fileno(), 2)
+    passed = False
+    try:
+        yield said
+        passed = True
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        text = said() if passed else ""
+        held.close()
+        if text:
+            sys.stderr.write(text)
 
 
 def _joint_type(jm) -> str:

@@ -215,7 +215,6 @@ def _save_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optim
                           "tensor_keys": {str(pid): [k for k, v in st.items() if torch.is_tensor(v)]
                                           for pid, st in sd["state"].items()}})
     doc = {"identity": identity, "log": asdict(log), "bad": bad, "optimizers": optim_doc}
-    out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / CHECKPOINT, safetensors.torch.save(tensors, metadata={"state": json.dumps(doc)}))
 
 

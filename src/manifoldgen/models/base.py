@@ -191,7 +191,6 @@ class ConditionalSampler(ABC):
         if not self.nets:
             raise ManifoldgenError(f"model '{self.name}' is not trained; nothing to save")
         path = Path(path)
-        path.mkdir(parents=True, exist_ok=True)
         blob = safetensors.torch.save(self.state_tensors())
         atomic_write_bytes(path / WEIGHTS_FILE, blob)
         doc = {**self.describe(), "weights_sha256": hashlib.sha256(blob).hexdigest()}
