@@ -37,7 +37,7 @@ EXIT_VALID, EXIT_INVALID, EXIT_USAGE, EXIT_CANNOT = 0, 1, 2, 3
 LIMIT_MARGIN = 1e-9  # rad or m, as manifoldgen's within_limits
 ALWAYS_SAMPLES = 200  # random configurations for the "always colliding" pairs (robots whose SRDF disables few)
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
-BUILTIN_TYPES = ("pose", "orientation", "plane", "joint_linear", "closed_chain", "rotation", "balance", "set")
+BUILTIN_TYPES = ("pose", "orientation", "plane", "sphere", "joint_linear", "closed_chain", "rotation", "balance", "set")
 AXES = {"x": 0, "y": 1, "z": 2}
 # example-robot-data names that no file stem gives: name -> (folder, URDF stem) (as manifoldgen's robot.py)
 ALIASES = {"anymal": ("anymal_b_simple_description", "anymal"), "anymal_b": ("anymal_b_simple_description", "anymal"),
@@ -442,6 +442,26 @@ class PlanePart(Part):
         return self.normals @ p - y
 
 
+class SpherePart(Part):
+    """``|p(q) - c| - y``: the frame's distance from the centre c minus the radius y."""
+
+    type = "sphere"
+
+    def __init__(self, robot: RobotModel, spec: dict):
+        self.frame_name = spec["frame"]
+        self.fid = robot.frame(self.frame_name)
+        self.center = np.asarray(spec.get("center", (0.0, 0.0, 0.0)), float)
+        if self.center.shape != (3,):
+            raise CannotRecheck(f"sphere center must be 3 numbers: {spec.get('center')!r}")
+        self.k = self.m = 1
+        self.tolerance = np.array([float(spec.get("tolerance", 0.01))])
+        self.labels = [f"{self.frame_name} distance from {self.center.round(3).tolist()} minus the radius (m)"]
+
+    def residual(self, s, y):
+        p, _ = s.pose(self.fid)
+        return np.array([np.linalg.norm(p - self.center)]) - y
+
+
 class JointLinearPart(Part):
     """``A q - y`` over the group's coordinates (a floating base's six first)."""
 
@@ -586,8 +606,8 @@ class UserPart(Part):
         self.labels = []
 
 
-PART_TYPES = {c.type: c for c in (PosePart, OrientationPart, PlanePart, JointLinearPart, ClosedChainPart, RotationPart,
-                                   BalancePart)}
+PART_TYPES = {c.type: c for c in (PosePart, OrientationPart, PlanePart, SpherePart, JointLinearPart, ClosedChainPart,
+                                   RotationPart, BalancePart)}
 
 
 def leaves(robot: RobotModel, spec: dict) -> list[Part]:

@@ -6,7 +6,8 @@ import pytest
 
 from manifoldgen.constraints import (BalanceConstraint, ClosedChainConstraint, Condition, Constraint, ConstraintSet,
                                      JointLinearConstraint, OrientationConstraint, PlaneConstraint, PoseConstraint,
-                                     RotationConstraint, array_namespace, build_constraint, project)
+                                     RotationConstraint, SphereConstraint, array_namespace, build_constraint,
+                                     project)
 from manifoldgen.robot import Robot
 from manifoldgen.constraints.so3 import jlog3, log3
 from manifoldgen.errors import ManifoldgenError
@@ -154,6 +155,8 @@ CASES = {
     "plane": lambda t, p, c: (PlaneConstraint(t.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]]), None, [0.4]),
     "line": lambda t, p, c: (PlaneConstraint(t.robot, "panda_hand_tcp", [[1, 0, 0], [0, 1, 1]], [[0.4, 0.5]]),
                              None, [0.4, 0.5]),
+    "sphere": lambda t, p, c: (SphereConstraint(t.robot, "panda_hand_tcp", [[0.5], [0.7]], center=[0.0, 0.0, 0.3]),
+                               None, [0.6]),
     "joint_linear": lambda t, p, c: (JointLinearConstraint(t.robot, [[1, 1, 0, 0, 0, 0, 0]], [[0.0], [0.5]]),
                                      None, [0.3]),
     "closed_chain": lambda t, p, c: (ClosedChainConstraint(p, "r_gripper_tool_frame", "l_gripper_tool_frame",

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Build the C++ OMPL baseline into benchmarks/ompl_native/build/ompl_native (an optional extra:
-# manifoldgen runs without it). Needs Debian's libompl-dev (OMPL 1.5, with Eigen 3.4 and Boost 1.74),
+# Build the C++ OMPL baseline into benchmarks/ompl_native/build/ompl_native, and OMPL's sphere demo
+# program into build/sphere_demo (optional extras:
+# manifoldgen runs without them). Needs Debian's libompl-dev (OMPL 1.5, with Eigen 3.4 and Boost 1.74),
 # cmake, g++ and the `pin` wheel in the Python environment given as $PYTHON (default .venv/bin/python).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

@@ -135,7 +135,7 @@ def _self_pairs(robot: Robot) -> list[tuple[int, int]]:
         adjacent = ja == jb or robot.model.parents[ja] == jb or robot.model.parents[jb] == ja
         if not adjacent and _moving(robot, ja) != _moving(robot, jb):
             pairs.append((a, b))
-    if srdf_disabled < MIN_SRDF_PAIRS * len(objects):
+    if pairs and srdf_disabled < MIN_SRDF_PAIRS * len(objects):  # nothing to sample without candidate pairs
         pairs = _sampled_matrix(robot, pairs)
     return pairs
 

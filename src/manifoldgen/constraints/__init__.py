@@ -15,7 +15,8 @@ from manifoldgen.constraints.plane import PlaneConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.projection import Projection, project
 from manifoldgen.constraints.rotation import RotationConstraint
+from manifoldgen.constraints.sphere import SphereConstraint
 
 __all__ = ["CONSTRAINTS", "BalanceConstraint", "ClosedChainConstraint", "Condition", "Constraint", "ConstraintSet",
            "JointLinearConstraint", "OrientationConstraint", "PlaneConstraint", "PoseConstraint", "Projection",
-           "RotationConstraint", "array_namespace", "as_like", "build_constraint", "project"]
+           "RotationConstraint", "SphereConstraint", "array_namespace", "as_like", "build_constraint", "project"]

@@ -280,7 +280,9 @@ def builtin_tasks() -> dict[str, dict[str, Path]]:
     found: dict[str, list[tuple[bool, str, Path]]] = {}
     for file in sorted(BUILTIN_DIR.glob("*.toml")):
         data = tomllib.loads(file.read_text())
-        found.setdefault(data["name"], []).append((not data.get("default", False), str(data["robot"]), file))
+        robot = str(data["robot"])  # a URDF path is known by its robot name, the file stem (as Robot.name)
+        robot = Path(robot).stem if robot.endswith(".urdf") else robot
+        found.setdefault(data["name"], []).append((not data.get("default", False), robot, file))
     return {name: {robot: file for _, robot, file in sorted(rows)} for name, rows in found.items()}
 
 
