@@ -94,7 +94,8 @@ class Space {
 
   // A motion's states (k, n) in order: how many leading ones are valid (intermediate states within the
   // margin, the last one, when it is a node, the plain tolerance); sets stop and counts stopped.
-  int valid_prefix(const double* states, int k, bool last_is_node);
+  // collision = false: the collision test is left out (a lazy search checks collisions later).
+  int valid_prefix(const double* states, int k, bool last_is_node, bool collision = true);
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
   // Every state every resolution along path (K, n), exact collision checks.
   PathCheck validate_path(const double* path, int K);
@@ -113,11 +114,14 @@ struct PlannerSettings {
   bool partial = true;
   int pool = 2048, pool_batch = 256, candidates = 8, target_batch = 32;
   std::string local = "auto";
+  // lazy: tree edges are checked for collision only when they lie on a candidate path (nodes at once);
+  // an edge found colliding then is cut, keeping its collision-free part (see planner.cpp)
+  bool lazy = false;
 };
 
 struct PlanOutput {
   RowMat path;  // (K, n); 0 rows: unsolved
-  long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0;
+  long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
   std::vector<long> nodes;
   bool timed_out = false;
 };

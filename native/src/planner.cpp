@@ -29,19 +29,20 @@ struct Tree {
   int n;
   std::vector<double> q;
   std::vector<int> parent;
-  std::vector<char> alive;
+  std::vector<char> alive, verified;  // verified: the edge into the node was checked for collision
 
-  Tree(const Vec& root) : n(static_cast<int>(root.size())) { add(-1, root.data()); }
+  Tree(const Vec& root) : n(static_cast<int>(root.size())) { add(-1, root.data(), true); }
   int size() const { return static_cast<int>(parent.size()); }
   const double* row(int i) const { return q.data() + static_cast<long>(i) * n; }
-  int add(int from, const double* x) {
+  int add(int from, const double* x, bool checked) {
     q.insert(q.end(), x, x + n);
     parent.push_back(from);
     alive.push_back(1);
+    verified.push_back(checked);
     return size() - 1;
   }
-  int add_chain(int from, const RowMat& waypoints) {  // returns the last node
-    for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data());
+  int add_chain(int from, const RowMat& waypoints, bool checked) {  // returns the last node
+    for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data(), checked);
     return from;
   }
   int nearest(const double* x) const {
@@ -137,6 +138,7 @@ struct Local {
   double resolution, step;
   bool partial, stones, walks;
   int kind;  // 0 auto, 1 interpolate, 2 project, 3 direct
+  bool lazy = false;  // motions: collision checked at their end state only (the search verifies edges later)
   long projections = 0;
   static constexpr double precision = 0.01;
   static constexpr int max_iters = 20;
@@ -157,9 +159,41 @@ struct Local {
     for (int i = 1; i <= k; ++i) out.row(i - 1) = (va + (vb - va) * (static_cast<double>(i) / k)).transpose();
     return out;
   }
+  // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
+  // (the last valid row, a node).
+  int prefix(const RowMat& s, bool last_is_node) {
+    const int k = static_cast<int>(s.rows());
+    const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
+    if (!lazy || count == 0 || space.planning_free(s.row(count - 1).data())) return count;
+    space.stop = COLLISION;
+    ++space.counts.stopped[COLLISION];
+    return 0;
+  }
+  // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
+  // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
+  // is found blocked after fewer checks than scanning from its start).
+  bool all_valid(const RowMat& s, int k, bool last_is_node) {
+    if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
+    if (lazy) return !last_is_node || !k || space.planning_free(s.row(k - 1).data()) || collided();
+    std::vector<std::pair<int, int>> spans{{0, k - 1}};
+    for (std::size_t next = 0; next < spans.size(); ++next) {
+      const auto [lo, hi] = spans[next];
+      if (lo > hi) continue;
+      const int mid = (lo + hi) / 2;
+      if (!space.planning_free(s.row(mid).data())) return collided();
+      spans.emplace_back(lo, mid - 1);
+      spans.emplace_back(mid + 1, hi);
+    }
+    return true;
+  }
+  bool collided() {
+    space.stop = COLLISION;
+    ++space.counts.stopped[COLLISION];
+    return false;
+  }
   bool whole(const double* a, const double* b) {
     const RowMat s = segment_states(a, b);
-    return space.valid_prefix(s.data(), static_cast<int>(s.rows()), true) == s.rows();
+    return all_valid(s, static_cast<int>(s.rows()), true);
   }
   RowMat none() const { return RowMat(0, n()); }
 
@@ -169,7 +203,7 @@ struct Local {
     const bool reach = distance <= max_distance;
     const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
     const RowMat s = segment_states(a, end.data());
-    const int count = space.valid_prefix(s.data(), static_cast<int>(s.rows()), reach);
+    const int count = prefix(s, reach);
     if (count == s.rows()) return {end.transpose(), reach};
     if (partial && count) return {s.row(count - 1), false};
     return {none(), false};
@@ -231,10 +265,19 @@ struct Local {
     return out;
   }
 
-  // Index of the first straight segment starts[i] -> ends[i] valid all along (ends are valid states), or -1.
+  // Index of the first straight segment starts[i] -> ends[i] valid all along, or -1. The end (a pooled
+  // sample, not yet checked for collision) is checked first: a colliding sample costs one check.
   int first_valid(const std::vector<const double*>& starts, const std::vector<const double*>& ends) {
-    for (std::size_t i = 0; i < starts.size(); ++i)
-      if (whole(starts[i], ends[i])) return static_cast<int>(i);
+    for (std::size_t i = 0; i < starts.size(); ++i) {
+      const int c = space.code(ends[i], 1.0, true, false);
+      if (c != VALID) {
+        space.stop = c;
+        ++space.counts.stopped[c];
+        continue;
+      }
+      const RowMat s = segment_states(starts[i], ends[i]);
+      if (all_valid(s, static_cast<int>(s.rows()) - 1, false)) return static_cast<int>(i);  // the end is checked
+    }
     return -1;
   }
 };
@@ -272,8 +315,33 @@ struct Search {
     return targets.row(next++).transpose();
   }
 
+  // Check the unverified edges of a candidate path for collision (planning resolution, in path order).
+  // A colliding edge is cut from its tree; its collision-free part before the first collision stays as
+  // a new node (as a blocked straight extension keeps its valid part). True when every edge passed.
+  bool verify(const std::vector<std::pair<int, int>>& edges) {
+    for (const auto& [k, child] : edges) {
+      Tree& tree = trees[k];
+      if (tree.verified[child]) continue;
+      const int from = tree.parent[child];
+      const RowMat states = local.segment_states(tree.row(from), tree.row(child));
+      const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
+      int free = 0;
+      while (free < k_states && space.planning_free(states.row(free).data())) ++free;
+      if (free == k_states) {
+        tree.verified[child] = 1;
+        continue;
+      }
+      ++out.cut_edges;
+      tree.kill(child);
+      if (s.partial && free) tree.add(from, states.row(free - 1).data(), true);
+      return false;
+    }
+    return true;
+  }
+
   // A path (K, n) that passed the dense check, or 0 rows; a failing edge is cut from its tree.
   bool finish(const RowMat& waypoints, const std::vector<std::pair<int, int>>& edges) {
+    if (!verify(edges)) return false;
     const PathCheck c = space.validate_path(waypoints.data(), static_cast<int>(waypoints.rows()));
     if (c.valid) {
       out.path = waypoints;
@@ -315,7 +383,7 @@ struct Search {
       ++out.out_of_reach;
       if (!local.walks) return -1;
       auto w = local.walk(tree.row(near), target, s.range);
-      return w.first.rows() ? tree.add_chain(near, w.first) : -1;
+      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
     }
     std::vector<int> nodes;
     std::vector<const double*> starts, ends;
@@ -329,7 +397,7 @@ struct Search {
     for (int j = 0; j < used; ++j) pool->free[slots[j]] = 0;
     if (i < 0) return -1;
     const Vec stone = pool->q.row(slots[i]).transpose();
-    return tree.add(nodes[i], stone.data());
+    return tree.add(nodes[i], stone.data(), !local.lazy);
   }
 
   // Extend tree k toward target from its nearest node (base.py Planner._grow).
@@ -338,7 +406,7 @@ struct Search {
     const int near = tree.nearest(target.data());
     if (!pool || (target - Eigen::Map<const Vec>(tree.row(near), space.n())).norm() <= s.range) {
       auto w = local.steer(tree.row(near), target.data(), s.range);
-      return w.first.rows() ? tree.add_chain(near, w.first) : -1;
+      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
     }
     pool->add(target.data(), trees);
     const int made = far(k, near, target.data());
@@ -358,7 +426,7 @@ struct Search {
       }
       auto w = local.steer(tree.row(node), target.data(), s.range);
       if (!w.first.rows()) return -1;
-      node = tree.add_chain(node, w.first);
+      node = tree.add_chain(node, w.first, !local.lazy);
       if (w.second) return node;
     }
     return -1;
@@ -383,7 +451,8 @@ struct Search {
   }
 
   void run(const Vec& start, const Vec& goal) {
-    if (direct(start, goal)) return;
+    if (direct(start, goal)) return;  // eager checks: a lazy direct walk would cross obstacles
+    local.lazy = s.lazy;
     trees.emplace_back(start);
     trees.emplace_back(goal);
     start_pool();

@@ -395,11 +395,11 @@ int Space::code(const double* q, double limit, bool collision, bool exact) {
   return VALID;
 }
 
-int Space::valid_prefix(const double* states, int k, bool last_is_node) {
+int Space::valid_prefix(const double* states, int k, bool last_is_node, bool collision) {
   const int nn = n();
   const double inner = 1.0 - impl_->margin;
   for (int i = 0; i < k; ++i) {
-    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, true, false);
+    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, collision, false);
     if (c != VALID) {
       stop = c;
       ++counts.stopped[c];

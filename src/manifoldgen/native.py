@@ -44,6 +44,7 @@ CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
 TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
+LAZY = False  # lazy edge checks (see rrt_connect in native/src/planner.cpp): wall 31 -> 28 ms, maze 107 -> 304 ms (trees cross walls); off
 
 
 def core_module():
@@ -144,10 +145,11 @@ def _rows(q: np.ndarray, n: int) -> np.ndarray:
 class NativeSpace:
     """``space``'s rule on the compiled ``core``: what a sampler asks (``valid``, ``violation``,
     ``project``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
-    runs the search (:func:`plan_rrt_connect`), not here."""
+    runs the search (:func:`plan_rrt_connect`), not here. ``collision=False``: :meth:`valid` leaves the
+    collision test out (for a search that checks every state it keeps, samples included)."""
 
-    def __init__(self, space: ConstrainedSpace, core):
-        self._space, self._core = space, core
+    def __init__(self, space: ConstrainedSpace, core, *, collision: bool = True):
+        self._space, self._core, self._collision = space, core, collision
 
     def __getattr__(self, name):
         return getattr(self._space, name)
@@ -158,7 +160,7 @@ class NativeSpace:
     def valid(self, q: np.ndarray, *, equality: bool = True) -> np.ndarray:
         q = _rows(q, self._space.n)
         limit = np.full(len(q), 1.0 if equality else np.inf)
-        return self._core.codes(q, limit, True, True) == 0
+        return self._core.codes(q, limit, self._collision, True) == 0
 
     def project(self, q: np.ndarray, *, tol: float = 1e-6, max_iters: int = 50, damping: float = 1e-6,
                 max_step: float = 0.5) -> Projection:
@@ -175,6 +177,33 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
+def draw_bulk(planner, count: int) -> np.ndarray:
+    """(count, n) samples for ``planner``, as its ``_draw_many`` gives them (Algorithm 1's buffer popped in
+    order, refilled a batch at a time, the same error after ``max_batches`` empty refills) but taken in
+    slices instead of one ``sample()`` call per row; a sampler that overrides its drawing keeps it."""
+    from manifoldgen.planning.base import SamplerFailed
+    from manifoldgen.sampling import Sampler
+
+    sampler = planner.sampler
+    if type(sampler).sample is not Sampler.sample or type(sampler).sample_many is not Sampler.sample_many:
+        return planner._draw_many(count)
+    rows, need, empty = [], count, 0
+    while need:
+        if not len(sampler._buffer):
+            if empty == sampler.max_batches:
+                raise SamplerFailed(f"{type(sampler).__name__} found no valid configuration in "
+                                    f"{sampler.max_batches} batches of {sampler.batch}")
+            sampler._refill()
+            empty = 0 if len(sampler._buffer) else empty + 1
+            continue
+        take, sampler._buffer = sampler._buffer[:need], sampler._buffer[need:]
+        rows.append(take)
+        need -= len(take)
+        sampler.stats.accepted += len(take)
+    planner.samples += count
+    return np.ascontiguousarray(np.concatenate(rows))
+
+
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
@@ -183,13 +212,13 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     s, space, sampler = planner.settings, planner.space, planner.sampler
     before = core.counts()
     swapped = sampler.space is space
-    if swapped:  # the sampler's checks and refinement run in the core too
-        sampler.space = NativeSpace(space, core)
+    if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
+        sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               lambda count: np.ascontiguousarray(planner._draw_many(count)),
+                               lambda count: draw_bulk(planner, count),
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
-                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH)
+                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY)
     finally:
         if swapped:
             sampler.space = space
@@ -201,4 +230,5 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     planner.out_of_reach += out["out_of_reach"]
     planner.local.projections += out["projections"]
     planner.native_nodes = list(out["nodes"])
+    planner.cut_edges = out["cut_edges"]
     return out["path"] if len(out["path"]) else None

@@ -52,7 +52,7 @@ class RRTConnect(Planner):
             self.core = None if reason else native.core_space(self.space)
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
-        self.sphere_checks = 0
+        self.sphere_checks = self.cut_edges = 0
 
     def _direct(self, start, goal):
         return None if self.core is not None else super()._direct(start, goal)
@@ -80,7 +80,8 @@ class RRTConnect(Planner):
     def _extras(self) -> dict:
         if self.core is None:
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
-        return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks}
+        return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
+                "cut_edges": self.cut_edges}
 
     def _target(self) -> np.ndarray:
         """The configuration to grow toward: a sample."""
