@@ -123,7 +123,6 @@ struct PlanOutput {
   RowMat path;  // (K, n); 0 rows: unsolved
   long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
   std::vector<long> nodes;
-  bool timed_out = false;
 };
 
 // draw(count) -> (count, n) valid configurations from the sampler (may throw: the exception ends the query).

@@ -211,12 +211,11 @@ NB_MODULE(manifoldgen_core, m) {
         d["projections"] = out.projections;
         d["cut_edges"] = out.cut_edges;
         d["nodes"] = out.nodes;
-        d["timed_out"] = out.timed_out;
         return d;
       },
       "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "range"_a, "resolution"_a, "step"_a, "partial"_a,
       "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false,
       "RRT-Connect from start to goal (n,) in space; draw(count) -> (count, n) valid samples. A dict: path (K, n) "
-      "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes, timed_out. "
+      "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes. "
       "lazy: tree edges are checked for collision only on candidate paths.");
 }

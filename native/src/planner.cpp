@@ -466,7 +466,6 @@ struct Search {
       if (joint < 0) continue;
       if (side == 0 ? join(made, joint) : join(joint, made)) return;
     }
-    out.timed_out = true;
   }
 };
 

@@ -14,11 +14,13 @@ equality within ``limit`` x tolerance, collision), lazily per state; projection 
 :func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
 compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
 ``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
-in C++ too). :func:`plan_rrt_connect` runs :class:`~manifoldgen.planning.RRTConnect`'s search in C++,
-the sampler feeding it through a callback, and books the core's operation counts on the planner's
-space, so results carry the same counters as a Python search.
+in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
+pooled sample when it first tries it). :func:`plan_rrt_connect` runs
+:class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
+(:func:`draw_bulk`), and books the core's operation counts on the planner's space, so results carry
+the same counters as a Python search.
 
-Sphere models (:meth:`set_spheres`): conservative spheres per robot geometry; when set, the searches
+Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
 check robot-vs-primitive and robot-robot pairs with them (exact coal for the pairs they do not
 cover), and every candidate path's final dense check stays exact.
 """
@@ -44,7 +46,9 @@ CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
 TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
-LAZY = False  # lazy edge checks (see rrt_connect in native/src/planner.cpp): wall 31 -> 28 ms, maze 107 -> 304 ms (trees cross walls); off
+# lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
+# (the trees grow through the maze's walls), so off
+LAZY = False
 
 
 def core_module():
