@@ -1,10 +1,12 @@
 """Our learned sampler against OMPL at native speed: panda wall and maze, same queries and seeds.
 
     python benchmarks/bench_ompl_native.py [--runs 30] [--time 10] [--scenes wall maze]
-                                           [--workers 1] [--out runs/ompl-native] [--resume]
+                                           [--methods cvae atlas-c++ ...] [--workers 1]
+                                           [--out runs/ompl-native] [--resume]
 
 Methods, interleaved per seed in one run: the shipped CVAE with RRT-Connect (our default local
-planner) and the C++ OMPL baseline (``ompl-native-atlas``, ``-projected``, ``-tangent``: RRTConnect
+planner; its search runs in the compiled core when ``manifoldgen_core`` is built, see
+:mod:`manifoldgen.native`) and the C++ OMPL baseline (``ompl-native-atlas``, ``-projected``, ``-tangent``: RRTConnect
 with our constraint and collision checker compiled; build it first with
 ``benchmarks/ompl_native/build.sh``). Every path gets the same dense check (0.005 rad) and the same
 retry policy. Prints per scene and method: success, median CPU and wall time (an unsolved run
@@ -55,11 +57,18 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=30)
     parser.add_argument("--time", type=float, default=10.0)
     parser.add_argument("--scenes", nargs="*", default=["wall", "maze"])
+    parser.add_argument("--methods", nargs="*", default=None, help="labels to run (default: all): "
+                        + ", ".join(m.split("=")[0] for m in METHODS))
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default="runs/ompl-native")
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args()
     methods = [m.format(model=pretrained_model_dir()) for m in METHODS]
+    if args.methods:
+        unknown = set(args.methods) - {m.split("=")[0] for m in methods}
+        if unknown:
+            parser.error(f"unknown methods {sorted(unknown)}; known: {[m.split('=')[0] for m in methods]}")
+        methods = [m for m in methods if m.split("=")[0] in args.methods]
     labels = [m.split("=")[0] for m in methods]
     lines = ["| scene | method | solved | median CPU (s) | of which C++ OMPL, solved (s) | median wall (s) "
              "| collision checks, solved (median) | FK evaluations, solved (median) | samples drawn, solved (median) |",

@@ -39,10 +39,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from manifoldgen.constraints import ConstraintSet, PoseConstraint
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.native import active_coordinates, write_models
 from manifoldgen.ompl_bridge import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.space import ConstrainedSpace
@@ -89,11 +89,9 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
                                "ompl-SPACE-PLANNER methods")
     terms = _pose_terms(space)
     folder = Path(folder)
-    model_file, geometry_file = folder / "model.bin", folder / "geometry.bin"
-    robot.model.saveToBinary(str(model_file))
-    (space.checker.geom if space.checker is not None else pin.GeometryModel()).saveToBinary(str(geometry_file))
-    active = [{"joint": robot.model.names[j], "idx_q": robot.model.joints[j].idx_q,
-               "idx_v": robot.model.joints[j].idx_v, "nq": robot.model.joints[j].nq} for j in robot._joint_ids]
+    model_file, geometry_file = write_models(space, folder)
+    active = [{"joint": joint, "idx_q": idx_q, "idx_v": idx_v, "nq": nq}
+              for joint, (idx_q, idx_v, nq) in zip(robot.joints, active_coordinates(robot))]
     problem = {
         "format_version": 1,
         "task": {"robot": robot.identity, "joints": robot.joints, "locked": robot.locked,

@@ -1,4 +1,9 @@
-"""RRT-Connect (Kuffner & LaValle 2000): two trees, extend one toward a sample, connect the other."""
+"""RRT-Connect (Kuffner & LaValle 2000): two trees, extend one toward a sample, connect the other.
+
+The search runs in the compiled core (:mod:`manifoldgen.native`) when it is built and takes the
+space's constraint (``core="auto"``, the default), else here in Python, which stays the reference
+the core is tested against.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +12,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from manifoldgen import native
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 
 @dataclass
 class RRTConnectSettings(PlannerSettings):
-    """RRT-Connect has only the shared settings (range, resolution, step, partial, pool, candidates)."""
+    """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
+    search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and the constraint is built
+    in, else Python; the result's ``extras['core']`` says which, ``extras['core_fallback']`` why not
+    native), ``python``, or ``native`` (an error when the core cannot run it)."""
+
+    core: str = "auto"
+
+    def check(self) -> None:
+        super().check()
+        if self.core not in native.CORES:
+            raise ManifoldgenError(f"unknown core '{self.core}'; known: {', '.join(native.CORES)}")
 
 
 class RRTConnect(Planner):
@@ -22,7 +39,27 @@ class RRTConnect(Planner):
     name = "rrtconnect"
     settings_type = RRTConnectSettings
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.core, self.fallback = None, ""
+        wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
+        if wanted != "python":
+            reason = ("the compiled core manifoldgen_core is not installed" if native.core_module() is None
+                      else native.unsupported(self.space))
+            if reason and wanted == "native":
+                raise ManifoldgenError(f"{reason}; {native.BUILD_HINT}" if native.core_module() is None
+                                       else f"{reason}; use core='python' or 'auto'")
+            self.core = None if reason else native.core_space(self.space)
+            self.fallback = reason or ""
+        self.native_nodes: list[int] = []
+        self.sphere_checks = self.cut_edges = 0
+
+    def _direct(self, start, goal):
+        return None if self.core is not None else super()._direct(start, goal)
+
     def _solve(self, start, goal, deadline):
+        if self.core is not None:
+            return native.plan_rrt_connect(self, self.core, start, goal, deadline)
         trees = self.trees = [Tree(start), Tree(goal)]
         self._start_pool(trees, deadline)
         while time.perf_counter() < deadline:
@@ -39,6 +76,12 @@ class RRTConnect(Planner):
             if path is not None:
                 return path
         return None
+
+    def _extras(self) -> dict:
+        if self.core is None:
+            return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
+        return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
+                "cut_edges": self.cut_edges}
 
     def _target(self) -> np.ndarray:
         """The configuration to grow toward: a sample."""

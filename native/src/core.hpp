@@ -1,0 +1,134 @@
+// manifoldgen's compiled planning core: the constrained space (constraint residuals and Jacobians,
+// projection, the validity rule, motion and path checks) and RRT-Connect, with pinocchio and coal.
+//
+// Arrays of configurations are row-major (rows = configurations), as numpy's. The rules and
+// algorithms are those of the Python reference (manifoldgen/space.py, constraints/projection.py,
+// planning/local.py, base.py, rrt_connect.py); tests/test_native.py compares the two.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace mgcore {
+
+using Vec = Eigen::VectorXd;
+using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// The validity tests, in the order they run (manifoldgen.space.REASONS, 1-based; 0: valid).
+enum Reason { VALID = 0, LIMITS = 1, CONSTRAINT = 2, INEQUALITY = 3, COLLISION = 4 };
+
+// Operations since construction, counted where they happen (the Python space's counters).
+struct Counters {
+  long evaluations = 0;       // configurations whose residual alone was evaluated
+  long jacobians = 0;         // configurations whose residual and Jacobian were evaluated
+  long projection_steps = 0;  // projection iterations, summed over rows
+  long collision_checks = 0;  // configurations checked with coal (exact meshes)
+  long sphere_checks = 0;     // configurations checked with the sphere models instead
+  std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
+};
+
+struct Projection {
+  bool converged;
+  int iterations;
+  double residual;  // final max |F_i|
+};
+
+struct PathCheck {
+  bool valid;
+  double worst;        // max |F_i| / tol_i over the checked states
+  long first_invalid;  // index of the first invalid dense state (-1: none)
+  int reason;          // its Reason
+  int segment;         // the path segment it lies on (-1: none)
+  long states;         // dense states in the path
+};
+
+// An active coordinate: where it sits in pinocchio's q and v (nq = 2: a continuous joint, cos/sin).
+struct Active {
+  int idx_q, idx_v, nq;
+};
+
+class Space {
+ public:
+  // model_file / geometry_file: pinocchio binary serializations of the robot model and of the
+  // collision model (geometries, obstacles, the exact collision pairs); reference (model.nq): the
+  // locked joints; lower/upper (n): joint limits; margin: intermediate motion states keep within
+  // (1 - margin) x tolerance; resolution: spacing of the dense path check. Throws std::runtime_error.
+  Space(const std::string& model_file, const std::string& geometry_file, const Vec& reference,
+        const std::vector<Active>& active, const Vec& lower, const Vec& upper, double margin, double resolution);
+  ~Space();
+
+  // Constraint terms, stacked in the order added (the condition y is baked in).
+  // pose: F = [p(q)[position_axes] - y ; log3(R^T R(q))[orientation_axes]]
+  void add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vector<int>& position_axes,
+                const std::vector<int>& orientation_axes, const Vec& y);
+  // closed chain: F = [Ra^T (pb - pa) - offset ; log3(rotation^T Ra^T Rb)]
+  void add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset);
+  void set_tolerance(const Vec& tolerance);  // (m,) after the terms
+  // Conservative sphere models (see set_spheres in module.cpp): joint (S,), center (S, 3) in the
+  // joint frame, radius (S,), geometry (S,) the robot geometry each covers.
+  void set_spheres(const std::vector<int>& joint, const RowMat& center, const Vec& radius,
+                   const std::vector<int>& geometry);
+  void clear_spheres();
+  bool has_spheres() const;
+  std::string sphere_report() const;  // what the sphere check covers, for people
+
+  int n() const;
+  int m() const;
+  double margin() const;
+  double resolution() const;
+  const Vec& tolerance() const;
+
+  // One configuration q (n,) at a time.
+  void residual(const double* q, double* F);               // counted as an evaluation
+  void jacobian(const double* q, double* F, double* J);    // J (m, n) row-major; counted as a Jacobian
+  double violation(const double* q);                       // max |F_i| / tol_i
+  bool within_limits(const double* q) const;
+  bool collision_free(const double* q);                    // exact (coal), counted
+  bool planning_free(const double* q);                     // spheres when set, else exact
+  int code(const double* q, double limit, bool collision, bool exact);  // first failed test, lazily
+
+  // A motion's states (k, n) in order: how many leading ones are valid (intermediate states within the
+  // margin, the last one, when it is a node, the plain tolerance); sets stop and counts stopped.
+  // collision = false: the collision test is left out (a lazy search checks collisions later).
+  int valid_prefix(const double* states, int k, bool last_is_node, bool collision = true);
+  Projection project(double* q, double tol, int max_iters, double damping, double max_step);
+  // Every state every resolution along path (K, n), exact collision checks.
+  PathCheck validate_path(const double* path, int K);
+
+  Counters counts;
+  int stop = VALID;  // reason of the latest motion check's stop (VALID: it passed)
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// RRT-Connect settings (manifoldgen.planning.base.PlannerSettings) and the local planner's name.
+struct PlannerSettings {
+  double range = 0.6, resolution = 0.05, step = 0.4;
+  bool partial = true;
+  int pool = 2048, pool_batch = 256, candidates = 8, target_batch = 32;
+  std::string local = "auto";
+  // lazy: tree edges are checked for collision only when they lie on a candidate path (nodes at once);
+  // an edge found colliding then is cut, keeping its collision-free part (see planner.cpp)
+  bool lazy = false;
+};
+
+struct PlanOutput {
+  RowMat path;  // (K, n); 0 rows: unsolved
+  long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
+  std::vector<long> nodes;
+};
+
+// draw(count) -> (count, n) valid configurations from the sampler (may throw: the exception ends the query).
+using Draw = std::function<RowMat(int)>;
+
+PlanOutput rrt_connect(Space& space, const Vec& start, const Vec& goal, const Draw& draw,
+                       const PlannerSettings& settings, double time_limit);
+
+}  // namespace mgcore

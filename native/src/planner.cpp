@@ -1,0 +1,486 @@
+// RRT-Connect in C++ (see core.hpp): manifoldgen.planning.rrt_connect with the shared machinery of
+// planning/base.py (trees, the stepping-stone pool, growing through the pool, the dense final check
+// with the edge-cut retry) and the local planners of planning/local.py. Samples come from Python
+// (the learned sampler) through the draw callback, a batch at a time.
+#include "core.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+
+namespace mgcore {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double INF = std::numeric_limits<double>::infinity();
+
+double dist2(const double* a, const double* b, int n) {
+  double s = 0.0;
+  for (int i = 0; i < n; ++i) s += (a[i] - b[i]) * (a[i] - b[i]);
+  return s;
+}
+
+// Configurations with parent links; each edge is a straight, checked segment.
+struct Tree {
+  int n;
+  std::vector<double> q;
+  std::vector<int> parent;
+  std::vector<char> alive, verified;  // verified: the edge into the node was checked for collision
+
+  Tree(const Vec& root) : n(static_cast<int>(root.size())) { add(-1, root.data(), true); }
+  int size() const { return static_cast<int>(parent.size()); }
+  const double* row(int i) const { return q.data() + static_cast<long>(i) * n; }
+  int add(int from, const double* x, bool checked) {
+    q.insert(q.end(), x, x + n);
+    parent.push_back(from);
+    alive.push_back(1);
+    verified.push_back(checked);
+    return size() - 1;
+  }
+  int add_chain(int from, const RowMat& waypoints, bool checked) {  // returns the last node
+    for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data(), checked);
+    return from;
+  }
+  int nearest(const double* x) const {
+    int best = 0;
+    double bd = INF;
+    for (int i = 0; i < size(); ++i) {
+      if (!alive[i]) continue;
+      const double d = dist2(row(i), x, n);
+      if (d < bd) bd = d, best = i;
+    }
+    return best;
+  }
+  std::vector<int> branch(int i) const {  // root .. i
+    std::vector<int> out{i};
+    while (parent[out.back()] >= 0) out.push_back(parent[out.back()]);
+    std::reverse(out.begin(), out.end());
+    return out;
+  }
+  void kill(int i) {  // node i and its descendants leave the nearest-neighbour queries
+    alive[i] = 0;
+    for (int j = i + 1; j < size(); ++j)
+      if (parent[j] >= 0 && !alive[parent[j]]) alive[j] = 0;
+  }
+};
+
+// Samples drawn but not yet in a tree: the stepping stones (planning/base.py SamplePool).
+struct Pool {
+  int n, capacity = 16384;
+  double radius;
+  RowMat q;
+  std::vector<char> free;
+  std::vector<double> gap;  // (capacity, 2): distance to the closest node of each tree
+  int synced[2] = {0, 0};
+  long head = 0;
+
+  Pool(int n_, double radius_, const std::vector<Tree>& trees) : n(n_), radius(radius_), q(16384, n_) {
+    free.assign(capacity, 0);
+    gap.assign(2L * capacity, INF);
+    for (int k = 0; k < 2; ++k) synced[k] = trees[k].size();
+  }
+  int filled() const { return static_cast<int>(std::min<long>(head, capacity)); }
+  static double closest_node(const double* x, const Tree& t, int from, int to) {
+    double best = INF;
+    for (int i = from; i < to; ++i)
+      if (t.alive[i]) best = std::min(best, dist2(x, t.row(i), t.n));
+    return std::sqrt(best);
+  }
+  void add(const double* x, const std::vector<Tree>& trees) {
+    const int slot = static_cast<int>(head % capacity);
+    std::copy(x, x + n, q.row(slot).data());
+    free[slot] = 1;
+    for (int k = 0; k < 2; ++k) gap[2L * slot + k] = closest_node(x, trees[k], 0, synced[k]);
+    ++head;
+  }
+  void add_rows(const RowMat& x, const std::vector<Tree>& trees) {
+    for (int r = 0; r < x.rows(); ++r) add(x.row(r).data(), trees);
+  }
+  void refresh(int k, const Tree& t) {
+    if (t.size() <= synced[k]) return;
+    const int end = filled();
+    for (int s = 0; s < end; ++s)
+      if (free[s]) gap[2L * s + k] = std::min(gap[2L * s + k], closest_node(q.row(s).data(), t, synced[k], t.size()));
+    synced[k] = t.size();
+  }
+  bool reachable(int k, const Tree& t) {
+    refresh(k, t);
+    const int end = filled();
+    for (int s = 0; s < end; ++s)
+      if (free[s] && gap[2L * s + k] <= radius) return true;
+    return false;
+  }
+  std::vector<int> closest(int k, const Tree& t, const double* target, int count, double than) {
+    refresh(k, t);
+    const int end = filled();
+    std::vector<std::pair<double, int>> near;
+    const double limit = than * than;
+    for (int s = 0; s < end; ++s) {
+      if (!free[s] || gap[2L * s + k] > radius) continue;
+      const double d = dist2(q.row(s).data(), target, n);
+      if (d < limit) near.emplace_back(d, s);
+    }
+    const std::size_t keep = std::min<std::size_t>(near.size(), count);
+    std::partial_sort(near.begin(), near.begin() + keep, near.end());
+    std::vector<int> out;
+    for (std::size_t i = 0; i < keep; ++i) out.push_back(near[i].second);
+    return out;
+  }
+};
+
+// The local planners of planning/local.py: interpolate, project, auto, direct.
+struct Local {
+  Space& space;
+  double resolution, step;
+  bool partial, stones, walks;
+  int kind;  // 0 auto, 1 interpolate, 2 project, 3 direct
+  bool lazy = false;  // motions: collision checked at their end state only (the search verifies edges later)
+  long projections = 0;
+  static constexpr double precision = 0.01;
+  static constexpr int max_iters = 20;
+
+  Local(Space& s, const PlannerSettings& p) : space(s), resolution(p.resolution), step(p.step), partial(p.partial) {
+    static const char* names[4] = {"auto", "interpolate", "project", "direct"};
+    kind = static_cast<int>(std::find(names, names + 4, p.local) - names);
+    if (kind == 4) throw std::runtime_error("unknown local planner '" + p.local + "'; known: auto, interpolate, project, direct");
+    stones = kind == 0 || kind == 1;
+    walks = kind == 0 || kind == 2;
+  }
+  int n() const { return space.n(); }
+
+  RowMat segment_states(const double* a, const double* b) const {
+    Eigen::Map<const Vec> va(a, n()), vb(b, n());
+    const int k = std::max(1, static_cast<int>(std::ceil((vb - va).norm() / resolution)));
+    RowMat out(k, n());
+    for (int i = 1; i <= k; ++i) out.row(i - 1) = (va + (vb - va) * (static_cast<double>(i) / k)).transpose();
+    return out;
+  }
+  // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
+  // (the last valid row, a node).
+  int prefix(const RowMat& s, bool last_is_node) {
+    const int k = static_cast<int>(s.rows());
+    const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
+    if (!lazy || count == 0 || space.planning_free(s.row(count - 1).data())) return count;
+    space.stop = COLLISION;
+    ++space.counts.stopped[COLLISION];
+    return 0;
+  }
+  // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
+  // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
+  // is found blocked after fewer checks than scanning from its start).
+  bool all_valid(const RowMat& s, int k, bool last_is_node) {
+    if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
+    if (lazy) return !last_is_node || !k || space.planning_free(s.row(k - 1).data()) || collided();
+    std::vector<std::pair<int, int>> spans{{0, k - 1}};
+    for (std::size_t next = 0; next < spans.size(); ++next) {
+      const auto [lo, hi] = spans[next];
+      if (lo > hi) continue;
+      const int mid = (lo + hi) / 2;
+      if (!space.planning_free(s.row(mid).data())) return collided();
+      spans.emplace_back(lo, mid - 1);
+      spans.emplace_back(mid + 1, hi);
+    }
+    return true;
+  }
+  bool collided() {
+    space.stop = COLLISION;
+    ++space.counts.stopped[COLLISION];
+    return false;
+  }
+  bool whole(const double* a, const double* b) {
+    const RowMat s = segment_states(a, b);
+    return all_valid(s, static_cast<int>(s.rows()), true);
+  }
+  RowMat none() const { return RowMat(0, n()); }
+
+  std::pair<RowMat, bool> straight(const double* a, const double* b, double max_distance) {
+    Eigen::Map<const Vec> va(a, n()), vb(b, n());
+    const double distance = (vb - va).norm();
+    const bool reach = distance <= max_distance;
+    const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
+    const RowMat s = segment_states(a, end.data());
+    const int count = prefix(s, reach);
+    if (count == s.rows()) return {end.transpose(), reach};
+    if (partial && count) return {s.row(count - 1), false};
+    return {none(), false};
+  }
+
+  std::pair<RowMat, bool> walk(const double* a, const double* b, double max_distance, bool creep = true) {
+    const int nn = n();
+    Eigen::Map<const Vec> vb(b, nn);
+    std::vector<Vec> waypoints;
+    Vec q = Eigen::Map<const Vec>(a, nn), target(nn);
+    double travelled = 0.0, length = step;
+    const double tol = precision * space.tolerance().minCoeff();
+    auto result = [&](bool reached) {
+      RowMat out(waypoints.size(), nn);
+      for (std::size_t i = 0; i < waypoints.size(); ++i) out.row(i) = waypoints[i].transpose();
+      return std::make_pair(out, reached);
+    };
+    while (travelled < max_distance) {
+      const double gap = (vb - q).norm();
+      if (gap <= length && space.violation(b) <= 1.0) {
+        if (whole(q.data(), b)) {
+          waypoints.push_back(vb);
+          return result(true);
+        }
+        if (!creep && space.stop == COLLISION) break;
+      } else {
+        target = q + (vb - q) * std::min(1.0, length / std::max(gap, 1e-12));
+        const Projection p = space.project(target.data(), tol, max_iters, 1e-6, 0.5);
+        ++projections;
+        const double moved = (target - q).norm();
+        if (!p.converged || moved > 2 * length || moved < 1e-9 || (vb - target).norm() >= gap) break;
+        if (whole(q.data(), target.data())) {
+          waypoints.push_back(target);
+          travelled += moved;
+          q = target;
+          length = std::min(step, 2 * length);
+          continue;
+        }
+        if (!creep && space.stop == COLLISION) break;
+      }
+      if (length / 2 < resolution) break;
+      length /= 2;
+    }
+    return result(false);
+  }
+
+  std::pair<RowMat, bool> steer(const double* a, const double* b, double max_distance) {
+    if (kind == 2) return walk(a, b, max_distance);
+    auto out = straight(a, b, max_distance);
+    if (kind != 0 || out.second || space.stop != CONSTRAINT) return out;
+    return walk(a, b, max_distance);
+  }
+
+  // Waypoints ending at b when the whole motion is valid (reached), else reached = false.
+  std::pair<RowMat, bool> connect(const double* a, const double* b) {
+    if (kind == 2) return walk(a, b, INF);
+    auto out = straight(a, b, INF);
+    if (kind == 0 && !out.second && space.stop == CONSTRAINT) out = walk(a, b, INF, false);
+    return out;
+  }
+
+  // Index of the first straight segment starts[i] -> ends[i] valid all along, or -1. The end (a pooled
+  // sample, not yet checked for collision) is checked first: a colliding sample costs one check.
+  int first_valid(const std::vector<const double*>& starts, const std::vector<const double*>& ends) {
+    for (std::size_t i = 0; i < starts.size(); ++i) {
+      const int c = space.code(ends[i], 1.0, true, false);
+      if (c != VALID) {
+        space.stop = c;
+        ++space.counts.stopped[c];
+        continue;
+      }
+      const RowMat s = segment_states(starts[i], ends[i]);
+      if (all_valid(s, static_cast<int>(s.rows()) - 1, false)) return static_cast<int>(i);  // the end is checked
+    }
+    return -1;
+  }
+};
+
+struct Search {
+  Space& space;
+  const Draw& draw;
+  PlannerSettings s;
+  Local local;
+  Clock::time_point deadline;
+  std::vector<Tree> trees;
+  std::unique_ptr<Pool> pool;
+  PlanOutput out;
+  RowMat targets;
+  int next = 0;
+
+  Search(Space& sp, const Draw& d, const PlannerSettings& st, double time_limit)
+      : space(sp), draw(d), s(st), local(sp, st),
+        deadline(Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time_limit))) {}
+
+  bool time_left() const { return Clock::now() < deadline; }
+
+  RowMat draw_many(int count) {
+    RowMat rows = draw(count);
+    if (rows.rows() != count || rows.cols() != space.n())
+      throw std::runtime_error("the sampler callback returned an array of the wrong shape");
+    out.samples += count;
+    return rows;
+  }
+  Vec target() {
+    if (next >= targets.rows()) {
+      targets = draw_many(s.target_batch);
+      next = 0;
+    }
+    return targets.row(next++).transpose();
+  }
+
+  // Check the unverified edges of a candidate path for collision (planning resolution, in path order).
+  // A colliding edge is cut from its tree; its collision-free part before the first collision stays as
+  // a new node (as a blocked straight extension keeps its valid part). True when every edge passed.
+  bool verify(const std::vector<std::pair<int, int>>& edges) {
+    for (const auto& [k, child] : edges) {
+      Tree& tree = trees[k];
+      if (tree.verified[child]) continue;
+      const int from = tree.parent[child];
+      const RowMat states = local.segment_states(tree.row(from), tree.row(child));
+      const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
+      int free = 0;
+      while (free < k_states && space.planning_free(states.row(free).data())) ++free;
+      if (free == k_states) {
+        tree.verified[child] = 1;
+        continue;
+      }
+      ++out.cut_edges;
+      tree.kill(child);
+      if (s.partial && free) tree.add(from, states.row(free - 1).data(), true);
+      return false;
+    }
+    return true;
+  }
+
+  // A path (K, n) that passed the dense check, or 0 rows; a failing edge is cut from its tree.
+  bool finish(const RowMat& waypoints, const std::vector<std::pair<int, int>>& edges) {
+    if (!verify(edges)) return false;
+    const PathCheck c = space.validate_path(waypoints.data(), static_cast<int>(waypoints.rows()));
+    if (c.valid) {
+      out.path = waypoints;
+      return true;
+    }
+    ++out.rejected;
+    const auto& e = edges[c.segment];
+    trees[e.first].kill(e.second);
+    return false;
+  }
+
+  bool direct(const Vec& start, const Vec& goal) {
+    auto w = local.connect(start.data(), goal.data());
+    if (!w.second) return false;
+    RowMat path(w.first.rows() + 1, space.n());
+    path.row(0) = start.transpose();
+    path.bottomRows(w.first.rows()) = w.first;
+    const PathCheck c = space.validate_path(path.data(), static_cast<int>(path.rows()));
+    out.rejected += !c.valid;
+    if (c.valid) out.path = path;
+    return c.valid;
+  }
+
+  void start_pool() {
+    if (!local.stones) return;
+    pool.reset(new Pool(space.n(), s.range, trees));
+    for (int i = 0; i < s.pool; i += s.pool_batch) {
+      if (Clock::now() > deadline) break;
+      pool->add_rows(draw_many(s.pool_batch), trees);
+    }
+  }
+
+  // Extend tree k toward a target out of range through the pool (base.py Planner._far).
+  int far(int k, int near, const double* target, double than = INF) {
+    Tree& tree = trees[k];
+    const std::vector<int> slots = pool->closest(k, tree, target, s.candidates, than);
+    if (slots.empty()) {
+      if (pool->reachable(k, tree)) return -1;
+      ++out.out_of_reach;
+      if (!local.walks) return -1;
+      auto w = local.walk(tree.row(near), target, s.range);
+      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
+    }
+    std::vector<int> nodes;
+    std::vector<const double*> starts, ends;
+    for (int slot : slots) {
+      nodes.push_back(tree.nearest(pool->q.row(slot).data()));
+      starts.push_back(tree.row(nodes.back()));
+      ends.push_back(pool->q.row(slot).data());
+    }
+    const int i = local.first_valid(starts, ends);
+    const int used = i < 0 ? static_cast<int>(slots.size()) : i + 1;
+    for (int j = 0; j < used; ++j) pool->free[slots[j]] = 0;
+    if (i < 0) return -1;
+    const Vec stone = pool->q.row(slots[i]).transpose();
+    return tree.add(nodes[i], stone.data(), !local.lazy);
+  }
+
+  // Extend tree k toward target from its nearest node (base.py Planner._grow).
+  int grow(int k, const Vec& target) {
+    Tree& tree = trees[k];
+    const int near = tree.nearest(target.data());
+    if (!pool || (target - Eigen::Map<const Vec>(tree.row(near), space.n())).norm() <= s.range) {
+      auto w = local.steer(tree.row(near), target.data(), s.range);
+      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
+    }
+    pool->add(target.data(), trees);
+    const int made = far(k, near, target.data());
+    if (made < 0 && !pool->reachable(k, tree)) pool->add_rows(draw_many(s.pool_batch), trees);
+    return made;
+  }
+
+  // Grow tree k toward target until it reaches it (that node) or is stuck (-1) (rrt_connect.py _connect).
+  int connect(int k, const Vec& target) {
+    Tree& tree = trees[k];
+    while (time_left()) {
+      int node = tree.nearest(target.data());
+      const double gap = (target - Eigen::Map<const Vec>(tree.row(node), space.n())).norm();
+      if (pool && gap > s.range) {
+        if (far(k, node, target.data(), gap) < 0) return -1;
+        continue;
+      }
+      auto w = local.steer(tree.row(node), target.data(), s.range);
+      if (!w.first.rows()) return -1;
+      node = tree.add_chain(node, w.first, !local.lazy);
+      if (w.second) return node;
+    }
+    return -1;
+  }
+
+  // root(0) .. node i == node j .. root(1), densely checked.
+  bool join(int i, int j) {
+    const std::vector<int> pa = trees[0].branch(i), pb = trees[1].branch(j);
+    const int nn = space.n();
+    RowMat waypoints(pa.size() + pb.size() - 1, nn);
+    std::vector<std::pair<int, int>> edges;
+    int r = 0;
+    for (std::size_t t = 0; t < pa.size(); ++t) {
+      waypoints.row(r++) = Eigen::Map<const Eigen::RowVectorXd>(trees[0].row(pa[t]), nn);
+      if (t) edges.emplace_back(0, pa[t]);
+    }
+    for (int t = static_cast<int>(pb.size()) - 2; t >= 0; --t) {
+      waypoints.row(r++) = Eigen::Map<const Eigen::RowVectorXd>(trees[1].row(pb[t]), nn);
+      edges.emplace_back(1, pb[t + 1]);
+    }
+    return finish(waypoints, edges);
+  }
+
+  void run(const Vec& start, const Vec& goal) {
+    if (direct(start, goal)) return;  // eager checks: a lazy direct walk would cross obstacles
+    local.lazy = s.lazy;
+    trees.emplace_back(start);
+    trees.emplace_back(goal);
+    start_pool();
+    while (time_left()) {
+      ++out.iterations;
+      const int side = static_cast<int>(out.iterations % 2);
+      const int made = grow(side, target());
+      if (made < 0) continue;
+      const Vec reached = Eigen::Map<const Vec>(trees[side].row(made), space.n());
+      const int joint = connect(1 - side, reached);
+      if (joint < 0) continue;
+      if (side == 0 ? join(made, joint) : join(joint, made)) return;
+    }
+  }
+};
+
+}  // namespace
+
+PlanOutput rrt_connect(Space& space, const Vec& start, const Vec& goal, const Draw& draw,
+                       const PlannerSettings& settings, double time_limit) {
+  if (start.size() != space.n() || goal.size() != space.n())
+    throw std::runtime_error("start and goal must have one value per active coordinate");
+  Search search(space, draw, settings, time_limit);
+  search.run(start, goal);
+  for (const Tree& t : search.trees) search.out.nodes.push_back(t.size());
+  search.out.projections = search.local.projections;
+  if (!search.out.path.rows()) search.out.path = RowMat(0, space.n());
+  return search.out;
+}
+
+}  // namespace mgcore

@@ -1,0 +1,496 @@
+// The constrained space in C++ (see core.hpp): manifoldgen.space.ConstrainedSpace's rule with the
+// constraint terms of constraints/pose.py, rotation.py (a pose term without position axes) and
+// closed_chain.py, the projection of constraints/projection.py, and a sphere-model collision test.
+#include "core.hpp"
+
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/geometry.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/collision/broadphase.hpp>
+#include <pinocchio/collision/broadphase-manager.hpp>
+#include <pinocchio/collision/collision.hpp>
+#include <pinocchio/serialization.hpp>
+#include <pinocchio/spatial.hpp>
+
+#include <coal/broadphase/broadphase_dynamic_AABB_tree.h>
+#include <coal/shape/geometric_shapes.h>
+
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace mgcore {
+
+using Manager = pinocchio::BroadPhaseManagerTpl<coal::DynamicAABBTreeCollisionManager>;
+using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+
+namespace {
+
+struct Term {
+  int kind;  // 0: pose, 1: closed chain
+  pinocchio::FrameIndex frame, frame_b;
+  Eigen::Matrix3d rotation;
+  std::vector<int> position_axes, orientation_axes;
+  Vec y;                   // pose: the conditioned positions
+  Eigen::Vector3d offset;  // chain: d * axis
+  int rows() const {
+    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size()) : 6;
+  }
+};
+
+// A scene primitive the spheres are tested against (world pose fixed at construction of the pair list).
+struct Shape {
+  int kind = -1;  // 0 box (half sides), 1 sphere (radius), 2 cylinder (radius, half length along z); -1 none
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();
+};
+
+// Distance from point p (in the shape's frame) to the shape (0 inside).
+double shape_distance(const Shape& s, const Eigen::Vector3d& p) {
+  if (s.kind == 0) return (p.cwiseAbs() - s.size).cwiseMax(0.0).norm();
+  if (s.kind == 1) return std::max(p.norm() - s.size[0], 0.0);
+  const double radial = std::max(std::hypot(p[0], p[1]) - s.size[0], 0.0);
+  const double axial = std::max(std::abs(p[2]) - s.size[1], 0.0);
+  return std::hypot(radial, axial);
+}
+
+Shape shape_of(const pinocchio::GeometryObject& g) {
+  Shape s;
+  if (auto box = std::dynamic_pointer_cast<coal::Box>(g.geometry)) {
+    s.kind = 0;
+    s.size = box->halfSide;
+  } else if (auto sphere = std::dynamic_pointer_cast<coal::Sphere>(g.geometry)) {
+    s.kind = 1;
+    s.size[0] = sphere->radius;
+  } else if (auto cyl = std::dynamic_pointer_cast<coal::Cylinder>(g.geometry)) {
+    s.kind = 2;
+    s.size[0] = cyl->radius;
+    s.size[1] = cyl->halfLength;
+  }
+  return s;
+}
+
+// How the sphere test treats one collision pair: spheres against spheres, spheres against a
+// primitive, or the exact coal test of that pair.
+struct PairTest {
+  int kind;  // 0 spheres-spheres, 1 spheres(a)-primitive(b), 2 exact
+  int a, b;  // geometry indices (kind 1: a has spheres, b is the primitive)
+  std::size_t pair;  // index in the geometry model's collision pairs (kind 2)
+};
+
+}  // namespace
+
+struct Space::Impl {
+  pinocchio::Model model;
+  pinocchio::Data data, cdata;  // constraint kinematics; collision kinematics
+  pinocchio::GeometryModel geom;
+  std::unique_ptr<pinocchio::GeometryData> geom_data;
+  std::unique_ptr<Manager> manager;
+  std::vector<Active> active;
+  std::vector<Term> terms;
+  Vec full, lower, upper, tolerance;
+  Matrix6x Ja, Jb;
+  double margin = 0.05, resolution = 0.005;
+  int m = 0;
+  // spheres
+  std::vector<int> sphere_joint;
+  RowMat sphere_center;  // (S, 3) in the joint frame
+  Vec sphere_radius;
+  std::vector<std::vector<int>> spheres_of;  // per geometry: its sphere indices
+  std::vector<Eigen::Vector3d> world;         // per sphere: world centre (latest state)
+  std::vector<PairTest> tests;
+  std::vector<Shape> shapes;  // per geometry
+
+  const Eigen::VectorXd& to_full(const double* q) {
+    for (std::size_t i = 0; i < active.size(); ++i) {
+      const Active& a = active[i];
+      if (a.nq == 2) {
+        full[a.idx_q] = std::cos(q[i]);
+        full[a.idx_q + 1] = std::sin(q[i]);
+      } else {
+        full[a.idx_q] = q[i];
+      }
+    }
+    return full;
+  }
+
+  int n() const { return static_cast<int>(active.size()); }
+
+  // Residual rows of every term from data's joint placements (forward kinematics done).
+  void fill_residual(double* F) {
+    int row = 0;
+    for (const Term& t : terms) {
+      const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
+      if (t.kind == 0) {
+        for (std::size_t k = 0; k < t.position_axes.size(); ++k)
+          F[row++] = A.translation()[t.position_axes[k]] - t.y[k];
+        const Eigen::Vector3d err = pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()));
+        for (int a : t.orientation_axes) F[row++] = err[a];
+      } else {
+        const pinocchio::SE3& B = pinocchio::updateFramePlacement(model, data, t.frame_b);
+        const Eigen::Vector3d rel = A.rotation().transpose() * (B.translation() - A.translation()) - t.offset;
+        const Eigen::Vector3d err = pinocchio::log3(
+            Eigen::Matrix3d(t.rotation.transpose() * A.rotation().transpose() * B.rotation()));
+        for (int i = 0; i < 3; ++i) F[row++] = rel[i];
+        for (int i = 0; i < 3; ++i) F[row++] = err[i];
+      }
+    }
+  }
+
+  // J (m, n) row-major from the frame Jacobians (computeJointJacobians done).
+  void fill_jacobian(double* F, double* J) {
+    const int nn = n();
+    auto put = [&](int row, const auto& rowvec) {  // rowvec over nv
+      for (int i = 0; i < nn; ++i) J[row * nn + i] = rowvec(active[i].idx_v);
+    };
+    int row = 0;
+    for (const Term& t : terms) {
+      const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
+      Ja.setZero();
+      pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
+      if (t.kind == 0) {
+        double theta;
+        const Eigen::Vector3d err =
+            pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()), theta);
+        Eigen::Matrix3d Jlog;
+        pinocchio::Jlog3(theta, err, Jlog);
+        const Eigen::Matrix<double, 3, Eigen::Dynamic> Jrot = Jlog * A.rotation().transpose() * Ja.bottomRows<3>();
+        for (std::size_t k = 0; k < t.position_axes.size(); ++k) {
+          F[row] = A.translation()[t.position_axes[k]] - t.y[k];
+          put(row++, Ja.row(t.position_axes[k]));
+        }
+        for (int a : t.orientation_axes) {
+          F[row] = err[a];
+          put(row++, Jrot.row(a));
+        }
+      } else {
+        const pinocchio::SE3& B = pinocchio::updateFramePlacement(model, data, t.frame_b);
+        Jb.setZero();
+        pinocchio::getFrameJacobian(model, data, t.frame_b, pinocchio::LOCAL_WORLD_ALIGNED, Jb);
+        const Eigen::Matrix3d RaT = A.rotation().transpose();
+        const Eigen::Vector3d r = B.translation() - A.translation();
+        const Eigen::Vector3d rel = RaT * r - t.offset;
+        double theta;
+        const Eigen::Vector3d err =
+            pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * RaT * B.rotation()), theta);
+        Eigen::Matrix3d Jlog;
+        pinocchio::Jlog3(theta, err, Jlog);
+        const Eigen::Matrix<double, 3, Eigen::Dynamic> Jpos =
+            RaT * (Jb.topRows<3>() - Ja.topRows<3>() + pinocchio::skew(r) * Ja.bottomRows<3>());
+        const Eigen::Matrix<double, 3, Eigen::Dynamic> Jrot =
+            Jlog * B.rotation().transpose() * (Jb.bottomRows<3>() - Ja.bottomRows<3>());
+        for (int i = 0; i < 3; ++i) {
+          F[row] = rel[i];
+          put(row++, Jpos.row(i));
+        }
+        for (int i = 0; i < 3; ++i) {
+          F[row] = err[i];
+          put(row++, Jrot.row(i));
+        }
+      }
+    }
+  }
+
+  // Sphere test of the latest collision kinematics (cdata): true when some tested pair may collide.
+  bool spheres_hit(const double* q) {
+    pinocchio::forwardKinematics(model, cdata, to_full(q));
+    for (std::size_t s = 0; s < sphere_joint.size(); ++s)
+      world[s] = cdata.oMi[sphere_joint[s]].act(Eigen::Vector3d(sphere_center.row(s).transpose()));
+    bool placed = false;
+    for (const PairTest& t : tests) {
+      if (t.kind == 0) {
+        for (int i : spheres_of[t.a])
+          for (int j : spheres_of[t.b])
+            if ((world[i] - world[j]).squaredNorm() <= std::pow(sphere_radius[i] + sphere_radius[j], 2)) return true;
+      } else if (t.kind == 1) {
+        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
+        const pinocchio::SE3 pose = cdata.oMi[g.parentJoint] * g.placement;
+        for (int i : spheres_of[t.a])
+          if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
+      } else {
+        if (!placed) {
+          pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
+          placed = true;
+        }
+        if (pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(t.pair))) return true;
+      }
+    }
+    return false;
+  }
+};
+
+Space::Space(const std::string& model_file, const std::string& geometry_file, const Vec& reference,
+             const std::vector<Active>& active, const Vec& lower, const Vec& upper, double margin, double resolution)
+    : impl_(new Impl) {
+  Impl& p = *impl_;
+  try {
+    p.model.loadFromBinary(model_file);
+    p.geom.loadFromBinary(geometry_file);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("cannot load the serialized robot model: ") + e.what());
+  }
+  if (reference.size() != p.model.nq) throw std::runtime_error("reference has the wrong size for the model");
+  if (lower.size() != static_cast<long>(active.size()) || upper.size() != lower.size())
+    throw std::runtime_error("limits must have one value per active coordinate");
+  p.data = pinocchio::Data(p.model);
+  p.cdata = pinocchio::Data(p.model);
+  p.geom_data.reset(new pinocchio::GeometryData(p.geom));
+  p.manager.reset(new Manager(&p.model, &p.geom, p.geom_data.get()));
+  p.active = active;
+  p.full = reference;
+  p.lower = lower;
+  p.upper = upper;
+  p.margin = margin;
+  p.resolution = resolution;
+  p.Ja.setZero(6, p.model.nv);
+  p.Jb.setZero(6, p.model.nv);
+  p.tolerance.resize(0);
+}
+
+Space::~Space() = default;
+
+void Space::add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vector<int>& position_axes,
+                     const std::vector<int>& orientation_axes, const Vec& y) {
+  Impl& p = *impl_;
+  if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("pose frame id out of range");
+  if (y.size() != static_cast<long>(position_axes.size())) throw std::runtime_error("pose y must give each position axis");
+  Term t{0, static_cast<pinocchio::FrameIndex>(frame), 0, rotation, position_axes, orientation_axes, y,
+         Eigen::Vector3d::Zero()};
+  p.m += t.rows();
+  p.terms.push_back(t);
+}
+
+void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset) {
+  Impl& p = *impl_;
+  const int nf = static_cast<int>(p.model.nframes);
+  if (frame_a < 0 || frame_b < 0 || frame_a >= nf || frame_b >= nf) throw std::runtime_error("chain frame id out of range");
+  Term t{1, static_cast<pinocchio::FrameIndex>(frame_a), static_cast<pinocchio::FrameIndex>(frame_b), rotation, {}, {},
+         Vec(), offset};
+  p.m += t.rows();
+  p.terms.push_back(t);
+}
+
+void Space::set_tolerance(const Vec& tolerance) {
+  if (tolerance.size() != impl_->m) throw std::runtime_error("tolerance must have one value per residual component");
+  if ((tolerance.array() <= 0).any()) throw std::runtime_error("tolerances must be positive");
+  impl_->tolerance = tolerance;
+}
+
+void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, const Vec& radius,
+                        const std::vector<int>& geometry) {
+  Impl& p = *impl_;
+  const std::size_t S = joint.size();
+  if (center.rows() != static_cast<long>(S) || center.cols() != 3 || radius.size() != static_cast<long>(S) ||
+      geometry.size() != S)
+    throw std::runtime_error("spheres need joint (S,), center (S, 3), radius (S,) and geometry (S,) of one length S");
+  const int ng = static_cast<int>(p.geom.ngeoms);
+  p.spheres_of.assign(ng, {});
+  for (std::size_t s = 0; s < S; ++s) {
+    if (joint[s] < 0 || joint[s] >= static_cast<int>(p.model.njoints))
+      throw std::runtime_error("sphere joint id out of range");
+    if (geometry[s] < 0 || geometry[s] >= ng) throw std::runtime_error("sphere geometry index out of range");
+    if (!(radius[s] >= 0)) throw std::runtime_error("sphere radii must be >= 0");
+    if (static_cast<int>(p.geom.geometryObjects[geometry[s]].parentJoint) != joint[s])
+      throw std::runtime_error("a sphere's joint must be the parent joint of the geometry it covers");
+    p.spheres_of[geometry[s]].push_back(static_cast<int>(s));
+  }
+  p.sphere_joint = joint;
+  p.sphere_center = center;
+  p.sphere_radius = radius;
+  p.world.assign(S, Eigen::Vector3d::Zero());
+  p.shapes.clear();
+  for (const auto& g : p.geom.geometryObjects) p.shapes.push_back(shape_of(g));
+  p.tests.clear();
+  for (std::size_t k = 0; k < p.geom.collisionPairs.size(); ++k) {
+    const int a = static_cast<int>(p.geom.collisionPairs[k].first), b = static_cast<int>(p.geom.collisionPairs[k].second);
+    const bool sa = !p.spheres_of[a].empty(), sb = !p.spheres_of[b].empty();
+    if (sa && sb) p.tests.push_back({0, a, b, k});
+    else if (sa && p.shapes[b].kind >= 0) p.tests.push_back({1, a, b, k});
+    else if (sb && p.shapes[a].kind >= 0) p.tests.push_back({1, b, a, k});
+    else p.tests.push_back({2, a, b, k});
+  }
+  // cheapest first: primitives, then sphere pairs, exact pairs last
+  std::stable_sort(p.tests.begin(), p.tests.end(), [](const PairTest& x, const PairTest& y) {
+    static const int rank[3] = {1, 0, 2};
+    return rank[x.kind] < rank[y.kind];
+  });
+}
+
+void Space::clear_spheres() {
+  impl_->sphere_joint.clear();
+  impl_->tests.clear();
+}
+
+bool Space::has_spheres() const { return !impl_->sphere_joint.empty(); }
+
+std::string Space::sphere_report() const {
+  int counts[3] = {0, 0, 0};
+  for (const PairTest& t : impl_->tests) ++counts[t.kind];
+  std::ostringstream out;
+  out << impl_->sphere_joint.size() << " spheres; pairs: " << counts[0] << " sphere-sphere, " << counts[1]
+      << " sphere-primitive, " << counts[2] << " exact";
+  return out.str();
+}
+
+int Space::n() const { return impl_->n(); }
+int Space::m() const { return impl_->m; }
+double Space::margin() const { return impl_->margin; }
+double Space::resolution() const { return impl_->resolution; }
+const Vec& Space::tolerance() const { return impl_->tolerance; }
+
+void Space::residual(const double* q, double* F) {
+  ++counts.evaluations;
+  pinocchio::forwardKinematics(impl_->model, impl_->data, impl_->to_full(q));
+  impl_->fill_residual(F);
+}
+
+void Space::jacobian(const double* q, double* F, double* J) {
+  ++counts.jacobians;
+  pinocchio::computeJointJacobians(impl_->model, impl_->data, impl_->to_full(q));
+  impl_->fill_jacobian(F, J);
+}
+
+double Space::violation(const double* q) {
+  const Impl& p = *impl_;
+  if (p.m == 0) return 0.0;
+  double F[64];
+  std::vector<double> big;
+  double* f = F;
+  if (p.m > 64) {
+    big.resize(p.m);
+    f = big.data();
+  }
+  residual(q, f);
+  double worst = 0.0;
+  for (int i = 0; i < p.m; ++i) worst = std::max(worst, std::abs(f[i]) / p.tolerance[i]);
+  return worst;
+}
+
+bool Space::within_limits(const double* q) const {
+  const Impl& p = *impl_;
+  for (int i = 0; i < p.n(); ++i)
+    if (q[i] < p.lower[i] - 1e-9 || q[i] > p.upper[i] + 1e-9) return false;
+  return true;
+}
+
+bool Space::collision_free(const double* q) {
+  ++counts.collision_checks;
+  if (impl_->geom.collisionPairs.empty()) return true;
+  return !pinocchio::computeCollisions(impl_->model, impl_->cdata, *impl_->manager, impl_->to_full(q), true);
+}
+
+bool Space::planning_free(const double* q) {
+  if (impl_->sphere_joint.empty()) return collision_free(q);
+  ++counts.sphere_checks;
+  return !impl_->spheres_hit(q);
+}
+
+int Space::code(const double* q, double limit, bool collision, bool exact) {
+  if (!within_limits(q)) return LIMITS;
+  if (violation(q) > limit) return CONSTRAINT;
+  if (collision && !(exact ? collision_free(q) : planning_free(q))) return COLLISION;
+  return VALID;
+}
+
+int Space::valid_prefix(const double* states, int k, bool last_is_node, bool collision) {
+  const int nn = n();
+  const double inner = 1.0 - impl_->margin;
+  for (int i = 0; i < k; ++i) {
+    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, collision, false);
+    if (c != VALID) {
+      stop = c;
+      ++counts.stopped[c];
+      return i;
+    }
+  }
+  stop = VALID;
+  return k;
+}
+
+Projection Space::project(double* q, double tol, int max_iters, double damping, double max_step) {
+  const Impl& p = *impl_;
+  const int nn = n(), mm = m();
+  Eigen::Map<Vec> x(q, nn);
+  x = x.cwiseMax(p.lower).cwiseMin(p.upper);
+  Vec F(mm), dq(nn);
+  RowMat J(mm, nn), Jb(mm, nn);
+  Eigen::MatrixXd A(mm, mm);
+  auto step = [&](const RowMat& Jm, double lam) {
+    A.noalias() = Jm * Jm.transpose();
+    A.diagonal().array() += lam;
+    dq.noalias() = -Jm.transpose() * A.ldlt().solve(F);
+  };
+  Projection out{false, max_iters, INFINITY};
+  for (int it = 0; it <= max_iters; ++it) {
+    if (mm) jacobian(q, F.data(), J.data());
+    else ++counts.jacobians;
+    const double err = mm ? F.cwiseAbs().maxCoeff() : 0.0;
+    out.residual = err;
+    if (err <= tol) {
+      out.converged = true;
+      out.iterations = it;
+      break;
+    }
+    if (it == max_iters) break;
+    ++counts.projection_steps;
+    const double lam = F.squaredNorm() + damping;
+    step(J, lam);
+    bool blocked = false;
+    Jb = J;
+    for (int i = 0; i < nn; ++i)
+      if ((x[i] <= p.lower[i] + 1e-9 && dq[i] < 0) || (x[i] >= p.upper[i] - 1e-9 && dq[i] > 0)) {
+        Jb.col(i).setZero();
+        blocked = true;
+      }
+    if (blocked) step(Jb, lam);
+    const double norm = dq.norm();
+    dq *= std::min(1.0, max_step / std::max(norm, 1e-12));
+    x = (x + dq).cwiseMax(p.lower).cwiseMin(p.upper);
+  }
+  return out;
+}
+
+PathCheck Space::validate_path(const double* path, int K) {
+  const int nn = n();
+  const double res = impl_->resolution;
+  PathCheck out{true, 0.0, -1, VALID, -1, 0};
+  Vec s(nn);
+  long index = 0;
+  auto check = [&](const double* q) {
+    int c = VALID;
+    if (!within_limits(q)) c = LIMITS;
+    else {
+      const double v = violation(q);
+      out.worst = std::max(out.worst, v);
+      if (v > 1.0) c = CONSTRAINT;
+      else if (!collision_free(q)) c = COLLISION;
+    }
+    if (c != VALID && out.valid) {
+      out.valid = false;
+      out.first_invalid = index;
+      out.reason = c;
+    }
+    ++index;
+    return c == VALID;
+  };
+  for (int seg = 0; seg + 1 < K; ++seg) {
+    Eigen::Map<const Vec> a(path + static_cast<long>(seg) * nn, nn), b(path + static_cast<long>(seg + 1) * nn, nn);
+    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / res)));
+    for (int j = 0; j < steps; ++j) {
+      s = a + (static_cast<double>(j) / steps) * (b - a);
+      if (!check(s.data())) {
+        out.segment = seg;
+        out.states = index;
+        return out;
+      }
+    }
+  }
+  if (K >= 1 && !check(path + static_cast<long>(K - 1) * nn)) out.segment = std::max(K - 2, 0);
+  out.states = index;
+  return out;
+}
+
+}  // namespace mgcore

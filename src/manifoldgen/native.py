@@ -1,0 +1,238 @@
+"""The compiled planning core (``manifoldgen_core``, C++ in ``native/``) behind the Python interfaces.
+
+:func:`core_space` builds a ``manifoldgen_core.Space`` from a
+:class:`~manifoldgen.space.ConstrainedSpace`: the robot model and the collision model (robot
+geometries, obstacles, a held tool, the exact collision pairs) go over by pinocchio's own binary
+serialization (:func:`write_models`, shared with the C++ OMPL baseline), the constraint as terms with
+the condition ``y`` baked in: ``pose``, ``rotation`` (a pose term without position axes, its target
+turned by ``y``), ``closed_chain``, and sets of them, on fixed-base robots. Anything else (a user's
+Python constraint, balance, a floating base) is not built in: :func:`unsupported` says why, and the
+planners fall back to Python.
+
+The core applies :class:`~manifoldgen.space.ConstrainedSpace`'s rule in the same order (limits,
+equality within ``limit`` x tolerance, collision), lazily per state; projection is
+:func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
+compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
+``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
+in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
+pooled sample when it first tries it). :func:`plan_rrt_connect` runs
+:class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
+(:func:`draw_bulk`), and books the core's operation counts on the planner's space, so results carry
+the same counters as a Python search.
+
+Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
+check robot-vs-primitive and robot-robot pairs with them (exact coal for the pairs they do not
+cover), and every candidate path's final dense check stays exact.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from manifoldgen.constraints import ConstraintSet, Projection
+from manifoldgen.constraints.closed_chain import ClosedChainConstraint
+from manifoldgen.constraints.pose import PoseConstraint
+from manifoldgen.constraints.rotation import RotationConstraint
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.robot import Robot
+from manifoldgen.space import REASONS, ConstrainedSpace
+
+CORES = ("auto", "python", "native")
+BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
+COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
+TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
+# lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
+# (the trees grow through the maze's walls), so off
+LAZY = False
+
+
+def core_module():
+    """The ``manifoldgen_core`` extension, or None when it is not built."""
+    try:
+        import manifoldgen_core
+    except ImportError:
+        return None
+    return manifoldgen_core
+
+
+def write_models(space: ConstrainedSpace, folder: Path) -> tuple[Path, Path]:
+    """Write the robot model and the space's collision model (obstacles and exact pairs included) with
+    pinocchio's binary serialization into ``folder``: (model file, geometry file)."""
+    folder = Path(folder)
+    model_file, geometry_file = folder / "model.bin", folder / "geometry.bin"
+    space.robot.model.saveToBinary(str(model_file))
+    (space.checker.geom if space.checker is not None else pin.GeometryModel()).saveToBinary(str(geometry_file))
+    return model_file, geometry_file
+
+
+def active_coordinates(robot) -> list[tuple[int, int, int]]:
+    """(idx_q, idx_v, nq) of each planning-group joint in pinocchio's q and v (nq 2: continuous)."""
+    return [(robot.model.joints[j].idx_q, robot.model.joints[j].idx_v, robot.model.joints[j].nq)
+            for j in robot._joint_ids]
+
+
+def _parts(space: ConstrainedSpace) -> list:
+    constraint = space.constraint
+    return constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
+
+
+BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint)
+
+
+def unsupported(space: ConstrainedSpace) -> str | None:
+    """Why the core cannot take ``space`` (a one-line reason), or None when it can."""
+    for part in _parts(space):
+        if type(part) not in BUILT_IN:
+            return (f"the compiled core has no '{part.spec()['type']}' constraint (built in: pose, rotation, "
+                    "closed_chain); a Python constraint runs in Python")
+    if not isinstance(space.robot, Robot):
+        return "the compiled core needs a pinocchio Robot"
+    if space.robot.floating_base:
+        return "the compiled core does not handle a floating base"
+    return None
+
+
+def core_space(space: ConstrainedSpace):
+    """A ``manifoldgen_core.Space`` for ``space`` (see the module docstring); a one-line error when the
+    core is not built or cannot take the space."""
+    core = core_module()
+    if core is None:
+        raise ManifoldgenError(f"the compiled core manifoldgen_core is not installed; {BUILD_HINT}")
+    reason = unsupported(space)
+    if reason:
+        raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
+    robot = space.robot
+    with tempfile.TemporaryDirectory(prefix="manifoldgen-core-") as folder:
+        model_file, geometry_file = write_models(space, Path(folder))
+        out = core.Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
+                         robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
+    offset = 0
+    for part in _parts(space):
+        k = part.condition.k
+        y = space.y[offset:offset + k]
+        offset += k
+        if type(part) is PoseConstraint:
+            out.add_pose(robot.frame_id(part.frame), part.rotation, list(part._idx), list(part._oidx), y)
+        elif type(part) is RotationConstraint:
+            out.add_pose(robot.frame_id(part.frame), np.ascontiguousarray(part.target(y[None])[0]), [], [0, 1, 2],
+                         np.zeros(0))
+        else:
+            out.add_chain(robot.frame_id(part.frame_a), robot.frame_id(part.frame_b), part.rotation,
+                          y[0] * part.axis)
+    out.set_tolerance(np.asarray(space.constraint.tolerance, float))
+    return out
+
+
+def set_spheres(core, spheres: dict) -> str:
+    """Give the core conservative sphere models: ``spheres`` holds ``joint (S,)`` pinocchio joint ids,
+    ``center (S, 3)`` in that joint's frame, ``radius (S,)``, ``geometry (S,)`` the robot geometry each
+    covers. Returns what the sphere check covers (sphere-sphere, sphere-primitive, exact pairs)."""
+    try:
+        core.set_spheres([int(j) for j in spheres["joint"]], np.ascontiguousarray(spheres["center"], float),
+                         np.ascontiguousarray(spheres["radius"], float), [int(g) for g in spheres["geometry"]])
+    except (KeyError, RuntimeError, ValueError, TypeError) as exc:
+        raise ManifoldgenError(f"bad sphere model: {exc}; give joint (S,), center (S, 3), radius (S,), "
+                               "geometry (S,)") from exc
+    return core.sphere_report()
+
+
+def _rows(q: np.ndarray, n: int) -> np.ndarray:
+    q = np.ascontiguousarray(q, dtype=float)
+    return q.reshape(1, n) if q.ndim == 1 else q
+
+
+class NativeSpace:
+    """``space``'s rule on the compiled ``core``: what a sampler asks (``valid``, ``violation``,
+    ``project``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
+    runs the search (:func:`plan_rrt_connect`), not here. ``collision=False``: :meth:`valid` leaves the
+    collision test out (for a search that checks every state it keeps, samples included)."""
+
+    def __init__(self, space: ConstrainedSpace, core, *, collision: bool = True):
+        self._space, self._core, self._collision = space, core, collision
+
+    def __getattr__(self, name):
+        return getattr(self._space, name)
+
+    def violation(self, q: np.ndarray) -> np.ndarray:
+        return self._core.violation(_rows(q, self._space.n))
+
+    def valid(self, q: np.ndarray, *, equality: bool = True) -> np.ndarray:
+        q = _rows(q, self._space.n)
+        limit = np.full(len(q), 1.0 if equality else np.inf)
+        return self._core.codes(q, limit, self._collision, True) == 0
+
+    def project(self, q: np.ndarray, *, tol: float = 1e-6, max_iters: int = 50, damping: float = 1e-6,
+                max_step: float = 0.5) -> Projection:
+        x, ok, iterations, residual = self._core.project(_rows(q, self._space.n), tol, max_iters, damping, max_step)
+        return Projection(x, ok.astype(bool), iterations, residual)
+
+
+def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
+    """Add the core's counts between ``before`` and ``after`` to ``space``'s counters."""
+    for key in COUNTERS:
+        setattr(space, key, getattr(space, key) + after[key] - before[key])
+    space.collision_checks += after["sphere_checks"] - before["sphere_checks"]
+    for reason in REASONS:
+        space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
+
+
+def draw_bulk(planner, count: int) -> np.ndarray:
+    """(count, n) samples for ``planner``, as its ``_draw_many`` gives them (Algorithm 1's buffer popped in
+    order, refilled a batch at a time, the same error after ``max_batches`` empty refills) but taken in
+    slices instead of one ``sample()`` call per row; a sampler that overrides its drawing keeps it."""
+    from manifoldgen.planning.base import SamplerFailed
+    from manifoldgen.sampling import Sampler
+
+    sampler = planner.sampler
+    if type(sampler).sample is not Sampler.sample or type(sampler).sample_many is not Sampler.sample_many:
+        return planner._draw_many(count)
+    rows, need, empty = [], count, 0
+    while need:
+        if not len(sampler._buffer):
+            if empty == sampler.max_batches:
+                raise SamplerFailed(f"{type(sampler).__name__} found no valid configuration in "
+                                    f"{sampler.max_batches} batches of {sampler.batch}")
+            sampler._refill()
+            empty = 0 if len(sampler._buffer) else empty + 1
+            continue
+        take, sampler._buffer = sampler._buffer[:need], sampler._buffer[need:]
+        rows.append(take)
+        need -= len(take)
+        sampler.stats.accepted += len(take)
+    planner.samples += count
+    return np.ascontiguousarray(np.concatenate(rows))
+
+
+def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
+    """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
+    settings and sampler it uses): the direct connection, then the search, until ``deadline``
+    (``time.perf_counter`` seconds). Books iterations, samples, rejections, projections and the core's
+    operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
+    s, space, sampler = planner.settings, planner.space, planner.sampler
+    before = core.counts()
+    swapped = sampler.space is space
+    if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
+        sampler.space = NativeSpace(space, core, collision=False)
+    try:
+        out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
+                               lambda count: draw_bulk(planner, count),
+                               max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
+                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY)
+    finally:
+        if swapped:
+            sampler.space = space
+        after = core.counts()
+        book(space, before, after)
+        planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
+    planner.iterations += out["iterations"]
+    planner.rejected += out["rejected_paths"]
+    planner.out_of_reach += out["out_of_reach"]
+    planner.local.projections += out["projections"]
+    planner.native_nodes = list(out["nodes"])
+    planner.cut_edges = out["cut_edges"]
+    return out["path"] if len(out["path"]) else None

@@ -1,0 +1,192 @@
+"""The compiled core (manifoldgen_core) against the Python reference: residuals, Jacobians, the validity
+rule, projection, motion and path checks, RRT-Connect paths rechecked state by state, the fallback for
+Python constraints, and the sphere-model hook."""
+
+import numpy as np
+import pytest
+
+from manifoldgen import native
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.space import REASONS, ConstrainedSpace, densify
+
+pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
+
+
+@pytest.fixture(scope="module")
+def maze(panda_task):
+    from manifoldgen.scene import get_scene
+    scene = get_scene(panda_task, "maze")
+    space = ConstrainedSpace(panda_task.constraint, scene.condition, scene.checker(panda_task.robot))
+    return panda_task, scene, space, native.core_space(space)
+
+
+@pytest.fixture(scope="module")
+def dualarm():
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import get_task
+    task = get_task("dualarm", "baxter")
+    scene = get_scene(task, "tray-over")
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    return task, scene, space, native.core_space(space)
+
+
+def _states(task, scene, space, seed=3):
+    """Random states, states projected onto the manifold, and states along the start-goal chord."""
+    q = task.robot.sample_uniform(150, np.random.default_rng(seed))
+    q[:60] = space.project(q[:60]).q
+    chord = densify(np.array([scene.start, scene.goal]), 0.02)[0]
+    return np.concatenate([q, chord[:60]])
+
+
+def _codes(space, q, limit):
+    """The Python rule's first failed test per row (collision included), as the core numbers them."""
+    code, _ = space._failures(q, limit)
+    free = code == 0
+    code[free] = np.where(space.checker.in_collision(q[free]), 4, 0)
+    return code
+
+
+@pytest.mark.parametrize("problem", ["maze", "dualarm"])
+def test_residuals_jacobians_and_validity_equal_the_python_space(problem, request):
+    task, scene, space, core = request.getfixturevalue(problem)
+    q = _states(task, scene, space)
+    y = np.broadcast_to(space.y, (len(q), len(space.y)))
+    F, J = core.jacobian(q)
+    F_py, J_py = task.constraint.jacobian(q, y)
+    on = slice(0, 60)  # on the manifold: where the planners live
+    np.testing.assert_allclose(F, F_py, atol=1e-9)
+    np.testing.assert_allclose(J[on], J_py[on], atol=1e-9)
+    np.testing.assert_allclose(J, J_py, atol=1e-7)  # off it, log3 near pi loses a few digits either way
+    np.testing.assert_allclose(core.residual(q), F_py, atol=1e-9)
+    np.testing.assert_allclose(core.violation(q), space.violation(q), atol=1e-9)
+    for limit in (1.0, 0.95):
+        ours = core.codes(q, np.full(len(q), limit), True, True)
+        expected = _codes(space, q, limit)
+        assert np.array_equal(ours, expected)
+        assert len(set(expected.tolist()) & {0, 4}) == 2  # valid and colliding states both occur
+    assert np.array_equal(native.NativeSpace(space, core).valid(q), space.valid(q))
+
+
+def test_projection_equals_the_python_algorithm(maze):
+    task, scene, space, core = maze
+    q = task.robot.sample_uniform(60, np.random.default_rng(5))
+    x, ok, iterations, residual = core.project(q, 1e-6, 50, 1e-6, 0.5)
+    reference = space.project(q)
+    ok = ok.astype(bool)
+    assert ok.mean() > 0.5 and np.array_equal(ok, reference.converged)
+    assert np.array_equal(iterations, reference.iterations)
+    np.testing.assert_allclose(x[ok], reference.q[ok], atol=1e-8)
+    assert np.all(residual[ok] <= 1e-6)
+    assert np.all(space.violation(x[ok]) <= 1e-4) and task.robot.within_limits(x).all()
+    short = native.NativeSpace(space, core).project(q, max_iters=2)  # the sampler's refinement
+    np.testing.assert_allclose(short.q, space.project(q, max_iters=2).q, atol=1e-8)
+
+
+def test_motion_and_path_checks_equal_the_python_space(maze):
+    task, scene, space, core = maze
+    chord = densify(np.array([scene.start, scene.goal]), 0.05)[0]
+    assert core.valid_prefix(chord, True) == space.valid_prefix(chord, True) < len(chord)
+    assert REASONS[core.stop - 1] == space.stop
+    on = space.project(task.robot.sample_uniform(40, np.random.default_rng(2))).q
+    for k in range(0, 40, 2):
+        states = densify(on[k:k + 2], 0.05)[0]
+        assert core.valid_prefix(states, True) == space.valid_prefix(states, True)
+    path = np.array([scene.start, scene.goal])
+    valid, worst, first, reason, segment, states = core.validate_path(path)
+    report = space.validate_path(path)
+    assert not valid and not report.valid and segment == report.segment == 0 and first + 1 == report.states_checked
+    assert report.reason.startswith(f"segment 0: {'is in collision' if reason == 4 else 'violates'}")
+
+
+@pytest.fixture(scope="module")
+def wall(panda_task):
+    from manifoldgen.scene import get_scene
+    return get_scene(panda_task, "wall")
+
+
+def _planner(task, scene, seed, core="native", sampler="cvae"):
+    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.specs import make_sampler
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    spec = f"cvae:{pretrained_model_dir()}" if sampler == "cvae" else sampler
+    return space, RRTConnect(space, make_sampler(spec, space, seed), seed=seed, settings=RRTConnectSettings(core=core))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_native_rrt_connect_paths_pass_the_python_check_state_by_state(panda_task, wall, seed):
+    space, planner = _planner(panda_task, wall, seed)
+    before = space.counts()
+    result = planner.solve(wall.start, wall.goal, 20.0)
+    after = space.counts()
+    assert result.solved and result.extras["core"] == "native"
+    path = result.path
+    np.testing.assert_allclose(path[0], wall.start) and np.testing.assert_allclose(path[-1], wall.goal)
+    states = densify(path, space.settings.resolution)[0]
+    assert panda_task.constraint.violation(states, space.y).max() <= 1.0
+    assert panda_task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+    assert space.validate_path(path).valid
+    # the same counters as a Python search, booked on the space
+    checks = after["collision_checks"] - before["collision_checks"]
+    assert 0 < result.extras["collision_checks"] == checks - 2  # the start and goal are checked before the count
+    assert result.extras["evaluations"] > 0 and after["jacobians"] > before["jacobians"]
+    assert sum(result.extras["nodes"]) >= 2 and result.samples_drawn > 0 and result.iterations >= 0
+
+
+def test_a_sampler_that_gives_up_ends_the_native_query_with_its_reason(panda_task, wall):
+    space, planner = _planner(panda_task, wall, 0)
+    planner.sampler.candidates = lambda count: np.zeros((0, space.n))
+    planner.sampler.max_batches = 3
+    result = planner.solve(wall.start, wall.goal, 5.0)
+    assert not result.solved and "found no valid configuration in 3 batches" in result.extras["failure"]
+    assert planner.sampler.space is space  # the sampler gets its own space back
+
+
+def test_core_choice_and_fallback_for_python_constraints(panda_task, wall):
+    from manifoldgen.constraints import PlaneConstraint
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.specs import make_sampler
+    plane = PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]])
+    assert native.unsupported(ConstrainedSpace(plane, [0.5])) is not None
+    space = ConstrainedSpace(plane, [0.5])
+    with pytest.raises(ManifoldgenError, match="compiled core has no 'plane' constraint"):
+        RRTConnect(space, make_sampler("project", space, 0), settings=RRTConnectSettings(core="native"))
+    auto = RRTConnect(space, make_sampler("project", space, 0))
+    assert auto.core is None and "plane" in auto._extras()["core_fallback"]
+    with pytest.raises(ManifoldgenError, match="unknown core"):
+        RRTConnectSettings(core="gpu").check()
+    _, python = _planner(panda_task, wall, 0, core="python")
+    assert python.core is None and python._extras() == {"core": "python"}
+
+
+def _bounding_spheres(space, names=("panda_link7", "panda_hand", "panda_leftfinger", "panda_rightfinger")):
+    """One sphere around the bounding box of each robot geometry on the ``names`` links (conservative: it covers
+    the geometry); the other geometries stay exact."""
+    joint, center, radius, geometry = [], [], [], []
+    robot_geoms = len(space.robot.collision_model.geometryObjects)
+    for i, g in enumerate(space.checker.geom.geometryObjects[:robot_geoms]):
+        if space.robot.model.frames[g.parentFrame].name not in names:
+            continue
+        g.geometry.computeLocalAABB()
+        joint.append(g.parentJoint)
+        center.append(g.placement.act(np.asarray(g.geometry.aabb_center)))
+        radius.append(g.geometry.aabb_radius)
+        geometry.append(i)
+    return {"joint": joint, "center": np.array(center), "radius": np.array(radius), "geometry": geometry}
+
+
+def test_sphere_models_are_conservative_and_plan_valid_paths(panda_task, wall):
+    space, planner = _planner(panda_task, wall, 0)
+    report = native.set_spheres(planner.core, _bounding_spheres(space))
+    assert "sphere-primitive" in report and planner.core.has_spheres
+    q = _states(panda_task, wall, space, seed=7)
+    spheres = planner.core.codes(q, np.full(len(q), np.inf), True, False)
+    exact = planner.core.codes(q, np.full(len(q), np.inf), True, True)
+    assert not np.any((spheres == 0) & (exact == 4))  # sphere-free implies mesh-free
+    assert np.any((spheres == 4) & (exact == 0)) and np.any(spheres == 0)  # conservative, not all blocked
+    result = planner.solve(wall.start, wall.goal, 20.0)
+    assert result.solved and result.extras["sphere_checks"] > 0
+    states = densify(result.path, space.settings.resolution)[0]
+    assert not space.checker.in_collision(states).any() and space.validate_path(result.path).valid
+    with pytest.raises(ManifoldgenError, match="bad sphere model"):
+        native.set_spheres(planner.core, {"joint": [1], "center": np.zeros((2, 3)), "radius": [0.1], "geometry": [0]})
