@@ -30,6 +30,16 @@ def dualarm():
     return task, scene, space, native.core_space(space)
 
 
+@pytest.fixture(scope="module")
+def sphere():
+    from manifoldgen.scene import get_scene
+    from manifoldgen.tasks import get_task
+    task = get_task("sphere", "point")
+    scene = get_scene(task, "sphere")
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    return task, scene, space, native.core_space(space)
+
+
 def _states(task, scene, space, seed=3):
     """Random states, states projected onto the manifold, and states along the start-goal chord."""
     q = task.robot.sample_uniform(150, np.random.default_rng(seed))
@@ -46,7 +56,7 @@ def _codes(space, q, limit):
     return code
 
 
-@pytest.mark.parametrize("problem", ["maze", "dualarm"])
+@pytest.mark.parametrize("problem", ["maze", "dualarm", "sphere"])
 def test_residuals_jacobians_and_validity_equal_the_python_space(problem, request):
     task, scene, space, core = request.getfixturevalue(problem)
     q = _states(task, scene, space)

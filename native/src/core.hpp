@@ -68,6 +68,8 @@ class Space {
                 const std::vector<int>& orientation_axes, const Vec& y);
   // closed chain: F = [Ra^T (pb - pa) - offset ; log3(rotation^T Ra^T Rb)]
   void add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset);
+  // sphere: F = |p(q) - center| - radius
+  void add_sphere(int frame, const Eigen::Vector3d& center, double radius);
   void set_tolerance(const Vec& tolerance);  // (m,) after the terms
   // Conservative sphere models (see set_spheres in module.cpp): joint (S,), center (S, 3) in the
   // joint frame, radius (S,), geometry (S,) the robot geometry each covers.

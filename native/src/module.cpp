@@ -88,6 +88,12 @@ NB_MODULE(manifoldgen_core, m) {
           },
           "frame_a"_a, "frame_b"_a, "rotation"_a, "offset"_a,
           "F = [Ra^T (pb - pa) - offset; log3(rotation^T Ra^T Rb)].")
+      .def(
+          "add_sphere",
+          [](Space& s, int frame, const In1& center, double radius) {
+            s.add_sphere(frame, Eigen::Vector3d(center(0), center(1), center(2)), radius);
+          },
+          "frame"_a, "center"_a, "radius"_a, "F = |p - center| - radius of frame.")
       .def("set_tolerance", [](Space& s, const In1& t) { s.set_tolerance(vec_of(t)); }, "tolerance"_a)
       .def(
           "set_spheres",

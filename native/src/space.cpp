@@ -31,14 +31,14 @@ using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 namespace {
 
 struct Term {
-  int kind;  // 0: pose, 1: closed chain
+  int kind;  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius))
   pinocchio::FrameIndex frame, frame_b;
   Eigen::Matrix3d rotation;
   std::vector<int> position_axes, orientation_axes;
   Vec y;                   // pose: the conditioned positions
   Eigen::Vector3d offset;  // chain: d * axis
   int rows() const {
-    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size()) : 6;
+    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size()) : kind == 1 ? 6 : 1;
   }
 };
 
@@ -124,7 +124,9 @@ struct Space::Impl {
     int row = 0;
     for (const Term& t : terms) {
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-      if (t.kind == 0) {
+      if (t.kind == 2) {
+        F[row++] = (A.translation() - t.offset).norm() - t.y[0];
+      } else if (t.kind == 0) {
         for (std::size_t k = 0; k < t.position_axes.size(); ++k)
           F[row++] = A.translation()[t.position_axes[k]] - t.y[k];
         const Eigen::Vector3d err = pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()));
@@ -151,7 +153,12 @@ struct Space::Impl {
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
       Ja.setZero();
       pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
-      if (t.kind == 0) {
+      if (t.kind == 2) {
+        const Eigen::Vector3d d = A.translation() - t.offset;
+        const double r = d.norm();
+        F[row] = r - t.y[0];
+        put(row++, (d / std::max(r, 1e-12)).transpose() * Ja.topRows<3>());
+      } else if (t.kind == 0) {
         double theta;
         const Eigen::Vector3d err =
             pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()), theta);
@@ -269,6 +276,16 @@ void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation,
   if (frame_a < 0 || frame_b < 0 || frame_a >= nf || frame_b >= nf) throw std::runtime_error("chain frame id out of range");
   Term t{1, static_cast<pinocchio::FrameIndex>(frame_a), static_cast<pinocchio::FrameIndex>(frame_b), rotation, {}, {},
          Vec(), offset};
+  p.m += t.rows();
+  p.terms.push_back(t);
+}
+
+void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) {
+  Impl& p = *impl_;
+  if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("sphere frame id out of range");
+  if (!(radius > 0)) throw std::runtime_error("sphere radius must be positive");
+  Term t{2, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec::Constant(1, radius),
+         center};
   p.m += t.rows();
   p.terms.push_back(t);
 }

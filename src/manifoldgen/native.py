@@ -5,7 +5,7 @@
 geometries, obstacles, a held tool, the exact collision pairs) go over by pinocchio's own binary
 serialization (:func:`write_models`, shared with the C++ OMPL baseline), the constraint as terms with
 the condition ``y`` baked in: ``pose``, ``rotation`` (a pose term without position axes, its target
-turned by ``y``), ``closed_chain``, and sets of them, on fixed-base robots. Anything else (a user's
+turned by ``y``), ``closed_chain``, ``sphere``, and sets of them, on fixed-base robots. Anything else (a user's
 Python constraint, balance, a floating base) is not built in: :func:`unsupported` says why, and the
 planners fall back to Python.
 
@@ -38,6 +38,7 @@ from manifoldgen.constraints import ConstraintSet, Projection
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.rotation import RotationConstraint
+from manifoldgen.constraints.sphere import SphereConstraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot
 from manifoldgen.space import REASONS, ConstrainedSpace
@@ -81,7 +82,7 @@ def _parts(space: ConstrainedSpace) -> list:
     return constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
 
 
-BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint)
+BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereConstraint)
 
 
 def unsupported(space: ConstrainedSpace) -> str | None:
@@ -89,7 +90,7 @@ def unsupported(space: ConstrainedSpace) -> str | None:
     for part in _parts(space):
         if type(part) not in BUILT_IN:
             return (f"the compiled core has no '{part.spec()['type']}' constraint (built in: pose, rotation, "
-                    "closed_chain); a Python constraint runs in Python")
+                    "closed_chain, sphere); a Python constraint runs in Python")
     if not isinstance(space.robot, Robot):
         return "the compiled core needs a pinocchio Robot"
     if space.robot.floating_base:
@@ -121,6 +122,8 @@ def core_space(space: ConstrainedSpace):
         elif type(part) is RotationConstraint:
             out.add_pose(robot.frame_id(part.frame), np.ascontiguousarray(part.target(y[None])[0]), [], [0, 1, 2],
                          np.zeros(0))
+        elif type(part) is SphereConstraint:
+            out.add_sphere(robot.frame_id(part.frame), part.center, float(y[0]))
         else:
             out.add_chain(robot.frame_id(part.frame_a), robot.frame_id(part.frame_b), part.rotation,
                           y[0] * part.axis)
