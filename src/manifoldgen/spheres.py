@@ -224,10 +224,9 @@ def _union_volume(centers: np.ndarray, radii: np.ndarray, h: float) -> float:
 def sphere_model(robot: Robot) -> SphereModel:
     """The robot's sphere model: read from the cache when it was made for these geometries and mesh
     files, else fitted (a few seconds per robot) and cached."""
-    stamp = {"version": VERSION, "slack": VOLUME_SLACK, "shell": SHELL_SLACK, "counts": [list(c) for c in COLUMN_COUNTS], "grid": VOLUME_GRID, "prism": PRISM_SIDES,
-             "geometries_sha256": _geometry_digest(robot.collision_model)}
+    stamp = cache_stamp(robot)
     path = cache_dir() / "spheres" / f"{robot.name}-{_digest(stamp)[:16]}.npz"
-    cached = _read_cache(path, stamp, len(robot.collision_model.geometryObjects))
+    cached = read_cache(path, stamp, len(robot.collision_model.geometryObjects))
     if cached is not None:
         return cached
     model = fit_model(robot.collision_model)
@@ -239,6 +238,13 @@ def sphere_model(robot: Robot) -> SphereModel:
     except ManifoldgenError as exc:  # an unwritable cache costs time, not correctness
         warnings.warn(f"sphere model not cached: {exc}")
     return model
+
+
+def cache_stamp(robot: Robot) -> dict:
+    """What a cached model must have been made for: this code's settings and the robot's geometries."""
+    return {"version": VERSION, "slack": VOLUME_SLACK, "shell": SHELL_SLACK, "grid": VOLUME_GRID,
+            "counts": [list(c) for c in COLUMN_COUNTS], "prism": PRISM_SIDES,
+            "geometries_sha256": _geometry_digest(robot.collision_model)}
 
 
 def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None) -> SphereModel:
@@ -295,7 +301,7 @@ def _arrays_digest(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def _read_cache(path: Path, stamp: dict, objects: int) -> SphereModel | None:
+def read_cache(path: Path, stamp: dict, objects: int) -> SphereModel | None:
     """The cached model at ``path`` if made for ``stamp`` and intact; None (with a one-line notice when
     a file was there) otherwise."""
     if not path.exists():
@@ -346,7 +352,8 @@ class SphereChecker:
         self.center = np.concatenate([model.center, held.center[keep]])
         self.radius = np.concatenate([model.radius, held.radius[keep]])
         self.geometry = np.concatenate([model.geometry, held.geometry[keep]])
-        unfitted = set(model.unfitted) | set(held.unfitted)
+        robot_objects = len(robot.collision_model.geometryObjects)
+        unfitted = (set(range(robot_objects)) - set(model.geometry.tolist())) | set(held.unfitted)
         objects = geom.geometryObjects
         shapes = {oid: objects[oid].geometry for oid in checker.obstacle_ids}
         exact_obstacles = {oid for oid, s in shapes.items() if not isinstance(s, (coal.Box, coal.Sphere, coal.Cylinder))}
