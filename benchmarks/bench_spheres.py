@@ -1,15 +1,17 @@
 """Sphere models: spheres per robot, cost per state of the batched numpy sphere check vs coal, and its
 false-positive rate (sphere says collision, coal says free) on the scenes' states.
 
-    python benchmarks/bench_spheres.py [--states 2000] [--robots panda pr2 talos centauro]
+    python benchmarks/bench_spheres.py [--states 2000] [--robots panda pr2 talos centauro] [--draw PNG]
 
 States are the task's manifold at the scene's condition (uniform seeds projected by damped least
 squares: what a constrained planner checks) and, beside them, uniform states in the joint limits; for
-the whole-body robots (self-collision only), seeds around the task's home projected onto its manifold. Every
-state coal finds in collision must be in collision for the spheres too (the script fails otherwise).
+the whole-body robots (self-collision only), seeds around the task's home projected onto its manifold.
+Every state coal finds in collision must be in collision for the spheres too (the script fails
+otherwise).
 The sphere checker finds its tight pairs (self pairs sent to coal) on a second half of the manifold
-states, not on those measured. Costs are CPU microseconds per state (process time), one batch of all states and batches of 32; wall time
-beside them.
+states, not on those measured. Costs are CPU microseconds per state (process time), one batch of all
+states and batches of 32; wall time beside them. ``--draw PNG`` only draws panda's spheres over its
+meshes at the pose task's home.
 """
 
 import argparse
@@ -86,7 +88,8 @@ def scenes(count: int, fitted: dict) -> None:
             missed = int(np.sum(exact & ~sphere))
             free = ~exact
             print(f"| {robot} {scene_name}, {kind} | {len(q)} | {exact.mean():.1%} | {np.mean(sphere[free]):.1%} | "
-                  f"{missed} | {coal_cpu:.1f} ({coal_wall:.1f}) | {cpu:.1f} ({wall:.1f}) / {cpu32:.1f} ({wall32:.1f}) |")
+                  f"{missed} | {coal_cpu:.1f} ({coal_wall:.1f}) | {cpu:.1f} ({wall:.1f}) / "
+                  f"{cpu32:.1f} ({wall32:.1f}) |")
             if missed:
                 raise SystemExit(f"{missed} states in collision for coal are free for the spheres: not conservative")
 
@@ -108,7 +111,8 @@ def self_only(robots: list[str], count: int, fitted: dict) -> None:
         near = near.q[near.converged]
         # tight pairs found on other states than those measured (the first half)
         fast = SphereChecker(checker, fitted.get(name), typical=near[len(near) // 2:])
-        for kind, q in (("manifold near home", near[:len(near) // 2]), ("uniform", task.robot.sample_uniform(count, rng))):
+        uniform = task.robot.sample_uniform(count, rng)
+        for kind, q in (("manifold near home", near[:len(near) // 2]), ("uniform", uniform)):
             exact, coal_cpu, coal_wall = per_state(checker.in_collision, q, len(q))
             sphere, cpu, wall = per_state(fast.in_collision, q, len(q))
             missed = int(np.sum(exact & ~sphere))
@@ -118,11 +122,58 @@ def self_only(robots: list[str], count: int, fitted: dict) -> None:
                 raise SystemExit(f"{name}: {missed} states in collision for coal are free for the spheres")
 
 
+def draw(path: str) -> None:
+    """Panda's meshes (grey) and spheres (translucent) at the pose task's home, two views, to ``path``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pinocchio as pin
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from manifoldgen.spheres import sphere_model, triangles_of
+
+    task = get_task("pose", "panda")
+    robot = task.robot
+    model = sphere_model(robot)
+    data, geom = robot.model.createData(), robot.collision_model
+    gdata = pin.GeometryData(geom)
+    full = robot.to_pinocchio(task.home)[0]
+    pin.forwardKinematics(robot.model, data, full)
+    pin.updateGeometryPlacements(robot.model, data, geom, gdata)
+    meshes = [triangles_of(g.geometry) @ gdata.oMg[i].rotation.T + gdata.oMg[i].translation
+              for i, g in enumerate(geom.geometryObjects)]
+    centers = np.array([data.oMi[int(j)].act(c) for j, c in zip(model.joint, model.center)])
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 14), np.linspace(0, np.pi, 8))
+    unit = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], -1)
+    fig = plt.figure(figsize=(10, 5.5))
+    for k, (elev, azim) in enumerate(((20, -60), (10, 30))):
+        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
+        for tris in meshes:
+            ax.add_collection3d(Poly3DCollection(tris, facecolor="0.25", edgecolor="none", alpha=0.35))
+        for c, r in zip(centers, model.radius):
+            ball = c + r * unit
+            ax.plot_surface(ball[..., 0], ball[..., 1], ball[..., 2], color="tab:orange", alpha=0.18, linewidth=0)
+        middle, half = (centers.max(0) + centers.min(0)) / 2, (centers.max(0) - centers.min(0)).max() / 2 + 0.08
+        ax.set(xlim=middle[0] + [-half, half], ylim=middle[1] + [-half, half], zlim=middle[2] + [-half, half],
+               box_aspect=(1, 1, 1))
+        ax.view_init(elev, azim)
+        ax.set_axis_off()
+    fig.suptitle(f"panda: {len(model)} spheres cover its {len(geom.geometryObjects)} collision geometries "
+                 f"(home of the pose task)")
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.93, wspace=0)
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--states", type=int, default=2000)
     parser.add_argument("--robots", nargs="*", default=list(ROBOTS), choices=list(ROBOTS))
+    parser.add_argument("--draw", metavar="PNG", help="only draw panda's spheres over its meshes to PNG")
     args = parser.parse_args()
+    if args.draw:
+        draw(args.draw)
+        return
     fitted = models(args.robots)
     scenes(args.states, fitted)
     self_only(args.robots, args.states, fitted)

@@ -100,7 +100,8 @@ def test_primitives_are_covered_solid(shape, rng):
     if isinstance(shape, coal.Box):
         points = points[np.all(np.abs(points) <= np.asarray(shape.halfSide), axis=1)]
     elif isinstance(shape, coal.Cylinder):
-        points = points[(np.linalg.norm(points[:, :2], axis=1) <= shape.radius) & (np.abs(points[:, 2]) <= shape.halfLength)]
+        points = points[(np.linalg.norm(points[:, :2], axis=1) <= shape.radius)
+                        & (np.abs(points[:, 2]) <= shape.halfLength)]
     else:
         points = points[np.linalg.norm(points, axis=1) <= shape.radius]
     assert len(points) > 100 and _uncovered(points, centers, radii) == 0
@@ -182,4 +183,5 @@ def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model,
     data["radius"] = data["radius"] * 0.5  # shrunk spheres would no longer cover
     np.savez(files[0], **data)
     with pytest.warns(UserWarning, match="do not match their checksum\\); recomputing"):
-        assert spheres.read_cache(files[0], spheres.cache_stamp(panda_task.robot), len(panda_model.solid_volume)) is None
+        stamp = spheres.cache_stamp(panda_task.robot)
+        assert spheres.read_cache(files[0], stamp, len(panda_model.solid_volume)) is None

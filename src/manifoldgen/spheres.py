@@ -21,11 +21,11 @@ check. How a mesh is covered, and why the cover is complete:
 
 An open mesh has no solid; its surface (what coal tests) is covered all the same. The directions are
 the mesh's principal axes; of the column counts tried, the fewest spheres whose union is within
-``VOLUME_SLACK`` times the solid's volume (or a ``SHELL_SLACK`` thick shell) of the smallest union found. Boxes are their 12 triangles,
-cylinders a circumscribed 24-sided prism (which holds the cylinder), spheres themselves. A geometry of
-another type (capsule, convex, height field ...) gets no spheres and its pairs are checked exactly by
-coal (one warning). Models are cached under ``collision.cache_dir()/spheres``, keyed by the robot's
-geometry model and the bytes of its mesh files.
+``VOLUME_SLACK`` times the solid's volume (or a ``SHELL_SLACK`` thick shell) of the smallest union
+found. Boxes are their 12 triangles, cylinders a circumscribed 24-sided prism (which holds the
+cylinder), spheres themselves. A geometry of another type (capsule, convex, height field ...) gets no
+spheres and its pairs are checked exactly by coal (one warning). Models are cached under
+``collision.cache_dir()/spheres``, keyed by the robot's geometry model and the bytes of its mesh files.
 """
 
 from __future__ import annotations
@@ -360,7 +360,8 @@ class SphereChecker:
         unfitted = (set(range(robot_objects)) - set(model.geometry.tolist())) | set(held.unfitted)
         objects = geom.geometryObjects
         shapes = {oid: objects[oid].geometry for oid in checker.obstacle_ids}
-        exact_obstacles = {oid for oid, s in shapes.items() if not isinstance(s, (coal.Box, coal.Sphere, coal.Cylinder))}
+        exact_obstacles = {oid for oid, s in shapes.items()
+                           if not isinstance(s, (coal.Box, coal.Sphere, coal.Cylinder))}
         pairs = [(int(geom.collisionPairs[k].first), int(geom.collisionPairs[k].second))
                  for k in range(len(geom.collisionPairs))]
         # a held box, sphere or cylinder is checked exactly against the robot's spheres (a tray held
@@ -382,7 +383,8 @@ class SphereChecker:
         notes = [f"{objects[o].name} (a mesh obstacle)" for o in sorted(exact_obstacles)]
         notes += [f"{objects[i].name} ({type(objects[i].geometry).__name__}, no spheres)" for i in sorted(unfitted)]
         if exact:
-            warnings.warn(f"sphere check of {robot.name}: {len(exact)} pairs use coal's exact check: {', '.join(notes)}")
+            warnings.warn(f"sphere check of {robot.name}: {len(exact)} pairs use coal's exact check: "
+                          f"{', '.join(notes)}")
         self._joints = np.unique(self.joint)
         self._slot = np.searchsorted(self._joints, self.joint)  # (S,) index into self._joints
         tight = self._tight(self_pairs, geom, typical)
