@@ -515,25 +515,25 @@ class SphereChecker:
                 if not len(rows):
                     continue
                 idx = self._members[g]
-                d2 = _gap2(kind, world[rows][:, idx], rot, offset, size)  # (r, s, O)
+                d2 = _gap2(kind, world[np.ix_(rows, idx)], rot, offset, size)  # (r, s, O)
                 hit[rows] |= np.any((d2 <= self.radius[idx, None] ** 2) & near[rows, g][:, None], axis=(1, 2))
         for g, slot, placement, kind, size in self._held:
             rows = np.flatnonzero(~hit)
             T_held = T[rows, slot] @ placement  # (r, 4, 4) world pose of the held shape
             near = _gap_local(kind, _into(bound[rows, g, None], T_held), size)[:, 0] <= self._bound_radius[g] ** 2
             rows, T_held, idx = rows[near], T_held[near], self._members[g]
-            d2 = _gap_local(kind, _into(world[rows][:, idx], T_held), size)  # (r, s)
+            d2 = _gap_local(kind, _into(world[np.ix_(rows, idx)], T_held), size)  # (r, s)
             hit[rows] |= np.any(d2 <= self.radius[idx] ** 2, axis=1)
         if len(self._pair_a):
             a, b = self._pair_a, self._pair_b
             gap = np.sum((bound[:, a] - bound[:, b]) ** 2, axis=-1)
             near = (gap <= (self._bound_radius[a] + self._bound_radius[b]) ** 2) & ~hit[:, None]  # (B, P)
-            for p in np.flatnonzero(near.any(0)):
+            for p in np.flatnonzero(near.any(0)):  # rows found in collision by one pair skip the next ones
                 rows = np.flatnonzero(near[:, p] & ~hit)
                 if not len(rows):
                     continue
                 ia, ib = self._members[a[p]], self._members[b[p]]
-                d2 = np.sum((world[rows][:, ia, None] - world[rows][:, None, ib]) ** 2, axis=-1)
+                d2 = np.sum((world[np.ix_(rows, ia)][:, :, None] - world[np.ix_(rows, ib)][:, None]) ** 2, axis=-1)
                 hit[rows] |= np.any(d2 <= (self.radius[ia, None] + self.radius[None, ib]) ** 2, axis=(1, 2))
         if self._exact is not None:
             geom, gdata, data = self._exact
