@@ -185,3 +185,17 @@ def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model,
     with pytest.warns(UserWarning, match="do not match their checksum\\); recomputing"):
         stamp = spheres.cache_stamp(panda_task.robot)
         assert spheres.read_cache(files[0], stamp, len(panda_model.solid_volume)) is None
+
+
+def test_tight_pairs_go_to_coal_and_stay_conservative(panda_task, panda_model, rng, monkeypatch):
+    robot = panda_task.robot
+    checker = CollisionChecker(robot)
+    q = robot.sample_uniform(400, rng)
+    exact = checker.in_collision(q)
+    default = spheres.SphereChecker(checker, panda_model)
+    monkeypatch.setattr(spheres, "TIGHT_RATE", 0.01)  # nearly every self pair whose spheres touch goes to coal
+    strict = spheres.SphereChecker(checker, panda_model, typical=q[200:])
+    assert strict.pairs["tight"] > default.pairs["tight"] and strict.pairs["exact"] == strict.pairs["tight"]
+    loose, tight = default.in_collision(q), strict.in_collision(q)
+    assert not np.any(exact & ~loose) and not np.any(exact & ~tight)
+    assert np.sum(tight & ~exact) < np.sum(loose & ~exact)
