@@ -196,6 +196,7 @@ def test_tight_pairs_go_to_coal_and_stay_conservative(panda_task, panda_model, r
     monkeypatch.setattr(spheres, "TIGHT_RATE", 0.01)  # nearly every self pair whose spheres touch goes to coal
     strict = spheres.SphereChecker(checker, panda_model, typical=q[200:])
     assert strict.pairs["tight"] > default.pairs["tight"] and strict.pairs["exact"] == strict.pairs["tight"]
+    assert len(strict.exact_pairs) == strict.pairs["exact"]
     loose, tight = default.in_collision(q), strict.in_collision(q)
     assert not np.any(exact & ~loose) and not np.any(exact & ~tight)
     assert np.sum(tight & ~exact) < np.sum(loose & ~exact)

@@ -404,6 +404,7 @@ class SphereChecker:
             self._exact = (g, pin.GeometryData(g), robot.model.createData())
         self.pairs = {"self": len(self_pairs), "obstacle": len(obstacle_pairs), "held": len(held_pairs),
                       "tight": len(tight), "exact": len(exact)}
+        self.exact_pairs = exact  # (a, b) geometry index pairs checked by coal (tight ones included)
 
     def _tight(self, pairs: list[tuple[int, int]], geom: pin.GeometryModel,
                typical: np.ndarray | None) -> list[tuple[int, int]]:
