@@ -2,7 +2,7 @@
 
     python benchmarks/bench_ompl_native.py [--runs 30] [--time 10] [--scenes wall maze]
                                            [--methods cvae atlas-c++ ...] [--workers 1]
-                                           [--out runs/ompl-native] [--resume]
+                                           [--out runs/ompl-native] [--resume] [--set KEY=VALUE ...]
 
 Methods, interleaved per seed in one run: the shipped CVAE with RRT-Connect (our default local
 planner; its search runs in the compiled core when ``manifoldgen_core`` is built, see
@@ -17,12 +17,15 @@ scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCEN
 """
 
 import argparse
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from manifoldgen.bench.planning import RUNS_FILE, Experiment, read_records, run_bench
 from manifoldgen.models import pretrained_model_dir
+from manifoldgen.planning.rrt_connect import RRTConnectSettings
+from manifoldgen.settings import parse_settings
 
 METHODS = ["cvae=rrtconnect@cvae:{model}", "atlas-c++=ompl-native-atlas", "projected-c++=ompl-native-projected",
            "tangent-c++=ompl-native-tangent"]
@@ -62,7 +65,10 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default="runs/ompl-native")
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a setting of our planners (e.g. spheres=true); OMPL's methods ignore it")
     args = parser.parse_args()
+    settings = parse_settings(args.set, None, {f.name: f.default for f in fields(RRTConnectSettings)}, "planner")
     methods = [m.format(model=pretrained_model_dir()) for m in METHODS]
     if args.methods:
         unknown = set(args.methods) - {m.split("=")[0] for m in methods}
@@ -75,7 +81,7 @@ def main() -> None:
              "|---|---|---|---|---|---|---|---|---|"]
     for scene in args.scenes:
         out = Path(args.out) / scene
-        run_bench(Experiment(scene, time_limit=args.time), methods, out, runs=args.runs, workers=args.workers,
+        run_bench(Experiment(scene, time_limit=args.time, planner_settings=settings), methods, out, runs=args.runs, workers=args.workers,
                   resume=args.resume)
         records = [r for r in read_records(out / RUNS_FILE) if r["run"] < args.runs]
         lines += summary(records, labels, scene)

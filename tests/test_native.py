@@ -198,5 +198,10 @@ def test_sphere_models_are_conservative_and_plan_valid_paths(panda_task, wall):
     assert result.solved and result.extras["sphere_checks"] > 0
     states = densify(result.path, space.settings.resolution)[0]
     assert not space.checker.in_collision(states).any() and space.validate_path(result.path).valid
+    # a broad phase, not an approximation: the same search and path as coal alone, with fewer coal checks
+    _, plain = _planner(panda_task, wall, 0)
+    alone = plain.solve(wall.start, wall.goal, 20.0)
+    np.testing.assert_array_equal(alone.path, result.path)
+    assert result.extras["collision_checks"] < alone.extras["collision_checks"]
     with pytest.raises(ManifoldgenError, match="bad sphere model"):
         native.set_spheres(planner.core, {"joint": [1], "center": np.zeros((2, 3)), "radius": [0.1], "geometry": [0]})

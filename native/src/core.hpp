@@ -12,6 +12,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace mgcore {
@@ -28,7 +29,7 @@ struct Counters {
   long jacobians = 0;         // configurations whose residual and Jacobian were evaluated
   long projection_steps = 0;  // projection iterations, summed over rows
   long collision_checks = 0;  // configurations checked with coal (exact meshes)
-  long sphere_checks = 0;     // configurations checked with the sphere models instead
+  long sphere_checks = 0;     // configurations checked with the sphere models first (coal only where they touch)
   std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
 };
 
@@ -73,8 +74,9 @@ class Space {
   void set_tolerance(const Vec& tolerance);  // (m,) after the terms
   // Conservative sphere models (see set_spheres in module.cpp): joint (S,), center (S, 3) in the
   // joint frame, radius (S,), geometry (S,) the robot geometry each covers.
+  // exact: geometry pairs left to coal all the same (spheres that touch while the meshes are apart).
   void set_spheres(const std::vector<int>& joint, const RowMat& center, const Vec& radius,
-                   const std::vector<int>& geometry);
+                   const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact = {});
   void clear_spheres();
   bool has_spheres() const;
   std::string sphere_report() const;  // what the sphere check covers, for people
@@ -90,9 +92,11 @@ class Space {
   void jacobian(const double* q, double* F, double* J);    // J (m, n) row-major; counted as a Jacobian
   double violation(const double* q);                       // max |F_i| / tol_i
   bool within_limits(const double* q) const;
-  bool collision_free(const double* q);                    // exact (coal), counted
-  bool planning_free(const double* q);                     // spheres when set, else exact
-  int code(const double* q, double limit, bool collision, bool exact);  // first failed test, lazily
+  // Exact verdict (coal); with sphere models set, a state whose spheres touch nothing is free without coal.
+  bool collision_free(const double* q);
+  bool spheres_free(const double* q);  // the sphere models' verdict alone (conservative), else exact
+  // first failed test, lazily; exact = false: the sphere models' verdict alone
+  int code(const double* q, double limit, bool collision, bool exact);
 
   // A motion's states (k, n) in order: how many leading ones are valid (intermediate states within the
   // margin, the last one, when it is a node, the plain tolerance); sets stop and counts stopped.

@@ -4,6 +4,7 @@
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/pair.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
@@ -98,13 +99,13 @@ NB_MODULE(manifoldgen_core, m) {
       .def(
           "set_spheres",
           [](Space& s, const std::vector<int>& joint, const In2& center, const In1& radius,
-             const std::vector<int>& geometry) {
+             const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact) {
             if (center.shape(1) != 3) throw nb::value_error("sphere centers must be (S, 3)");
             RowMat c = Eigen::Map<const RowMat>(center.data(), static_cast<long>(center.shape(0)), 3);
-            s.set_spheres(joint, c, vec_of(radius), geometry);
+            s.set_spheres(joint, c, vec_of(radius), geometry, exact);
           },
-          "joint"_a, "center"_a, "radius"_a, "geometry"_a,
-          "Conservative sphere models: planning checks use them (exact coal for pairs they do not cover).")
+          "joint"_a, "center"_a, "radius"_a, "geometry"_a, "exact"_a = std::vector<std::pair<int, int>>(),
+          "Conservative sphere models: every collision check tests them first and runs coal only where they touch.")
       .def("clear_spheres", &Space::clear_spheres)
       .def_prop_ro("has_spheres", &Space::has_spheres)
       .def("sphere_report", &Space::sphere_report)

@@ -164,7 +164,7 @@ struct Local {
   int prefix(const RowMat& s, bool last_is_node) {
     const int k = static_cast<int>(s.rows());
     const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
-    if (!lazy || count == 0 || space.planning_free(s.row(count - 1).data())) return count;
+    if (!lazy || count == 0 || space.collision_free(s.row(count - 1).data())) return count;
     space.stop = COLLISION;
     ++space.counts.stopped[COLLISION];
     return 0;
@@ -174,13 +174,13 @@ struct Local {
   // is found blocked after fewer checks than scanning from its start).
   bool all_valid(const RowMat& s, int k, bool last_is_node) {
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
-    if (lazy) return !last_is_node || !k || space.planning_free(s.row(k - 1).data()) || collided();
+    if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || collided();
     std::vector<std::pair<int, int>> spans{{0, k - 1}};
     for (std::size_t next = 0; next < spans.size(); ++next) {
       const auto [lo, hi] = spans[next];
       if (lo > hi) continue;
       const int mid = (lo + hi) / 2;
-      if (!space.planning_free(s.row(mid).data())) return collided();
+      if (!space.collision_free(s.row(mid).data())) return collided();
       spans.emplace_back(lo, mid - 1);
       spans.emplace_back(mid + 1, hi);
     }
@@ -269,7 +269,7 @@ struct Local {
   // sample, not yet checked for collision) is checked first: a colliding sample costs one check.
   int first_valid(const std::vector<const double*>& starts, const std::vector<const double*>& ends) {
     for (std::size_t i = 0; i < starts.size(); ++i) {
-      const int c = space.code(ends[i], 1.0, true, false);
+      const int c = space.code(ends[i], 1.0, true, true);
       if (c != VALID) {
         space.stop = c;
         ++space.counts.stopped[c];
@@ -326,7 +326,7 @@ struct Search {
       const RowMat states = local.segment_states(tree.row(from), tree.row(child));
       const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
       int free = 0;
-      while (free < k_states && space.planning_free(states.row(free).data())) ++free;
+      while (free < k_states && space.collision_free(states.row(free).data())) ++free;
       if (free == k_states) {
         tree.verified[child] = 1;
         continue;

@@ -101,6 +101,11 @@ struct Space::Impl {
   Vec sphere_radius;
   std::vector<std::vector<int>> spheres_of;  // per geometry: its sphere indices
   std::vector<Eigen::Vector3d> world;         // per sphere: world centre (latest state)
+  // per geometry with spheres: a ball holding them all (centre in the joint frame, radius), tested first
+  std::vector<Eigen::Vector3d> bound_center, bound_world;
+  std::vector<double> bound_radius;
+  std::vector<int> bound_joint;
+  std::vector<char> placed_spheres;  // per geometry: its world centres are up to date
   std::vector<PairTest> tests;
   std::vector<Shape> shapes;  // per geometry
 
@@ -204,17 +209,30 @@ struct Space::Impl {
   // Sphere test of the latest collision kinematics (cdata): true when some tested pair may collide.
   bool spheres_hit(const double* q) {
     pinocchio::forwardKinematics(model, cdata, to_full(q));
-    for (std::size_t s = 0; s < sphere_joint.size(); ++s)
-      world[s] = cdata.oMi[sphere_joint[s]].act(Eigen::Vector3d(sphere_center.row(s).transpose()));
+    // world centres, placed when a geometry's bounding ball is first needed
+    std::fill(placed_spheres.begin(), placed_spheres.end(), false);
+    for (std::size_t g = 0; g < bound_joint.size(); ++g)
+      if (bound_joint[g] >= 0) bound_world[g] = cdata.oMi[bound_joint[g]].act(bound_center[g]);
+    auto place = [&](int g) {
+      if (placed_spheres[g]) return;
+      placed_spheres[g] = true;
+      for (int s : spheres_of[g])
+        world[s] = cdata.oMi[sphere_joint[s]].act(Eigen::Vector3d(sphere_center.row(s).transpose()));
+    };
     bool placed = false;
     for (const PairTest& t : tests) {
       if (t.kind == 0) {
+        if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
+        place(t.a);
+        place(t.b);
         for (int i : spheres_of[t.a])
           for (int j : spheres_of[t.b])
             if ((world[i] - world[j]).squaredNorm() <= std::pow(sphere_radius[i] + sphere_radius[j], 2)) return true;
       } else if (t.kind == 1) {
         const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-        const pinocchio::SE3 pose = cdata.oMi[g.parentJoint] * g.placement;
+        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        place(t.a);
         for (int i : spheres_of[t.a])
           if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
       } else {
@@ -297,7 +315,7 @@ void Space::set_tolerance(const Vec& tolerance) {
 }
 
 void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, const Vec& radius,
-                        const std::vector<int>& geometry) {
+                        const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact) {
   Impl& p = *impl_;
   const std::size_t S = joint.size();
   if (center.rows() != static_cast<long>(S) || center.cols() != 3 || radius.size() != static_cast<long>(S) ||
@@ -318,15 +336,36 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
   p.sphere_center = center;
   p.sphere_radius = radius;
   p.world.assign(S, Eigen::Vector3d::Zero());
+  p.placed_spheres.assign(ng, false);
+  p.bound_center.assign(ng, Eigen::Vector3d::Zero());
+  p.bound_world.assign(ng, Eigen::Vector3d::Zero());
+  p.bound_radius.assign(ng, 0.0);
+  p.bound_joint.assign(ng, -1);
+  for (int g = 0; g < ng; ++g) {
+    if (p.spheres_of[g].empty()) continue;
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int s : p.spheres_of[g]) c += center.row(s).transpose();
+    c /= static_cast<double>(p.spheres_of[g].size());
+    double r = 0.0;
+    for (int s : p.spheres_of[g]) r = std::max(r, (Eigen::Vector3d(center.row(s).transpose()) - c).norm() + radius[s]);
+    p.bound_center[g] = c;
+    p.bound_radius[g] = r;
+    p.bound_joint[g] = joint[p.spheres_of[g].front()];
+  }
   p.shapes.clear();
   for (const auto& g : p.geom.geometryObjects) p.shapes.push_back(shape_of(g));
   p.tests.clear();
   for (std::size_t k = 0; k < p.geom.collisionPairs.size(); ++k) {
     const int a = static_cast<int>(p.geom.collisionPairs[k].first), b = static_cast<int>(p.geom.collisionPairs[k].second);
     const bool sa = !p.spheres_of[a].empty(), sb = !p.spheres_of[b].empty();
-    if (sa && sb) p.tests.push_back({0, a, b, k});
+    const bool forced = std::find(exact.begin(), exact.end(), std::make_pair(a, b)) != exact.end() ||
+                        std::find(exact.begin(), exact.end(), std::make_pair(b, a)) != exact.end();
+    // a primitive (box, sphere, cylinder: an obstacle, a held tray) is tested exactly against the other's
+    // spheres, tighter than its own spheres would be
+    if (forced) p.tests.push_back({2, a, b, k});
     else if (sa && p.shapes[b].kind >= 0) p.tests.push_back({1, a, b, k});
     else if (sb && p.shapes[a].kind >= 0) p.tests.push_back({1, b, a, k});
+    else if (sa && sb) p.tests.push_back({0, a, b, k});
     else p.tests.push_back({2, a, b, k});
   }
   // cheapest first: primitives, then sphere pairs, exact pairs last
@@ -394,12 +433,17 @@ bool Space::within_limits(const double* q) const {
 }
 
 bool Space::collision_free(const double* q) {
+  Impl& p = *impl_;
+  if (p.geom.collisionPairs.empty()) return true;
+  if (!p.sphere_joint.empty()) {  // the broad phase: spheres that touch nothing cover meshes that touch nothing
+    ++counts.sphere_checks;
+    if (!p.spheres_hit(q)) return true;
+  }
   ++counts.collision_checks;
-  if (impl_->geom.collisionPairs.empty()) return true;
-  return !pinocchio::computeCollisions(impl_->model, impl_->cdata, *impl_->manager, impl_->to_full(q), true);
+  return !pinocchio::computeCollisions(p.model, p.cdata, *p.manager, p.to_full(q), true);
 }
 
-bool Space::planning_free(const double* q) {
+bool Space::spheres_free(const double* q) {
   if (impl_->sphere_joint.empty()) return collision_free(q);
   ++counts.sphere_checks;
   return !impl_->spheres_hit(q);
@@ -408,7 +452,7 @@ bool Space::planning_free(const double* q) {
 int Space::code(const double* q, double limit, bool collision, bool exact) {
   if (!within_limits(q)) return LIMITS;
   if (violation(q) > limit) return CONSTRAINT;
-  if (collision && !(exact ? collision_free(q) : planning_free(q))) return COLLISION;
+  if (collision && !(exact ? collision_free(q) : spheres_free(q))) return COLLISION;
   return VALID;
 }
 
@@ -416,7 +460,7 @@ int Space::valid_prefix(const double* states, int k, bool last_is_node, bool col
   const int nn = n();
   const double inner = 1.0 - impl_->margin;
   for (int i = 0; i < k; ++i) {
-    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, collision, false);
+    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, collision, true);
     if (c != VALID) {
       stop = c;
       ++counts.stopped[c];

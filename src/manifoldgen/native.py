@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import tempfile
 import time
+import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -134,14 +136,34 @@ def core_space(space: ConstrainedSpace):
 def set_spheres(core, spheres: dict) -> str:
     """Give the core conservative sphere models: ``spheres`` holds ``joint (S,)`` pinocchio joint ids,
     ``center (S, 3)`` in that joint's frame, ``radius (S,)``, ``geometry (S,)`` the robot geometry each
-    covers. Returns what the sphere check covers (sphere-sphere, sphere-primitive, exact pairs)."""
+    covers, and optionally ``exact``: geometry pairs ``(a, b)`` left to coal. Returns what the sphere
+    check covers (sphere-sphere, sphere-primitive, exact pairs)."""
     try:
         core.set_spheres([int(j) for j in spheres["joint"]], np.ascontiguousarray(spheres["center"], float),
-                         np.ascontiguousarray(spheres["radius"], float), [int(g) for g in spheres["geometry"]])
+                         np.ascontiguousarray(spheres["radius"], float), [int(g) for g in spheres["geometry"]],
+                         [(int(a), int(b)) for a, b in spheres.get("exact", ())])
     except (KeyError, RuntimeError, ValueError, TypeError) as exc:
         raise ManifoldgenError(f"bad sphere model: {exc}; give joint (S,), center (S, 3), radius (S,), "
                                "geometry (S,)") from exc
     return core.sphere_report()
+
+
+_SPHERES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # CollisionChecker -> its sphere arrays
+
+
+def space_spheres(space: ConstrainedSpace) -> dict:
+    """The sphere models of ``space``'s robot and held object (:mod:`manifoldgen.spheres`, cached on disk)
+    with the pairs they leave to coal (mesh obstacles, geometries without spheres, tight self pairs), as
+    :func:`set_spheres` takes them; kept per collision checker."""
+    checker = space.checker
+    if checker not in _SPHERES:
+        from manifoldgen.spheres import SphereChecker
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the pairs left to coal are listed in "exact"
+            spheres = SphereChecker(checker)
+        _SPHERES[checker] = {"joint": spheres.joint, "center": spheres.center, "radius": spheres.radius,
+                             "geometry": spheres.geometry, "exact": list(spheres.exact_pairs)}
+    return _SPHERES[checker]
 
 
 def _rows(q: np.ndarray, n: int) -> np.ndarray:
@@ -179,7 +201,6 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
     """Add the core's counts between ``before`` and ``after`` to ``space``'s counters."""
     for key in COUNTERS:
         setattr(space, key, getattr(space, key) + after[key] - before[key])
-    space.collision_checks += after["sphere_checks"] - before["sphere_checks"]
     for reason in REASONS:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 

@@ -22,9 +22,12 @@ class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
     search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and the constraint is built
     in, else Python; the result's ``extras['core']`` says which, ``extras['core_fallback']`` why not
-    native), ``python``, or ``native`` (an error when the core cannot run it)."""
+    native), ``python``, or ``native`` (an error when the core cannot run it); ``spheres``: the core's
+    planning checks use conservative sphere models of the robot (:mod:`manifoldgen.spheres`), the final
+    dense check of a path stays exact."""
 
     core: str = "auto"
+    spheres: bool = False
 
     def check(self) -> None:
         super().check()
@@ -50,6 +53,8 @@ class RRTConnect(Planner):
                 raise ManifoldgenError(f"{reason}; {native.BUILD_HINT}" if native.core_module() is None
                                        else f"{reason}; use core='python' or 'auto'")
             self.core = None if reason else native.core_space(self.space)
+            if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:
+                native.set_spheres(self.core, native.space_spheres(self.space))
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
         self.sphere_checks = self.cut_edges = 0
