@@ -144,7 +144,7 @@ def test_sbl_checks_edges_only_on_candidate_paths():
     assert 0 < lazy["edges_removed"] < lazy["edges_checked"] < 0.6 * sum(result.extras["nodes"])
     again, *_ = _planner("sbl", "interpolate", corridor_problem, seed=1)
     np.testing.assert_array_equal(again.solve(start, goal, 20.0).path, result.path)
-    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0 and dimensions >= 0, got 0, 0"):
+    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0, dimensions >= 0 and bridge >= 0, got 0, 0, 0.6"):
         _planner("sbl", "auto", corridor_problem, cells=0)
 
 
