@@ -277,8 +277,8 @@ class Planner(ABC):
     def _goal_target(self, goal: np.ndarray, radius: float) -> np.ndarray:
         """A target near the goal for a single tree's goal bias: with stepping stones and a local
         planner that walks, the end of a walk on the manifold from the goal toward a sample, at most
-        ``radius`` long, whose states all join the pool (a sampler seldom puts samples near a
-        given goal, and a tree steps only through samples); else the goal itself."""
+        ``radius`` long (and its last step), whose states all join the pool (a sampler seldom puts
+        samples near a given goal, and a tree steps only through samples); else the goal itself."""
         if self.pool is None or not self.local.walks:
             return goal
         waypoints, _ = self.local.walk(goal, self._draw(), radius)
