@@ -130,6 +130,45 @@ def test_unreachable_conditions_and_targets_are_one_clear_line(tmp_path, changes
     assert "\n" not in str(info.value)
 
 
+# a pr2 configuration on the tray manifold at (0.3 m, 0) whose arms cross: the right upper arm, elbow and forearm
+# go through the tray (and the left gripper through the right upper arm)
+TRAY_THROUGH_ARM = [0.0, 0.4818, -0.3854, 0.8, -2.3212, 2.443, -2.079, 1.8204, 0.3373, -0.5236, 0.9845, -2.2464,
+                    2.414, -2.094, 1.6416]
+
+
+def _cli_error(args) -> str:
+    """The one error line of ``manifoldgen ARGS``, which must exit 2."""
+    from typer.testing import CliRunner
+
+    from manifoldgen.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args], terminal_width=400)
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1, result.output
+    return errors[0]
+
+
+def test_the_issues_bad_inputs_exit_2_with_one_line(tmp_path):
+    """The dual-arm issue's bad inputs through the CLI: two frames that are the same, a (d, pitch) no
+    configuration reaches, a tray target out of both arms' reach, a start where the tray goes through an arm."""
+    same = _variant(tmp_path, "pr2", 'frame_b = "l_gripper_tool_frame"', 'frame_b = "r_gripper_tool_frame"')
+    assert "closed chain frames are both 'r_gripper_tool_frame'; give two different frames" in _cli_error(
+        ["collect", same, "--per-condition", "2", "-o", tmp_path / "x.npz"])
+    plan = ["plan", "dualarm", "--robot", "pr2", "--sampler", "project", "--time", "1", "-o", tmp_path / "p.npz",
+            "--scene"]
+    assert "no configuration of pr2 satisfies the task at condition distance = 3, pitch = 0" in _cli_error(
+        [*plan, _scene_variant(tmp_path, condition=[3.0, 0.0])])
+    assert "at the goal target {'position': [0.55, 1.5, 0.5]}" in _cli_error(
+        [*plan, _scene_variant(tmp_path, goal={"position": [0.55, 1.5, 0.5]})])
+    task = get_task("dualarm", "pr2")
+    assert task.constraint.satisfied(np.array(TRAY_THROUGH_ARM), [0.3, 0.0])[0]
+    assert {"r_forearm_link_0", "tray"} in [set(pair) for pair in task_checker(task).collisions(TRAY_THROUGH_ARM)]
+    assert _cli_error([*plan, _scene_variant(tmp_path, start=TRAY_THROUGH_ARM)]).startswith(
+        "error: start configuration is in collision: ")
+    assert not list(tmp_path.glob("*.npz"))
+
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 

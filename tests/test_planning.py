@@ -11,6 +11,7 @@ from manifoldgen.constraints import ConstraintSet, OrientationConstraint, PlaneC
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning import PLANNERS, PlanResult, RRTConnectSettings, RRTSettings, shortcut
+from manifoldgen.planning.base import Tree
 from manifoldgen.robot import Robot
 from manifoldgen.sampling import DatasetSampler, ProjectionSampler, UniformSampler
 from manifoldgen.scene import get_scene
@@ -144,7 +145,7 @@ def test_sbl_checks_edges_only_on_candidate_paths():
     assert 0 < lazy["edges_removed"] < lazy["edges_checked"] < 0.6 * sum(result.extras["nodes"])
     again, *_ = _planner("sbl", "interpolate", corridor_problem, seed=1)
     np.testing.assert_array_equal(again.solve(start, goal, 20.0).path, result.path)
-    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0 and dimensions >= 0, got 0, 0"):
+    with pytest.raises(ManifoldgenError, match="SBL needs cells > 0, dimensions >= 0 and bridge >= 0, got 0, 0, 0.6"):
         _planner("sbl", "auto", corridor_problem, cells=0)
 
 
@@ -220,3 +221,34 @@ def test_cbirrt_without_a_sampler_draws_uniform_targets():
     space = ConstrainedSpace(constraint, y, checker)
     result = PLANNERS.get("cbirrt")(space, None, seed=0).solve(start, goal, 20.0)
     _check(result, space, start, goal)
+
+
+class _AwayFromGoal(ProjectionSampler):
+    """Projection samples none of which lies within 0.7 of the sphere's north pole (the goal): a sampler that
+    leaves the goal's neighbourhood empty, as the learned samplers leave a tray goal's."""
+
+    def candidates(self, count):
+        q = super().candidates(count)
+        return q[np.linalg.norm(q - [0.0, 0.0, 1.0], axis=1) > 0.7]
+
+
+@pytest.mark.parametrize("name", ["rrt", "kpiece", "prm"])
+def test_single_query_planners_reach_a_goal_no_sample_lies_near(name):
+    """RRT and KPIECE step only through samples, so no node ever comes within range of a goal with no sample
+    near it; their goal-biased growth walks out from the goal for its targets (each state walked valid, on the
+    sphere, within goal_radius of the goal, joining the pool). PRM expands the goal's component instead."""
+    constraint, y, checker, start, goal = sphere_problem()
+    space = ConstrainedSpace(constraint, y, checker)
+    cls = PLANNERS.get(name)
+    planner = cls(space, _AwayFromGoal(space, seed=3), seed=3, settings=cls.settings_type(range=0.3))
+    _check(planner.solve(start, goal, 20.0), space, start, goal)
+    if name == "prm":
+        return
+    planner.trees = [Tree(start)]
+    planner._start_pool(planner.trees, np.inf)
+    before = planner.pool.head
+    target = planner._goal_target(goal, 0.5)
+    walked = planner.pool.q[before:planner.pool.head]
+    assert len(walked) and np.array_equal(walked[-1], target)
+    assert np.linalg.norm(target - goal) <= 0.5 + planner.settings.step and space.valid(walked).all()  # walks end their last step
+    assert np.abs(np.linalg.norm(walked, axis=1) - 1.0).max() < 0.01

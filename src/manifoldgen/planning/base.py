@@ -134,6 +134,7 @@ class Planner(ABC):
         self.iterations = self.samples = self.rejected = self.out_of_reach = 0
         self.trees: list[Tree] = []
         self.pool: SamplePool | None = None
+        self._goal_gap = np.inf  # the closest a node of a single tree came to the goal
 
     # ---------------------------------------------------------------- the contract
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
@@ -144,7 +145,7 @@ class Planner(ABC):
         before = self.sampler.stats.to_dict()
         counts, projections = self.space.counts(), self.local.projections
         self.iterations = self.samples = self.rejected = self.out_of_reach = 0
-        self.trees, self.pool = [], None
+        self.trees, self.pool, self._goal_gap = [], None, np.inf
         began = time.perf_counter()
         failure = ""
         try:
@@ -259,14 +260,55 @@ class Planner(ABC):
         return report
 
     def _reach_goal(self, tree: Tree, node: int, goal: np.ndarray) -> np.ndarray | None:
-        """Join ``node`` to the goal when it is within ``range``; the accepted path or None."""
-        if np.linalg.norm(goal - tree.q[node]) > self.settings.range:
+        """Join ``node`` to the goal when it is within ``range``, or, with a local planner that
+        walks, when it is the closest node to the goal yet (a single tree seldom comes within range
+        of a goal that few samples lie near); the accepted path or None."""
+        gap = float(np.linalg.norm(goal - tree.q[node]))
+        closest = gap < self._goal_gap
+        self._goal_gap = min(gap, self._goal_gap)
+        if gap > self.settings.range and not (closest and self.local.walks):
             return None
         waypoints = self.local.connect(tree.q[node], goal)
         if waypoints is None:
             return None
         branch = tree.branch(tree.add(node, waypoints))
         return self._finish(tree.q[branch], [(tree, k) for k in branch[1:]])
+
+    def _goal_target(self, goal: np.ndarray, radius: float) -> np.ndarray:
+        """A target near the goal for a single tree's goal bias: with stepping stones and a local
+        planner that walks, the end of a walk on the manifold from the goal toward a sample, at most
+        ``radius`` long (and its last step), whose states all join the pool (a sampler seldom puts
+        samples near a given goal, and a tree steps only through samples); else the goal itself."""
+        if self.pool is None or not self.local.walks:
+            return goal
+        waypoints, _ = self.local.walk(goal, self._draw(), radius)
+        if not len(waypoints):
+            return goal
+        self.pool.add(waypoints)
+        return waypoints[-1]
+
+    def _toward_goal(self, goal: np.ndarray, radius: float, deadline: float) -> np.ndarray | None:
+        """A single tree's goal-biased step: grow toward a target within ``radius`` of the goal (see
+        :meth:`_goal_target`) for as long as it makes progress: through the pooled samples that bring
+        it closer, as RRT-Connect's connect, else with the local planner (a walk on the manifold
+        under ``auto``), trying the goal from every new node; the accepted path or None."""
+        tree, target = self.trees[0], self._goal_target(goal, radius)
+        while time.perf_counter() < deadline:
+            node = tree.nearest(target)
+            gap = float(np.linalg.norm(target - tree.q[node]))
+            reached = False
+            new = None
+            if self.pool is not None and gap > self.settings.range:
+                new = self._far(0, node, target, than=gap)
+            if new is None:  # in range, or no pooled sample brings the tree closer: the local planner
+                waypoints, reached = self.local.steer(tree.q[node], target, self.settings.range)
+                new = tree.add(node, waypoints) if len(waypoints) else None
+            if new is None:
+                return None
+            path = self._reach_goal(tree, new, goal)
+            if path is not None or reached:
+                return path
+        return None
 
     def _finish(self, waypoints: np.ndarray, edges: list[tuple[Tree, int]]) -> np.ndarray | None:
         """Dense-check a candidate path; segment s of ``waypoints`` is the edge into node

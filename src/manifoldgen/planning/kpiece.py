@@ -14,26 +14,31 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 @dataclass
 class KPIECESettings(PlannerSettings):
-    """goal_bias: probability of growing toward the goal; border_fraction: probability of
-    expanding a border cell (fewer than 2 d occupied neighbours); cells: grid cells along each
-    of the ``dimensions`` projected axes (0: max(2, ceil(log2 n)))."""
+    """goal_bias: probability of growing toward the goal (OMPL's 0.05 doubled: KPIECE's border-cell
+    expansions walk more than RRT's steps, and at 0.05 it solved 8 of 10 pr2 tray-over runs), and
+    goal_radius how far from it the target of that growth may lie (see
+    :meth:`Planner._toward_goal`); border_fraction: probability of expanding a border cell (fewer
+    than 2 d occupied neighbours); cells: grid cells along each of the ``dimensions`` projected axes
+    (0: max(2, ceil(log2 n)))."""
 
-    goal_bias: float = 0.05
+    goal_bias: float = 0.1
+    goal_radius: float = 1.8
     border_fraction: float = 0.9
     cells: int = 20
     dimensions: int = 0
 
     def check(self) -> None:
         super().check()
-        if not (0 <= self.goal_bias <= 1 and 0 <= self.border_fraction <= 1 and self.cells > 0
-                and self.dimensions >= 0):
-            raise ManifoldgenError("KPIECE needs goal_bias and border_fraction in [0, 1], cells > 0, dimensions >= 0")
+        if not (0 <= self.goal_bias <= 1 and 0 <= self.border_fraction <= 1 and self.goal_radius > 0
+                and self.cells > 0 and self.dimensions >= 0):
+            raise ManifoldgenError("KPIECE needs goal_bias and border_fraction in [0, 1], goal_radius > 0, cells > 0, "
+                                   "dimensions >= 0")
 
 
 class KPIECE(Planner):
     """Single tree; each iteration picks a cell (border cells first, then the less selected
-    and less covered), then the node of that cell closest to a sample (or the goal), and
-    extends it toward that sample."""
+    and less covered), then the node of that cell closest to a sample, and extends it toward that
+    sample; with probability ``goal_bias`` it grows toward the goal instead, as RRT does."""
 
     name = "kpiece"
     settings_type = KPIECESettings
@@ -50,32 +55,37 @@ class KPIECE(Planner):
         grid.add(0, start)
         while time.perf_counter() < deadline:
             self.iterations += 1
-            cell = grid.choose(self.rng, settings.border_fraction)
-            to_goal = self.rng.random() < settings.goal_bias
-            target = goal if to_goal else self._draw()
-            members = [m for m in grid.members[cell] if np.isfinite(tree.q[m, 0])]  # not cut by a failed check
-            if not members:
-                continue
-            node = members[int(np.argmin(np.linalg.norm(tree.q[members] - target, axis=1)))]
             first = len(tree)
-            new = self._extend(tree, node, target, keep=not to_goal)
-            if new is None:
-                continue
+            if self.rng.random() < settings.goal_bias:
+                path = self._toward_goal(goal, settings.goal_radius, deadline)
+            else:
+                path = self._explore(tree, grid, goal)
             for i in range(first, len(tree)):
-                grid.add(i, tree.q[i])
-            path = self._reach_goal(tree, new, goal)
+                if np.isfinite(tree.q[i, 0]):  # not cut by a failed check
+                    grid.add(i, tree.q[i])
             if path is not None:
                 return path
         return None
 
-    def _extend(self, tree: Tree, node: int, target: np.ndarray, keep: bool) -> int | None:
+    def _explore(self, tree: Tree, grid: _Grid, goal: np.ndarray) -> np.ndarray | None:
+        """Extend the node of a chosen cell closest to a sample toward it; the path when the new
+        node reaches the goal, else None."""
+        cell = grid.choose(self.rng, self.settings.border_fraction)
+        target = self._draw()
+        members = [m for m in grid.members[cell] if np.isfinite(tree.q[m, 0])]  # not cut by a failed check
+        if not members:
+            return None
+        node = members[int(np.argmin(np.linalg.norm(tree.q[members] - target, axis=1)))]
+        new = self._extend(tree, node, target)
+        return None if new is None else self._reach_goal(tree, new, goal)
+
+    def _extend(self, tree: Tree, node: int, target: np.ndarray) -> int | None:
         """Grow ``node`` toward ``target``: through the pooled sample within range of it closest to
         the target when the local planner uses stepping stones, walking when there is none."""
         origin = tree.q[node]
         steer = self.local.steer
         if self.pool is not None and np.linalg.norm(target - origin) > self.settings.range:
-            if keep:
-                self.pool.add(target[None])
+            self.pool.add(target[None])
             stone = self.pool.take_near(origin, target)
             if stone is None:
                 self.out_of_reach += 1

@@ -4,10 +4,11 @@ Two trees, rooted at the start and the goal, take turns to grow. A tree picks a 
 over a random low-dimensional projection with probability inversely proportional to the nodes in
 it (OMPL's way of favouring sparse regions), one of its nodes at random, and adds a node near it.
 That edge is not checked. When the new node falls in a cell the other tree occupies, it is bridged
-to the other tree's node in that cell closest to it (OMPL's rule; the 2001 paper bridges to the
-closest node within a distance, which in 7 and more dimensions the trees seldom reach), and only
-then are the edges of the path start .. bridge .. goal checked, in order from the start, each with
-the local planner (a chord that leaves the manifold becomes a projected walk under ``auto`` and
+to the other tree's node in that cell closest to it (OMPL's rule), and else to the other tree's
+nearest node if that lies within ``bridge`` (the 2001 paper's rule: the trees seldom share a cell
+of the grid on a manifold of 6 and more dimensions, where the cells' projection mixes it with the
+joints it does not span), and only then are the edges of the path start .. bridge .. goal
+checked, in order from the start, each with the local planner (a chord that leaves the manifold becomes a projected walk under ``auto`` and
 ``project``). An edge that passes is never checked again. A bridge that fails is dropped. A tree
 edge that fails is removed, and the nodes beyond it, still joined to the other tree through the
 bridge, move to that tree, as in the 2001 paper (OMPL's SBL deletes them instead; keeping them
@@ -18,11 +19,11 @@ validation like every planner's, and a segment that fails it is handled the same
 node leaves the manifold, so the new node is one of the sampler's samples. The planner draws a
 sample (the direction; it joins the pool) and takes the pooled sample within ``range`` of the node
 that lies closest to it, as the other tree planners steer through stepping stones; the edge to it
-stays unchecked. Where no pooled sample is within range of the node the iteration ends, unless none
-is within range of the whole tree (samples too sparse for stepping stones): then the pool draws a
-batch and the node walks toward the drawn sample on the manifold for at most ``range``, as it
-always does with the ``project`` local planner (no stepping stones). A walk is checked as it goes,
-so its edges are born checked.
+stays unchecked. Where no pooled sample is within range of the node, the node walks toward the
+drawn sample on the manifold for at most ``range``, as it always does with the ``project`` local
+planner (no stepping stones). A walk is checked as it goes, so its edges are born checked. The pool
+grows by the one drawn sample per iteration (drawing batches for a tree with no sample in reach, as
+RRT-Connect does, spent half of SBL's time on samples that landed far from both trees).
 """
 
 from __future__ import annotations
@@ -39,15 +40,18 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 @dataclass
 class SBLSettings(PlannerSettings):
     """cells: grid cells along each of the ``dimensions`` projected axes (0: max(2, ceil(log2 n)))
-    of the density grid that picks the node to expand."""
+    of the density grid that picks the node to expand; bridge: distance (rad) within which a new
+    node outside the other tree's cells is bridged to that tree's nearest node."""
 
     cells: int = 20
     dimensions: int = 0
+    bridge: float = 0.6
 
     def check(self) -> None:
         super().check()
-        if self.cells <= 0 or self.dimensions < 0:
-            raise ManifoldgenError(f"SBL needs cells > 0 and dimensions >= 0, got {self.cells}, {self.dimensions}")
+        if self.cells <= 0 or self.dimensions < 0 or self.bridge < 0:
+            raise ManifoldgenError(f"SBL needs cells > 0, dimensions >= 0 and bridge >= 0, got {self.cells}, "
+                                   f"{self.dimensions}, {self.bridge}")
 
 
 class SBL(Planner):
@@ -99,10 +103,7 @@ class SBL(Planner):
                 new = tree.add(node, stone[None])
                 self._grids[k].add(new)
                 return new
-            if self.pool.reachable(k):
-                return None
             self.out_of_reach += 1
-            self.pool.draw(self.pool.batch)
             if not self.local.walks:
                 return None
         waypoints, _ = self.local.walk(origin, target, self.settings.range)
@@ -116,13 +117,17 @@ class SBL(Planner):
         return new
 
     def _bridge(self, k: int, new: int) -> np.ndarray | None:
-        """Bridge node ``new`` of tree ``k`` to the closest node of the other tree in its cell, if
-        any; check the path through the bridge lazily, then densely: the path or None."""
+        """Bridge node ``new`` of tree ``k`` to the closest node of the other tree in its cell, or
+        else to the other tree's nearest node when that lies within ``bridge``; check the path
+        through the bridge lazily, then densely: the path or None."""
         other, q = self.trees[1 - k], self.trees[k].q[new]
         members = self._grids[1 - k].cells.get(self._grids[1 - k].cell(q))
-        if not members:
-            return None
-        near = members[int(np.argmin(np.linalg.norm(other.q[members] - q, axis=1)))]
+        if members:
+            near = members[int(np.argmin(np.linalg.norm(other.q[members] - q, axis=1)))]
+        else:
+            near = other.nearest(q)
+            if np.linalg.norm(other.q[near] - q) > self.settings.bridge:
+                return None
         ends = (new, near) if k == 0 else (near, new)
         edges = [(0, i) for i in self.trees[0].branch(ends[0])[1:]] + [None] + \
                 [(1, i) for i in self.trees[1].branch(ends[1])[:0:-1]]
