@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
 # Whole-body balance (issue 9): every figure of the README's "Whole-body balance" section, one command.
 #
-#     bash benchmarks/bench_balance.sh [OUT=runs/balance] [RUNS=30] [TIME=30] [STEPS="reach others drinkcan"]
+#     bash benchmarks/bench_balance.sh [OUT=runs/balance] [RUNS=30] [TIME=30] [STEPS="reach others drinkcan"] [WORKERS=1]
 #
 # reach (per robot, talos then centauro): collect 2,500 stable configurations per pelvis/base height (seed 0),
 #   train a CVAE (its default: residual penalty on the equalities, penalty on the CoM-margin inequality), score
 #   it per condition (`bench sampling`: accuracy = equalities within tolerance AND CoM inside with its margin;
 #   coverage against fresh projection samples), then plan the reach scene RUNS times (seeds 0..RUNS-1) with the
 #   learned sampler + RRT-Connect and the balance-blind planner, every solved path checked for static stability
-#   state by state and executed in MuJoCo (`--physics`); one worker, so the times are one process's.
-# others: the other planners on the same reach scenes, 10 seeds each, 2 workers: the learned sampler with SBL,
+#   state by state and executed in MuJoCo (`--physics`); WORKERS processes (1: the times are one process's).
+# others: the other planners on the same reach scenes, 10 seeds each, one worker: the learned sampler with SBL,
 #   RRT and KPIECE; uniform + projection with RRT-Connect; CBiRRT; OMPL Projected / Atlas; the CoM-blind planner.
 # drinkcan: collect 2,500 upright-can configurations per wrist yaw, train a CVAE, plan the drinkcan scene 10 times
 #   with the learned sampler + RRT-Connect, uniform + projection + RRT-Connect and CBiRRT.
@@ -20,6 +20,7 @@ out=${1:-runs/balance}
 runs=${2:-30}
 time=${3:-30}
 steps=${4:-reach others drinkcan}
+workers=${5:-1}
 mg=(.venv/bin/manifoldgen)
 [ -x "${mg[0]}" ] || mg=(manifoldgen)
 mkdir -p "$out"
@@ -34,12 +35,12 @@ for r in talos centauro; do
   if [[ " $steps " == *" reach "* ]]; then
     [ -f "$out/sampling-$r/table.md" ] || "${mg[@]}" bench sampling "$cvae" -o "$out/sampling-$r" \
         --samples 1000 --reference 1000 --repeats 3 --threads 1
-    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs "$runs" --time "$time" --workers 1 --resume \
+    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs "$runs" --time "$time" --workers "$workers" --resume \
       "${settings[@]}" --physics -o "$out/plan-$r" \
       -m "cvae-rrtconnect=rrtconnect@cvae:$cvae,batch=256" -m "blind=rrtconnect:direct@blind"
   fi
   if [[ " $steps " == *" others "* ]]; then
-    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs 10 --time "$time" --workers 2 --resume \
+    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs 10 --time "$time" --workers 1 --resume \
       "${settings[@]}" -o "$out/others-$r" \
       -m "cvae-sbl=sbl@cvae:$cvae,batch=256" -m "cvae-rrt=rrt@cvae:$cvae,batch=256" \
       -m "cvae-kpiece=kpiece@cvae:$cvae,batch=256" -m "project-rrtconnect=rrtconnect@project" \
