@@ -1,36 +1,79 @@
 #!/usr/bin/env bash
-# Whole-body balance (issue 9): data, models, sampling accuracy/coverage and the reach benchmark, both robots.
+# Whole-body balance (issue 9): every figure of the README's "Whole-body balance" section, one command.
 #
-#     bash benchmarks/bench_balance.sh [OUT=runs/balance] [ROBOTS="talos centauro"] [RUNS=10] [TIME=30]
+#     bash benchmarks/bench_balance.sh [OUT=runs/balance] [RUNS=30] [TIME=30] [STEPS="reach others drinkcan"] [WORKERS=1]
 #
-# Per robot: collect 2,500 stable configurations per pelvis/base height (seed 0), train a CVAE and a CGAN
-# (their defaults: residual penalty on the feet/height equalities and on the CoM-margin inequality), score
-# them per condition (`bench sampling`: raw and refined accuracy = equalities within tolerance AND CoM
-# inside the polygon with its margin; coverage against fresh projection samples), then plan the reach
-# scene RUNS times with every method (`bench plan`; results.md holds the planning table and the static
-# stability of every solved path). Finished steps are skipped when rerun (bench plan resumes).
+# reach (per robot, talos then centauro): collect 2,500 stable configurations per pelvis/base height (seed 0),
+#   train a CVAE (its default: residual penalty on the equalities, penalty on the CoM-margin inequality), score
+#   it per condition (accuracy = equalities within tolerance AND CoM inside with its margin; talos also coverage
+#   against fresh projection samples, `bench sampling`), then plan the reach scene RUNS times (seeds 0..RUNS-1) with the
+#   learned sampler + RRT-Connect and the balance-blind planner, every solved path checked for static stability
+#   state by state and executed in MuJoCo (`--physics`); WORKERS processes (1: the times are one process's).
+# others: the other planners on the same reach scenes, 10 seeds each, one worker: the learned sampler with SBL,
+#   RRT and KPIECE; uniform + projection with RRT-Connect; CBiRRT; OMPL Projected / Atlas; the CoM-blind planner.
+# drinkcan: collect 2,500 upright-can configurations per wrist yaw, train a CVAE, plan the drinkcan scene 10 times
+#   with the learned sampler + RRT-Connect, uniform + projection + RRT-Connect and CBiRRT; sample accuracy per yaw;
+#   one learned-sampler path rechecked by examples/check_path.py. The reach step ends with the README's snapshots.
+# The README's figures: talos RUNS=30 WORKERS=1; centauro's reach with RUNS=20 WORKERS=2 (its physics checks are dear).
+# Finished steps are skipped when rerun (`bench plan` resumes); results.md in each plan folder holds the tables.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-runs/balance}
-robots=${2:-talos centauro}
-runs=${3:-10}
-time=${4:-30}
+runs=${2:-30}
+time=${3:-30}
+steps=${4:-reach others drinkcan}
+workers=${5:-1}
 mg=(.venv/bin/manifoldgen)
 [ -x "${mg[0]}" ] || mg=(manifoldgen)
+py=.venv/bin/python
+[ -x "$py" ] || py=python
 mkdir -p "$out"
-for r in $robots; do
-  d="$out/$r"
-  [ -f "$d.npz" ] || "${mg[@]}" collect balance --robot "$r" --per-condition 2500 --seed 0 -o "$d.npz"
-  for m in cvae cgan; do
-    [ -f "$d-$m/model.json" ] || "${mg[@]}" train "$d.npz" --model "$m" --seed 0 -o "$d-$m"
-  done
-  [ -f "$out/sampling-$r/table.md" ] || "${mg[@]}" bench sampling "$d-cvae" "$d-cgan" -o "$out/sampling-$r" \
-      --samples 1000 --reference 1000 --repeats 3 --threads 1
-  "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs "$runs" --time "$time" --workers 2 --resume \
-    --set pool=32 --set pool_batch=64 -o "$out/plan-$r" \
-    -m "cvae-rrtconnect=rrtconnect@cvae:$d-cvae,batch=256" -m "cvae-rrt=rrt@cvae:$d-cvae,batch=256" \
-    -m "cvae-kpiece=kpiece@cvae:$d-cvae,batch=256" -m "project-rrtconnect=rrtconnect@project" \
-    -m "cbirrt=cbirrt:project@uniform" -m "ompl-projected=ompl-projected-rrtconnect" \
-    -m "ompl-atlas=ompl-atlas-rrtconnect" -m "blind=rrtconnect:direct@blind" \
-    -m "cgan-rrtconnect=rrtconnect@cgan:$d-cgan,batch=256" -m "feet-only=rrtconnect@feet-only"
+settings=(--set pool=32 --set pool_batch=64)
+model() {  # model TASK ROBOT NAME: dataset and CVAE
+  [ -f "$out/$3.npz" ] || "${mg[@]}" collect "$1" --robot "$2" --per-condition 2500 --seed 0 -o "$out/$3.npz"
+  [ -f "$out/$3-cvae/model.json" ] || "${mg[@]}" train "$out/$3.npz" --model cvae --seed 0 -o "$out/$3-cvae"
+}
+for r in talos centauro; do
+  case " $steps " in *" reach "*|*" others "*) model balance "$r" "$r" ;; esac
+  cvae="$out/$r-cvae"
+  if [[ " $steps " == *" reach "* ]]; then
+    if [ "$r" = talos ]; then  # accuracy and coverage against fresh projection samples
+      [ -f "$out/sampling-$r/table.md" ] || "${mg[@]}" bench sampling "$cvae" -o "$out/sampling-$r" \
+          --samples 1000 --reference 1000 --repeats 1 --threads 1
+    else  # accuracy only: centauro's reference samples would take ~1 h to collect (4 rows/s)
+      for y in 0.7 0.75 0.8 0.85; do
+        "${mg[@]}" sample "$cvae" --condition="$y" -n 1000 --refine 2 -o "$out/samples-$r-$y.npz"
+      done
+    fi
+    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs "$runs" --time "$time" --workers "$workers" --resume \
+      "${settings[@]}" --physics -o "$out/plan-$r" \
+      -m "cvae-rrtconnect=rrtconnect@cvae:$cvae,batch=256" -m "blind=rrtconnect:direct@blind"
+  fi
+  if [[ " $steps " == *" others "* ]]; then
+    "${mg[@]}" bench plan balance --robot "$r" --scene reach --runs 10 --time "$time" --workers 1 --resume \
+      "${settings[@]}" -o "$out/others-$r" \
+      -m "cvae-sbl=sbl@cvae:$cvae,batch=256" -m "cvae-rrt=rrt@cvae:$cvae,batch=256" \
+      -m "cvae-kpiece=kpiece@cvae:$cvae,batch=256" -m "project-rrtconnect=rrtconnect@project" \
+      -m "cbirrt=cbirrt:project@uniform" -m "ompl-projected=ompl-projected-rrtconnect" \
+      -m "ompl-atlas=ompl-atlas-rrtconnect" -m "feet-only=rrtconnect@feet-only"
+  fi
 done
+if [[ " $steps " == *" drinkcan "* ]]; then
+  model drinkcan centauro drinkcan
+  "${mg[@]}" bench plan drinkcan --scene drinkcan --runs 10 --time "$time" --workers 1 --resume -o "$out/plan-drinkcan" \
+    -m "cvae-rrtconnect=rrtconnect@cvae:$out/drinkcan-cvae,batch=256" -m "project-rrtconnect=rrtconnect@project" \
+    -m "cbirrt=cbirrt:project@uniform"
+  for y in -0.75 -0.25 0.25 0.75; do
+    "${mg[@]}" sample "$out/drinkcan-cvae" --condition="$y" -n 1000 --refine 2 -o "$out/samples-drinkcan-$y.npz"
+  done
+  "${mg[@]}" plan drinkcan --scene drinkcan --sampler "cvae:$out/drinkcan-cvae,batch=256" --seed 0 --time 30 \
+    -o "$out/drinkcan-path.npz"
+  "$py" examples/check_path.py "$out/drinkcan-path.npz"
+fi
+if [[ " $steps " == *" reach "* ]]; then  # the README's snapshots, each path rechecked from its file alone
+  for r in talos centauro; do
+    "${mg[@]}" plan balance --robot "$r" --scene reach --sampler "cvae:$out/$r-cvae,batch=256" "${settings[@]}" \
+      --seed 1 -o "$out/$r-reach.npz" --snapshots "docs/images/balance-$r-reach.png"
+    "$py" examples/check_path.py "$out/$r-reach.npz"
+  done
+fi

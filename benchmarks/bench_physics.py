@@ -87,8 +87,10 @@ def main():
     if (args.folder is None) == (args.calibrate is None):
         parser.error("give a FOLDER of path files, or --calibrate OUT_FOLDER")
     pace = PhysicsSettings()
-    settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * args.duration_scale,
-                               seconds_per_m=pace.seconds_per_m * args.duration_scale, hold_s=args.hold)
+    scale = args.duration_scale  # speeds / scale, accelerations / scale^2: every segment lasts scale times as long
+    settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * scale, seconds_per_m=pace.seconds_per_m * scale,
+                               max_acceleration_rad=pace.max_acceleration_rad / scale ** 2,
+                               max_acceleration_m=pace.max_acceleration_m / scale ** 2, hold_s=args.hold)
     outside = calibration_paths(args.calibrate) if args.calibrate else {}
     files = sorted(outside) if outside else sorted(args.folder.glob("*.npz"))
     results, wall, cpu = [], time.perf_counter(), time.process_time()

@@ -11,7 +11,8 @@ import torch
 from manifoldgen.constraints import BalanceConstraint, build_constraint, project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
-from manifoldgen.tasks import get_task
+from manifoldgen.stability import balance_part
+from manifoldgen.tasks import BUILTIN_DIR, get_task
 
 
 @pytest.fixture(scope="module")
@@ -25,13 +26,13 @@ def centauro():
 
 
 def _arguments(task, **changes):
-    return {**task.constraint.arguments, "foot_positions": None, "foot_rotations": None, **changes}
+    return {**balance_part(task.constraint).arguments, "foot_positions": None, "foot_rotations": None, **changes}
 
 
 def test_balance_tasks_fix_the_feet_where_they_stand(centauro, talos):
     for task, feet, n in ((centauro, 4, 39), (talos, 2, 34)):
-        c, home = task.constraint, task.home
-        assert task.robot.n == n and c.satisfied(home, task.home_condition)[0]
+        c, home = balance_part(task.constraint), task.home
+        assert task.robot.n == n and task.constraint.satisfied(home, task.home_condition)[0]
         stance = np.asarray(c.arguments["stance"])
         for foot, p in zip(c.feet, c.foot_positions):  # fixed where they stand in the reference stance, on z = 0
             np.testing.assert_allclose(task.robot.frame_pose(stance, foot)[0][0], p, atol=1e-9)
@@ -88,6 +89,92 @@ def test_balance_bad_input(centauro, talos):
         BalanceConstraint(robot, **_arguments(centauro, stance=None))
     with pytest.raises(ManifoldgenError, match="stance has 3 values"):
         BalanceConstraint(robot, **_arguments(centauro, stance=[0.0, 0.0, 0.8]))
+
+
+def _sole_outline(robot, foot: str) -> np.ndarray:
+    """(x_lo, x_hi, y_lo, y_hi) in the foot frame of the flat bottom of the foot link's collision mesh: its vertices
+    within 2 mm of the lowest (pinocchio's collision model, the reference configuration)."""
+    import pinocchio as pin
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    geometry = pin.GeometryData(robot.collision_model)
+    pin.updateGeometryPlacements(model, data, robot.collision_model, geometry)
+    frame = data.oMf[model.getFrameId(foot)]
+    k, obj = next((k, g) for k, g in enumerate(robot.collision_model.geometryObjects)
+                  if g.parentJoint == model.frames[model.getFrameId(foot)].parentJoint and hasattr(g.geometry, "vertices"))
+    world = np.asarray(obj.geometry.vertices()) @ geometry.oMg[k].rotation.T + geometry.oMg[k].translation
+    local = (world - frame.translation) @ frame.rotation
+    sole = local[local[:, 2] < local[:, 2].min() + 0.002]
+    return np.array([sole[:, 0].min(), sole[:, 0].max(), sole[:, 1].min(), sole[:, 1].max()])
+
+
+def test_talos_support_polygon_is_the_real_sole(talos):
+    """The task's sole corners lie on the ankle mesh's flat bottom, within 1 mm of its outline (they were 3.5 mm
+    beyond its toe, and 2 of 10 planned reaches fell in MuJoCo)."""
+    c = balance_part(talos.constraint)
+    corners = np.asarray(c.arguments["contacts"])[:, :2]
+    for foot in c.feet:
+        x_lo, x_hi, y_lo, y_hi = _sole_outline(talos.robot, foot)
+        assert (corners[:, 0] >= x_lo).all() and (corners[:, 0] <= x_hi).all()
+        assert (corners[:, 1] >= y_lo).all() and (corners[:, 1] <= y_hi).all()
+        np.testing.assert_allclose([corners[:, 0].min(), corners[:, 0].max(), corners[:, 1].min(), corners[:, 1].max()],
+                                   [x_lo, x_hi, y_lo, y_hi], atol=1e-3)
+
+
+def test_centauro_wheels_stay_upright_over_their_contacts(centauro, rng):
+    """Centauro's task holds each wheel's contact point and keeps its contact frame's z axis vertical: projected
+    configurations keep every wheel centre over its contact point, where it stood (a wheel cannot swing about its
+    ground contact, as it did with the contact points alone: up to 10 cm in MuJoCo)."""
+    robot, home, y = centauro.robot, centauro.home, centauro.home_condition
+    assert [p.frame for p in centauro.constraint.parts[1:]] == [f"contact_{i}" for i in range(1, 5)]
+    q = np.clip(home + 0.15 * rng.normal(size=(8, robot.n)), robot.lower, robot.upper)
+    res = project(centauro.constraint, q, y)
+    ok = res.q[res.converged]
+    assert len(ok) >= 4 and centauro.constraint.satisfied(ok, y).all()
+    for i in range(1, 5):
+        start = robot.frame_pose(home, f"wheel_{i}")[0][0]
+        centres = robot.frame_pose(ok, f"wheel_{i}")[0]
+        assert np.abs(centres - start).max() < 0.003  # 0.124 m above the contact, tilt within 0.01 rad: <= 1.3 mm off
+        moved = robot.frame_pose(q[res.converged], f"wheel_{i}")[0]
+        assert np.abs(moved - start).max() > 0.01  # the seeds had them elsewhere: projection put them back
+
+
+def _bad_task(tmp_path, robot, name, *edits):
+    """The built-in balance task file of ``robot`` with ``edits`` (old, new) made, written to ``tmp_path / name``."""
+    text = (BUILTIN_DIR / f"balance-{robot}.toml").read_text().replace('"scenes/', f'"{BUILTIN_DIR}/scenes/')
+    for old, new in edits:
+        assert old in text
+        text = text.replace(old, new)
+    (tmp_path / name).write_text(text)
+    return str(tmp_path / name)
+
+
+def test_balance_bad_input_exits_2_with_one_line(talos, tmp_path):
+    """The issue's bad inputs, from the command line: feet off the ground, fewer than 3 contact points (no support
+    polygon for the margin), a stance whose CoM is outside, a hand target out of reach while balanced."""
+    from typer.testing import CliRunner
+
+    from manifoldgen.cli import app
+    soles = ("flat = true", "flat = true\nfoot_positions = [[-0.008847, 0.084817, 0.0], [-0.008847, -0.085183, 0.0]]")
+    lean = ("stance = [0.0, 0.0, 1.019272,", "stance = [0.2, 0.0, 1.019272,")  # the robot 0.2 m ahead of its soles
+    far = json.loads((BUILTIN_DIR / "scenes" / "talos-reach.json").read_text())
+    far["goal"]["position"] = [1.5, 0.3, 0.9]
+    (tmp_path / "far.json").write_text(json.dumps(far))
+    cases = [
+        (["collect", _bad_task(tmp_path, "centauro", "air.toml", ('"contact_3", "contact_4"]', '"wheel_3", "contact_4"]')),
+          "--per-condition", "1", "-o", str(tmp_path / "x.npz")], "'wheel_3' does not touch the ground"),
+        (["collect", _bad_task(tmp_path, "talos", "points.toml", ("flat = true\ncontacts", "flat = false\n# contacts")),
+          "--per-condition", "1", "-o", str(tmp_path / "x.npz")], "no support polygon for the CoM margin"),
+        (["collect", _bad_task(tmp_path, "talos", "lean.toml", soles, lean),
+          "--per-condition", "1", "-o", str(tmp_path / "x.npz")], "outside the support polygon"),
+        (["plan", "balance", "--robot", "talos", "--scene", str(tmp_path / "far.json"), "--sampler", "project",
+          "-o", str(tmp_path / "p.npz")], "gripper_left_base_link at the goal target"),
+    ]
+    for args, needle in cases:
+        result = CliRunner().invoke(app, args, terminal_width=400)
+        errors = [line for line in result.output.splitlines() if line.startswith("error: ")]
+        assert result.exit_code == 2 and len(errors) == 1 and needle in errors[0], result.output
+        assert "Traceback" not in result.output and not (tmp_path / "x.npz").exists()
 
 
 def test_path_stability_counts_states_outside_the_polygon(talos):

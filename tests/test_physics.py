@@ -229,6 +229,7 @@ def test_talos_stands_on_its_whole_soles(talos_task):
     for lo_x, hi_x, lo_y, hi_y in result.engine["flat_soles"].values():  # the sole: 0.2 m x 0.124 m
         assert lo_x < -0.1 and hi_x > 0.09 and lo_y < -0.06 and hi_y > 0.06
     assert {"leg_left_5_joint", "leg_right_5_joint"} <= set(result.engine["stance_servos"])  # ankles
+    assert result.effort_joint is not None and result.max_effort_ratio > 0  # URDF effort limits: reported, not applied
     assert not any(j.startswith("arm") for j in result.engine["stance_servos"])
 
 
@@ -245,3 +246,24 @@ def test_talos_balanced_path_stays_up_and_unbalanced_falls(talos_task):
     assert up.upright and up.stable and up.max_tilt_deg < 2.0 and up.max_slip_m < 0.01
     down = check_path(talos_task.robot, unbalanced, feet, settings)
     assert down.fell and not down.upright
+
+
+def test_each_segment_is_eased_from_rest_within_speed_and_acceleration_limits(talos_task):
+    """A short base shift is paced by the base's acceleration limit, a long joint swing by its speed limit; the
+    planned motion is at rest at every waypoint and never exceeds either limit (no kick at the waypoints)."""
+    from manifoldgen.physics import _Simulation
+
+    settings, home, n = PhysicsSettings(), talos_task.home, talos_task.robot.n
+    path = np.stack([home, home + 0.01 * np.eye(n)[0], home + 0.01 * np.eye(n)[0] + 0.5 * np.eye(n)[20]])
+    sim = _Simulation(talos_task.robot, ["left_sole_link", "right_sole_link"], settings, home)
+    stamps, motion = sim.schedule(path)
+    np.testing.assert_allclose(np.diff(stamps), [np.sqrt(10 / np.sqrt(3) * 0.01 / settings.max_acceleration_m),
+                                                 1.875 * settings.seconds_per_rad * 0.5])
+    dt = 1e-3
+    t = settings.settle_s + np.arange(-0.1, motion + 0.1, dt)
+    q = np.stack([sim._plan_at(path, stamps, motion, ti) for ti in t])
+    v, a = np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / dt ** 2
+    assert np.abs(v[:, 0]).max() <= 1 / settings.seconds_per_m and np.abs(a[:, 0]).max() <= 0.1 * 1.01
+    assert np.abs(v[:, 20]).max() <= 1 / settings.seconds_per_rad * 1.01 and np.abs(a[:, 20]).max() <= 1.0 * 1.01
+    at_waypoints = np.searchsorted(t, settings.settle_s + stamps[1:-1])
+    assert np.abs(v[at_waypoints]).max() < 1e-3  # at rest at the inner waypoint

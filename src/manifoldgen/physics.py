@@ -39,9 +39,12 @@ The model (see docs/physics.md):
   state (pinocchio's kinematics of the plan): the rim point that touched the ground stays the lowest, the
   wheel does not roll. ``engine["wheel_joints"]`` names them;
 - time: segment k gets a nominal duration, the larger of ``seconds_per_rad`` times its largest angle change
-  (joints and base angles) and ``seconds_per_m`` times its base translation; the whole path is then run on a
-  quintic ease-in/ease-out of its total (zero velocity and acceleration at both ends, peak speed the nominal
-  one). The first state is held ``settle_s`` before, the last ``hold_s`` after.
+  (joints and base angles) and ``seconds_per_m`` times its base translation; each segment is run on a quintic
+  ease-in/ease-out from rest to rest (zero velocity and acceleration at both of its waypoints), lasting long
+  enough that its peak speed is the nominal one and its peak accelerations stay within ``max_acceleration_rad``
+  and ``max_acceleration_m``: no velocity jumps at the waypoints (whose kicks tipped talos over on long paths when
+  the whole path was eased as one), and no sharp starts and stops on short segments (whose inertial forces move
+  the zero-moment point by about a h / g). The first state is held ``settle_s`` before, the last ``hold_s`` after.
 
 Shapes: a path is ``(K, n)`` in the planning group's coordinates (floating base first).
 """
@@ -67,6 +70,7 @@ _GAP = 0.005  # m: a foot further above the ground at the start is reported as n
 _SOLE_TOL = 0.002  # m: a foot mesh's vertices this close to its lowest (along the foot frame's z) are its sole
 _SOLE_MIN = 0.02  # m: a sole narrower than this either way is no flat sole (a wheel's or a rounded foot's line)
 _PEAK_SPEED = 1.875  # peak / mean speed of the quintic ease 10u^3 - 15u^4 + 6u^5
+_PEAK_ACCELERATION = 10 / np.sqrt(3)  # peak acceleration of the quintic ease over distance D in time T, times T^2 / D
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,8 @@ class PhysicsSettings:
 
     seconds_per_rad: float = 2.0  # s per rad of a segment's largest angle change: at most 0.5 rad/s
     seconds_per_m: float = 10.0  # s per m of a segment's base translation: at most 0.1 m/s
+    max_acceleration_rad: float = 1.0  # rad/s^2, each joint and base angle (a segment lasts long enough for it) ...
+    max_acceleration_m: float = 0.1  # m/s^2 of the base (its CoM's ground projection moves ~ a h / g: 1 cm for talos)
     settle_s: float = 0.5  # s holding the first state before moving
     hold_s: float = 1.0  # s holding the last state after moving
     timestep: float = 0.001  # s, physics step
@@ -117,6 +123,8 @@ class PhysicsResult:
     base_drift_m: float  # largest distance between the simulated and the planned base origin
     final_drift_m: float  # the same at the end
     max_tracking_error_rad: float  # largest |joint - servo target| (how well the servos held the path)
+    max_effort_ratio: float  # largest |servo torque| / the URDF's effort limit of its joint (> 1: beyond the motor)
+    effort_joint: str | None  # the joint where that ratio peaked
     start_foot_gap_m: dict[str, float]  # per foot: its distance to the ground at the first state
     simulated_s: float
     wall_s: float
@@ -353,11 +361,16 @@ class _Simulation:
         self.wheel_axles = np.array([w[2] for w in wheels]).reshape(-1, 3)
         self.wheel_locked = np.array([robot.locked.get(w, 0.0) for w in self.wheel_names])
         servoed = self.joint_names + self.wheel_names  # actuators in this order: the group's joints, then the wheels
+        self.servoed = servoed
         welded = _weld_locked(spec, mujoco, robot, group, set(self.wheel_names))
+        effort = {}  # the URDF's effort limits, which MuJoCo's importer would enforce: reported, not applied
         for j in spec.joints:
             if j.name in servoed:
                 j.armature = settings.armature
                 j.limited = mujoco.mjtLimited.mjLIMITED_FALSE  # the servos hold the path; limits were planned
+                if j.actfrclimited != mujoco.mjtLimited.mjLIMITED_FALSE and j.actfrcrange[1] > 0:
+                    effort[j.name] = float(j.actfrcrange[1])
+                j.actfrclimited = mujoco.mjtLimited.mjLIMITED_FALSE
         for name in servoed:
             spec.add_actuator(name=f"servo:{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
                               gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE)
@@ -375,6 +388,7 @@ class _Simulation:
         self.ground = m.geom("ground").id
         self.qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in servoed], int)
         self.dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in servoed], int)
+        self.effort = np.array([effort.get(n, np.inf) for n in servoed])  # (servoed,) N m, inf: none given
         mass = float(m.body_subtreemass[0])
         self.engine = {"engine": "mujoco", "version": mujoco.__version__, "bodies": int(m.nbody - 1),
                        "servoed_joints": len(self.joint_names), "welded_joints": welded,
@@ -562,18 +576,27 @@ class _Simulation:
 
     # ------------------------------------------------------------------ run
     def schedule(self, path: np.ndarray) -> tuple[np.ndarray, float]:
-        """Nominal waypoint stamps (K,) in s from the first, and the motion's real duration (see the module doc)."""
+        """Waypoint stamps (K,) in s from the first, and the motion's duration (see the module doc): segment k lasts
+        long enough that its quintic ease keeps every joint within the peak speeds and accelerations."""
         s = self.settings
         step = np.abs(np.diff(path, axis=0))
-        nominal = np.maximum(s.seconds_per_rad * step[:, 3:].max(axis=1, initial=0.0),
-                             s.seconds_per_m * np.linalg.norm(step[:, :3], axis=1))
-        stamps = np.concatenate([[0.0], np.cumsum(nominal)])
-        return stamps, _PEAK_SPEED * stamps[-1]
+        angle, shift = step[:, 3:].max(axis=1, initial=0.0), np.linalg.norm(step[:, :3], axis=1)
+        duration = np.maximum.reduce([_PEAK_SPEED * s.seconds_per_rad * angle, _PEAK_SPEED * s.seconds_per_m * shift,
+                                      np.sqrt(_PEAK_ACCELERATION * angle / s.max_acceleration_rad),
+                                      np.sqrt(_PEAK_ACCELERATION * shift / s.max_acceleration_m)])
+        stamps = np.concatenate([[0.0], np.cumsum(duration)])
+        return stamps, float(stamps[-1])
 
     def _plan_at(self, path: np.ndarray, stamps: np.ndarray, motion_s: float, t: float) -> np.ndarray:
-        """The planned configuration (n,) at simulated time t: held, eased along the path, held."""
-        u = np.clip((t - self.settings.settle_s) / motion_s, 0.0, 1.0) if motion_s > 0 else 1.0
-        return _interpolate(path, stamps, stamps[-1] * u ** 3 * (10 - 15 * u + 6 * u ** 2))
+        """The planned configuration (n,) at simulated time t: held, each segment eased from rest to rest, held."""
+        tau = t - self.settings.settle_s
+        if tau <= 0 or len(path) == 1:
+            return path[0]
+        if tau >= motion_s:
+            return path[-1]
+        k = int(np.searchsorted(stamps, tau, side="right")) - 1  # stamps[k] <= tau < stamps[k + 1]
+        u = (tau - stamps[k]) / (stamps[k + 1] - stamps[k])
+        return path[k] + u ** 3 * (10 - 15 * u + 6 * u ** 2) * (path[k + 1] - path[k])
 
     def run(self, path: np.ndarray, progress: bool) -> PhysicsResult:
         mujoco, m, d, s = self.mujoco, self.model, self.data, self.settings
@@ -585,6 +608,7 @@ class _Simulation:
         ticks = int(np.ceil(total / (substeps * s.timestep)))
         start_feet = d.site_xpos[self.foot_sites].copy()
         max_tilt = max_drift = drift = tracking = 0.0
+        effort = np.zeros(len(self.effort))
         slip = np.zeros(len(self.feet))
         fell_at = None
         target = self._targets(self._plan_at(path, stamps, motion_s, d.time))
@@ -603,6 +627,7 @@ class _Simulation:
                 max_tilt, max_drift = max(max_tilt, tilt), max(max_drift, drift)
                 slip = np.maximum(slip, np.linalg.norm((d.site_xpos[self.foot_sites] - start_feet)[:, :2], axis=1))
                 tracking = max(tracking, float(np.abs(d.qpos[self.qadr] - target).max()))
+                effort = np.maximum(effort, np.abs(d.actuator_force) / self.effort)
                 bar.advance()
                 if tilt > s.fall_tilt_deg or d.qpos[2] < base_plan[2] - s.fall_drop_m:
                     fell_at = float(d.time)
@@ -613,19 +638,10 @@ class _Simulation:
             upright=bool(upright), stable=bool(upright and slip.max() <= s.slip_threshold_m), fell=fell,
             fell_at_s=fell_at, max_tilt_deg=float(max_tilt), max_slip_m=float(slip.max()),
             foot_slip_m={f: float(v) for f, v in zip(self.feet, slip)}, base_drift_m=float(max_drift),
-            final_drift_m=float(drift), max_tracking_error_rad=float(tracking),
+            final_drift_m=float(drift), max_tracking_error_rad=float(tracking), max_effort_ratio=float(effort.max()),
+            effort_joint=self.servoed[int(effort.argmax())] if np.isfinite(self.effort).any() else None,
             start_foot_gap_m={f: float(g) for f, g in gaps.items()}, simulated_s=float(d.time),
             wall_s=0.0, cpu_s=0.0, engine=self.engine, settings=asdict(s))
-
-
-def _interpolate(path: np.ndarray, stamps: np.ndarray, tau: float) -> np.ndarray:
-    """The path's configuration (n,) at nominal time tau: linear between waypoints (stamps (K,))."""
-    if tau <= 0 or len(path) == 1:
-        return path[0]
-    if tau >= stamps[-1]:
-        return path[-1]
-    k = int(np.searchsorted(stamps, tau, side="right")) - 1
-    return path[k] + (tau - stamps[k]) / (stamps[k + 1] - stamps[k]) * (path[k + 1] - path[k])
 
 
 def summary(result: PhysicsResult) -> str:
@@ -638,6 +654,8 @@ def summary(result: PhysicsResult) -> str:
              f"{s['fall_tilt_deg']} deg or base {s['fall_drop_m']} m below plan)",
              f"  max base tilt {result.max_tilt_deg:.2f} deg, base drift {result.base_drift_m:.4f} m "
              f"(final {result.final_drift_m:.4f} m), joint tracking error {result.max_tracking_error_rad:.4f} rad",
+             f"  largest servo torque {result.max_effort_ratio:.2f} x its joint's URDF effort limit"
+             + (f" ({result.effort_joint}; limits not applied)" if result.effort_joint else " (no limits in the URDF)"),
              "  foot slip " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.foot_slip_m.items()),
              "  foot gap at start " + ", ".join(f"{f} {v * 1000:.1f} mm" for f, v in result.start_foot_gap_m.items())
              + "".join(f"; {f} does not touch the ground: the first state is not a stance on these feet"

@@ -98,9 +98,14 @@ def blind_space(robot: Robot, checker: CollisionChecker | None,
 
 def feet_only_space(constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None,
                     settings: ValidationSettings = ValidationSettings()) -> ConstrainedSpace:
-    """The space of a planner blind to the centre of mass: ``constraint`` (a balance constraint) with its CoM
-    inequality switched off (the feet stay on their spots, the base at its height), limits, collisions."""
-    if not isinstance(constraint, BalanceConstraint):
-        raise ManifoldgenError("the feet-only baseline needs a task whose constraint is a balance constraint")
-    arguments = {k: v for k, v in constraint.spec().items() if k != "type"}
-    return ConstrainedSpace(BalanceConstraint(constraint.robot, **{**arguments, "margin": -1e9}), y, checker, settings)
+    """The space of a planner blind to the centre of mass: ``constraint`` (a balance constraint, alone or in a set)
+    with its CoM inequality switched off (the feet stay on their spots, the base at its height; a set's other parts,
+    e.g. upright wheels, kept), limits, collisions."""
+    balance = balance_part(constraint)
+    if balance is None:
+        raise ManifoldgenError("the feet-only baseline needs a task with a balance constraint")
+    arguments = {k: v for k, v in balance.spec().items() if k != "type"}
+    blind = BalanceConstraint(balance.robot, **{**arguments, "margin": -1e9})
+    if isinstance(constraint, ConstraintSet):
+        blind = ConstraintSet([blind if part is balance else part for part in constraint.parts])
+    return ConstrainedSpace(blind, y, checker, settings)
