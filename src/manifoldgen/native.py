@@ -100,6 +100,34 @@ def unsupported(space: ConstrainedSpace) -> str | None:
     return None
 
 
+def constraint_terms(space: ConstrainedSpace) -> list[dict]:
+    """``space``'s built-in constraint at its condition as the C++ terms (JSON-ready), in residual order:
+    ``pose`` (frame_id, row-major rotation, position_axes, orientation_axes, y), ``chain`` (frame_a_id,
+    frame_b_id, rotation, offset = d x axis) and ``sphere`` (frame_id, center, radius); a rotation
+    constraint is a pose term without position axes, its target turned by y. The compiled core and the
+    C++ OMPL baseline both build from these."""
+    robot, terms, offset = space.robot, [], 0
+    for part in _parts(space):
+        y = space.y[offset:offset + part.condition.k]
+        offset += part.condition.k
+        if type(part) is PoseConstraint:
+            terms.append({"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                          "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
+                          "orientation_axes": list(part._oidx), "y": y.tolist()})
+        elif type(part) is RotationConstraint:
+            terms.append({"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                          "rotation": part.target(y[None])[0].reshape(-1).tolist(), "position_axes": [],
+                          "orientation_axes": [0, 1, 2], "y": []})
+        elif type(part) is SphereConstraint:
+            terms.append({"type": "sphere", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                          "center": part.center.tolist(), "radius": float(y[0])})
+        else:
+            terms.append({"type": "chain", "frame_a": part.frame_a, "frame_b": part.frame_b,
+                          "frame_a_id": robot.frame_id(part.frame_a), "frame_b_id": robot.frame_id(part.frame_b),
+                          "rotation": part.rotation.reshape(-1).tolist(), "offset": (y[0] * part.axis).tolist()})
+    return terms
+
+
 def core_space(space: ConstrainedSpace):
     """A ``manifoldgen_core.Space`` for ``space`` (see the module docstring); a one-line error when the
     core is not built or cannot take the space."""
@@ -114,21 +142,16 @@ def core_space(space: ConstrainedSpace):
         model_file, geometry_file = write_models(space, Path(folder))
         out = core.Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
                          robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
-    offset = 0
-    for part in _parts(space):
-        k = part.condition.k
-        y = space.y[offset:offset + k]
-        offset += k
-        if type(part) is PoseConstraint:
-            out.add_pose(robot.frame_id(part.frame), part.rotation, list(part._idx), list(part._oidx), y)
-        elif type(part) is RotationConstraint:
-            out.add_pose(robot.frame_id(part.frame), np.ascontiguousarray(part.target(y[None])[0]), [], [0, 1, 2],
-                         np.zeros(0))
-        elif type(part) is SphereConstraint:
-            out.add_sphere(robot.frame_id(part.frame), part.center, float(y[0]))
+    for term in constraint_terms(space):
+        kind = term["type"]
+        if kind == "pose":
+            out.add_pose(term["frame_id"], np.reshape(term["rotation"], (3, 3)), term["position_axes"],
+                         term["orientation_axes"], np.asarray(term["y"], float))
+        elif kind == "sphere":
+            out.add_sphere(term["frame_id"], np.asarray(term["center"], float), term["radius"])
         else:
-            out.add_chain(robot.frame_id(part.frame_a), robot.frame_id(part.frame_b), part.rotation,
-                          y[0] * part.axis)
+            out.add_chain(term["frame_a_id"], term["frame_b_id"], np.reshape(term["rotation"], (3, 3)),
+                          np.asarray(term["offset"], float))
     out.set_tolerance(np.asarray(space.constraint.tolerance, float))
     return out
 

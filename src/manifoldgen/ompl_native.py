@@ -9,7 +9,7 @@ The problem goes to the C++ program as a JSON file (:func:`export_problem`): the
 people, and what the program builds from: the robot model and the collision model written by
 pinocchio's own serialization from the very objects this space checks with (robot geometries,
 scene obstacles, the exact collision pairs: SRDF-pruned or the sampled matrix), the locked joints'
-reference, the joint limits, the pose terms (frame, rotation, axes, y, tolerances), start, goal,
+reference, the joint limits, the constraint terms of the compiled core (pose, rotation, closed chain, sphere; tolerances), start, goal,
 seed and OMPL settings. OMPL plans at native speed: the constraint, its Jacobian and the validity
 test (joint limits, then collision, as :meth:`~manifoldgen.space.ConstrainedSpace.valid` with
 ``equality=False``, like the Python bridge) are C++ calls.
@@ -40,9 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.constraints import ConstraintSet, PoseConstraint
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.native import active_coordinates, write_models
+from manifoldgen.native import active_coordinates, constraint_terms, unsupported, write_models
 from manifoldgen.ompl_bridge import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.space import ConstrainedSpace
@@ -62,21 +61,14 @@ def native_binary() -> Path:
     return path
 
 
-def _pose_terms(space: ConstrainedSpace) -> list[dict]:
-    """The space's constraint as pose terms for the C++ side; anything else is refused."""
-    constraint, y = space.constraint, space.y
-    parts = constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
-    terms, offset = [], 0
-    for part in parts:
-        if type(part) is not PoseConstraint:
-            raise ManifoldgenError(f"the C++ OMPL baseline supports pose constraints only, not "
-                                   f"'{constraint.spec()['type']}'; use the Python-callback ompl-SPACE-PLANNER methods")
-        k = part.condition.k
-        terms.append({"type": "pose", "frame": part.frame, "frame_id": part.robot.frame_id(part.frame),
-                      "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
-                      "orientation_axes": list(part._oidx), "y": y[offset:offset + k].tolist()})
-        offset += k
-    return terms
+def _terms(space: ConstrainedSpace) -> list[dict]:
+    """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`: pose,
+    rotation, closed chain, sphere, the compiled core's); anything else, or a floating base, is refused."""
+    reason = unsupported(space)
+    if reason:
+        raise ManifoldgenError(f"the C++ OMPL baseline cannot take this task ({reason}); use the Python-callback "
+                               "ompl-SPACE-PLANNER methods")
+    return constraint_terms(space)
 
 
 def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray, folder: Path, *,
@@ -84,10 +76,7 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
                    settings: OmplSettings) -> Path:
     """Write ``problem.json``, ``model.bin`` and ``geometry.bin`` into ``folder``; the JSON's path."""
     robot = space.robot
-    if robot.floating_base:
-        raise ManifoldgenError("the C++ OMPL baseline does not handle a floating base yet; use the Python-callback "
-                               "ompl-SPACE-PLANNER methods")
-    terms = _pose_terms(space)
+    terms = _terms(space)
     folder = Path(folder)
     model_file, geometry_file = write_models(space, folder)
     active = [{"joint": joint, "idx_q": idx_q, "idx_v": idx_v, "nq": nq}
@@ -141,7 +130,7 @@ class NativeOmplPlanner:
             raise ManifoldgenError(f"unknown native OMPL space '{ompl_space}'; known: {', '.join(SPACES)}")
         if resolution <= 0:
             raise ManifoldgenError(f"resolution must be positive, got {resolution}")
-        _pose_terms(space)  # refuse an unsupported constraint now, not at solve time
+        _terms(space)  # refuse an unsupported constraint now, not at solve time
         self.binary = native_binary()
         self.settings = OmplSettings() if settings is None else settings
         self.settings.check()
