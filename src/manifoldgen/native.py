@@ -17,7 +17,7 @@ compares both with the Python reference. :class:`NativeSpace` gives a sampler th
 in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
 pooled sample when it first tries it). :func:`plan_rrt_connect` runs
 :class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
-(:func:`draw_bulk`), and books the core's operation counts on the planner's space, so results carry
+(the planner's ``_draw_many``), and books the core's operation counts on the planner's space, so results carry
 the same counters as a Python search.
 
 Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
@@ -228,33 +228,6 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
-def draw_bulk(planner, count: int) -> np.ndarray:
-    """(count, n) samples for ``planner``, as its ``_draw_many`` gives them (Algorithm 1's buffer popped in
-    order, refilled a batch at a time, the same error after ``max_batches`` empty refills) but taken in
-    slices instead of one ``sample()`` call per row; a sampler that overrides its drawing keeps it."""
-    from manifoldgen.planning.base import SamplerFailed
-    from manifoldgen.sampling import Sampler
-
-    sampler = planner.sampler
-    if type(sampler).sample is not Sampler.sample or type(sampler).sample_many is not Sampler.sample_many:
-        return planner._draw_many(count)
-    rows, need, empty = [], count, 0
-    while need:
-        if not len(sampler._buffer):
-            if empty == sampler.max_batches:
-                raise SamplerFailed(f"{type(sampler).__name__} found no valid configuration in "
-                                    f"{sampler.max_batches} batches of {sampler.batch}")
-            sampler._refill()
-            empty = 0 if len(sampler._buffer) else empty + 1
-            continue
-        take, sampler._buffer = sampler._buffer[:need], sampler._buffer[need:]
-        rows.append(take)
-        need -= len(take)
-        sampler.stats.accepted += len(take)
-    planner.samples += count
-    return np.ascontiguousarray(np.concatenate(rows))
-
-
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
@@ -267,7 +240,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               lambda count: draw_bulk(planner, count),
+                               planner._draw_many,
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
                                s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY)
     finally:

@@ -56,18 +56,25 @@ class Sampler(ABC):
 
     def sample(self) -> np.ndarray:
         """One valid configuration (n,)."""
-        for _ in range(self.max_batches):
-            if len(self._buffer):
-                q, self._buffer = self._buffer[0], self._buffer[1:]
-                self.stats.accepted += 1
-                return q
-            self._refill()
-        raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
-                               f"{self.max_batches} batches of {self.batch}")
+        return self.sample_many(1)[0]
 
     def sample_many(self, count: int) -> np.ndarray:
-        """(count, n) valid configurations."""
-        return np.stack([self.sample() for _ in range(count)]) if count else np.zeros((0, self.space.n))
+        """(count, n) valid configurations: the buffer taken in order, in slices, refilled a batch at a
+        time; an error after ``max_batches`` refills in a row found none."""
+        rows, need, empty = [], count, 0
+        while need:
+            if not len(self._buffer):
+                if empty == self.max_batches:
+                    raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
+                                           f"{self.max_batches} batches of {self.batch}")
+                self._refill()
+                empty = 0 if len(self._buffer) else empty + 1
+                continue
+            take, self._buffer = self._buffer[:need], self._buffer[need:]
+            rows.append(take)
+            need -= len(take)
+            self.stats.accepted += len(take)
+        return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
 
 
 class UniformSampler(Sampler):
