@@ -113,6 +113,6 @@ def test_cpp_demo_solves_each_seed_the_same_way():
 @needs_program
 def test_cpp_demo_refuses_bad_options_in_one_line():
     done = subprocess.run([str(PROGRAM), "--space", "bogus"], capture_output=True, text=True, timeout=60)
-    assert done.returncode == 1 and "unknown space 'bogus'" in done.stderr and done.stderr.count("\n") == 1
+    assert done.returncode == 1 and "unknown OMPL space 'bogus'" in done.stderr and done.stderr.count("\n") == 1
     done = subprocess.run([str(PROGRAM), "--time", "soon"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1 and "--time needs a number" in done.stderr

@@ -1,5 +1,5 @@
-// OMPL's constrained planning (Projected / Atlas / TangentBundle + RRTConnect) with our pose
-// constraint and validity checker compiled (problem.hpp), driven by manifoldgen over a pipe.
+// OMPL's constrained planning (Projected / Atlas / TangentBundle + RRTConnect) with our constraint
+// (the compiled core's terms) and validity checker compiled (problem.hpp), driven by manifoldgen over a pipe.
 //
 //   ompl_native PROBLEM.json            plan (protocol below)
 //   ompl_native --evaluate PROBLEM.json  read configurations (n numbers a line) on stdin; print for
@@ -14,22 +14,18 @@
 // Tolerance: OMPL tests || F_i / tol_i ||_2 <= t with t = settings.tolerance (1 - margin): our
 // residual scaled component-wise by our tolerances, as manifoldgen's Python OMPL bridge does.
 #include "problem.hpp"
+#include "ompl_common.hpp"
 
-#include <ompl/base/ConstrainedSpaceInformation.h>
 #include <ompl/base/Constraint.h>
 #include <ompl/base/PlannerData.h>
 #include <ompl/base/spaces/RealVectorStateSpace.h>
 #include <ompl/base/spaces/constraint/AtlasStateSpace.h>
-#include <ompl/base/spaces/constraint/ProjectedStateSpace.h>
-#include <ompl/base/spaces/constraint/TangentBundleStateSpace.h>
 #include <ompl/geometric/SimpleSetup.h>
 #include <ompl/geometric/planners/rrt/RRTConnect.h>
 #include <ompl/util/Console.h>
 #include <ompl/util/RandomNumbers.h>
 
-#include <chrono>
 #include <cstdio>
-#include <ctime>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -39,15 +35,8 @@ namespace og = ompl::geometric;
 
 namespace {
 
-double cpu_seconds() {
-  timespec t;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
-
-double wall_seconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+using ompl_common::cpu_seconds;
+using ompl_common::wall_seconds;
 
 // Our constraint at a fixed y, residual and Jacobian rows divided by our per-component tolerances.
 class ScaledConstraint : public ob::Constraint {
@@ -152,20 +141,7 @@ int plan(mgnative::Problem& problem, double load_s) {
   }
   ambient->setBounds(bounds);
   auto constraint = std::make_shared<ScaledConstraint>(problem);
-  ob::ConstrainedStateSpacePtr space;
-  ob::SpaceInformationPtr si;
-  if (settings.space == "projected") {
-    space = std::make_shared<ob::ProjectedStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::ConstrainedSpaceInformation>(space);
-  } else if (settings.space == "atlas") {
-    space = std::make_shared<ob::AtlasStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::ConstrainedSpaceInformation>(space);
-  } else if (settings.space == "tangent") {
-    space = std::make_shared<ob::TangentBundleStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::TangentBundleSpaceInformation>(space);
-  } else {
-    throw std::runtime_error("unknown OMPL space '" + settings.space + "'; known: projected, atlas, tangent");
-  }
+  const auto [space, si] = ompl_common::constrained_space(settings.space, ambient, constraint);
   space->setDelta(settings.delta);
   space->setLambda(settings.lambda);
   si->setStateValidityChecker([&problem](const ob::State* state) {

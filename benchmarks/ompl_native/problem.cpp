@@ -48,7 +48,8 @@ std::vector<int> ints_of(const json::value& v) {
 struct Problem::Impl {
   std::unique_ptr<mgcore::Space> space;
   Eigen::VectorXd lower, upper, start, goal, tolerance;
-  mgcore::RowMat J;  // (m, n) row-major, as the core writes it
+  Eigen::VectorXd F;  // (m,) the residual beside a Jacobian
+  mgcore::RowMat J;   // (m, n) row-major, as the core writes it
   Settings settings;
 };
 
@@ -125,32 +126,27 @@ const Eigen::VectorXd& Problem::start() const { return impl_->start; }
 const Eigen::VectorXd& Problem::goal() const { return impl_->goal; }
 const Eigen::VectorXd& Problem::tolerance() const { return impl_->tolerance; }
 
+// Eigen::Ref<const VectorXd> and Ref<VectorXd> are contiguous (inner stride 1): the core reads and writes them in place.
 void Problem::residual(const Eigen::Ref<const Eigen::VectorXd>& q, Eigen::Ref<Eigen::VectorXd> out) {
   ++counts.fk;
-  const Eigen::VectorXd x = q;
-  Eigen::VectorXd F(m());
-  impl_->space->residual(x.data(), F.data());
-  out = F;
+  impl_->space->residual(q.data(), out.data());
 }
 
 void Problem::jacobian(const Eigen::Ref<const Eigen::VectorXd>& q, Eigen::Ref<Eigen::MatrixXd> out) {
   ++counts.fk;
   ++counts.jacobians;
-  const Eigen::VectorXd x = q;
-  Eigen::VectorXd F(m());
-  impl_->space->jacobian(x.data(), F.data(), impl_->J.data());
-  out = impl_->J;
+  impl_->F.resize(m());
+  impl_->space->jacobian(q.data(), impl_->F.data(), impl_->J.data());
+  out = impl_->J;  // the core writes (m, n) row-major, OMPL reads column-major
 }
 
 bool Problem::within_limits(const Eigen::Ref<const Eigen::VectorXd>& q) const {
-  const Eigen::VectorXd x = q;
-  return impl_->space->within_limits(x.data());
+  return impl_->space->within_limits(q.data());
 }
 
 bool Problem::collision_free(const Eigen::Ref<const Eigen::VectorXd>& q) {
   ++counts.collision_checks;
-  const Eigen::VectorXd x = q;
-  return impl_->space->collision_free(x.data());
+  return impl_->space->collision_free(q.data());
 }
 
 }  // namespace mgnative

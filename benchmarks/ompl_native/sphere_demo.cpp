@@ -21,22 +21,19 @@
 // "rejected_paths", "function_calls", "jacobian_calls", "projections", "validity_checks",
 // "dense_checks", "samples", "vertices", "charts"}; times are from building the space to the final
 // verdict, dense check included; counts are over the whole run.
-#include <ompl/base/ConstrainedSpaceInformation.h>
+#include "ompl_common.hpp"
+
 #include <ompl/base/Constraint.h>
 #include <ompl/base/PlannerData.h>
 #include <ompl/base/spaces/RealVectorStateSpace.h>
 #include <ompl/base/spaces/constraint/AtlasStateSpace.h>
-#include <ompl/base/spaces/constraint/ProjectedStateSpace.h>
-#include <ompl/base/spaces/constraint/TangentBundleStateSpace.h>
 #include <ompl/geometric/SimpleSetup.h>
 #include <ompl/geometric/planners/rrt/RRTConnect.h>
 #include <ompl/util/Console.h>
 #include <ompl/util/RandomNumbers.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <ctime>
 #include <stdexcept>
 #include <string>
 
@@ -45,15 +42,8 @@ namespace og = ompl::geometric;
 
 namespace {
 
-double cpu_seconds() {
-  timespec t;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
-
-double wall_seconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+using ompl_common::cpu_seconds;
+using ompl_common::wall_seconds;
 
 struct Options {
   std::string space = "atlas";
@@ -155,20 +145,7 @@ void run(const Options& o, long seed) {
   auto ambient = std::make_shared<ob::RealVectorStateSpace>(3);
   ambient->setBounds(-2, 2);
   auto constraint = std::make_shared<SphereConstraint>(o.radius, o.tolerance);
-  ob::ConstrainedStateSpacePtr space;
-  ob::SpaceInformationPtr si;
-  if (o.space == "projected") {
-    space = std::make_shared<ob::ProjectedStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::ConstrainedSpaceInformation>(space);
-  } else if (o.space == "atlas") {
-    space = std::make_shared<ob::AtlasStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::ConstrainedSpaceInformation>(space);
-  } else if (o.space == "tangent") {
-    space = std::make_shared<ob::TangentBundleStateSpace>(ambient, constraint);
-    si = std::make_shared<ob::TangentBundleSpaceInformation>(space);
-  } else {
-    throw std::runtime_error("unknown space '" + o.space + "'; use atlas, projected or tangent");
-  }
+  const auto [space, si] = ompl_common::constrained_space(o.space, ambient, constraint);
   space->setup();
   space->setDelta(ompl::magic::CONSTRAINED_STATE_SPACE_DELTA);
   space->setLambda(ompl::magic::CONSTRAINED_STATE_SPACE_LAMBDA);
