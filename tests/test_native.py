@@ -12,32 +12,29 @@ from manifoldgen.space import REASONS, ConstrainedSpace, densify
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
 
 
+def _problem(task, scene_name: str):
+    """(task, scene, its constrained space, the core built from it)."""
+    from manifoldgen.scene import get_scene
+    scene = get_scene(task, scene_name)
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    return task, scene, space, native.core_space(space)
+
+
 @pytest.fixture(scope="module")
 def maze(panda_task):
-    from manifoldgen.scene import get_scene
-    scene = get_scene(panda_task, "maze")
-    space = ConstrainedSpace(panda_task.constraint, scene.condition, scene.checker(panda_task.robot))
-    return panda_task, scene, space, native.core_space(space)
+    return _problem(panda_task, "maze")
 
 
 @pytest.fixture(scope="module")
 def dualarm():
-    from manifoldgen.scene import get_scene
     from manifoldgen.tasks import get_task
-    task = get_task("dualarm", "baxter")
-    scene = get_scene(task, "tray-over")
-    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-    return task, scene, space, native.core_space(space)
+    return _problem(get_task("dualarm", "baxter"), "tray-over")
 
 
 @pytest.fixture(scope="module")
 def sphere():
-    from manifoldgen.scene import get_scene
     from manifoldgen.tasks import get_task
-    task = get_task("sphere", "point")
-    scene = get_scene(task, "sphere")
-    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-    return task, scene, space, native.core_space(space)
+    return _problem(get_task("sphere", "point"), "sphere")
 
 
 def _states(task, scene, space, seed=3):
@@ -114,13 +111,14 @@ def wall(panda_task):
     return get_scene(panda_task, "wall")
 
 
-def _planner(task, scene, seed, core="native", sampler="cvae"):
+def _planner(task, scene, seed, core="native", sampler="cvae", spheres=False):
     from manifoldgen.models import pretrained_model_dir
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.specs import make_sampler
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     spec = f"cvae:{pretrained_model_dir()}" if sampler == "cvae" else sampler
-    return space, RRTConnect(space, make_sampler(spec, space, seed), seed=seed, settings=RRTConnectSettings(core=core))
+    return space, RRTConnect(space, make_sampler(spec, space, seed), seed=seed,
+                             settings=RRTConnectSettings(core=core, spheres=spheres))
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -205,3 +203,14 @@ def test_sphere_models_are_conservative_and_plan_valid_paths(panda_task, wall):
     assert result.extras["collision_checks"] < alone.extras["collision_checks"]
     with pytest.raises(ManifoldgenError, match="bad sphere model"):
         native.set_spheres(planner.core, {"joint": [1], "center": np.zeros((2, 3)), "radius": [0.1], "geometry": [0]})
+
+
+def test_the_spheres_setting_fits_the_robot_and_keeps_the_search(panda_task, wall):
+    """``spheres=True``: the robot's fitted sphere models (spheres.py) as the broad phase of every check."""
+    _, with_spheres = _planner(panda_task, wall, 1, spheres=True)
+    _, plain = _planner(panda_task, wall, 1)
+    assert with_spheres.core.has_spheres and not plain.core.has_spheres
+    a, b = (p.solve(wall.start, wall.goal, 20.0) for p in (with_spheres, plain))
+    assert a.solved and a.extras["sphere_checks"] > 0
+    np.testing.assert_array_equal(a.path, b.path)
+    assert a.extras["collision_checks"] < b.extras["collision_checks"] / 2
