@@ -45,10 +45,7 @@ class KPIECE(Planner):
 
     def _solve(self, start, goal, deadline):
         robot, settings = self.space.robot, self.settings
-        dims = settings.dimensions or max(2, int(np.ceil(np.log2(robot.n))))
-        axes = self.rng.normal(size=(dims, robot.n))
-        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-        grid = _Grid(axes, np.abs(axes) @ (robot.upper - robot.lower) / settings.cells)
+        grid = _Grid(*random_projection(robot, settings.dimensions, settings.cells, self.rng))
         tree = Tree(start)
         self.trees = [tree]
         self._start_pool(self.trees, deadline)
@@ -96,6 +93,15 @@ class KPIECE(Planner):
                 target = stone
         waypoints, _ = steer(origin, target, self.settings.range)
         return tree.add(node, waypoints) if len(waypoints) else None
+
+
+def random_projection(robot, dimensions: int, cells: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Random unit ``axes (d, n)`` (d = ``dimensions``, or max(2, ceil(log2 n)) when 0) and the cell size
+    ``(d,)`` that cuts the joint box's extent along each axis into ``cells`` cells."""
+    d = dimensions or max(2, int(np.ceil(np.log2(robot.n))))
+    axes = rng.normal(size=(d, robot.n))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    return axes, np.abs(axes) @ (robot.upper - robot.lower) / cells
 
 
 class _Grid:

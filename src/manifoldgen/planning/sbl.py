@@ -35,6 +35,7 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
+from manifoldgen.planning.kpiece import random_projection
 
 
 @dataclass
@@ -62,12 +63,8 @@ class SBL(Planner):
     settings_type = SBLSettings
 
     def _solve(self, start, goal, deadline):
-        robot, settings = self.space.robot, self.settings
-        dims = settings.dimensions or max(2, int(np.ceil(np.log2(robot.n))))
-        axes = self.rng.normal(size=(dims, robot.n))
-        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-        size = np.abs(axes) @ (robot.upper - robot.lower) / settings.cells
-        self._plant(start, goal, axes, size)
+        settings = self.settings
+        self._plant(start, goal, *random_projection(self.space.robot, settings.dimensions, settings.cells, self.rng))
         self._start_pool(self.trees, deadline)
         while time.perf_counter() < deadline:
             self.iterations += 1
