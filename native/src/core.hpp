@@ -48,10 +48,13 @@ struct PathCheck {
   long states;         // dense states in the path
 };
 
-// An active coordinate: where it sits in pinocchio's q and v (nq = 2: a continuous joint, cos/sin).
+// An active joint: where it sits in pinocchio's q and v (nq = 2: a continuous joint, cos/sin). nq = 7:
+// pinocchio's free flyer, first in the list, six coordinates (x, y, z, yaw, pitch, roll) as manifoldgen.robot
+// has them (ZYX Euler: R = Rz(yaw) Ry(pitch) Rx(roll)); every other entry is one coordinate.
 struct Active {
   int idx_q, idx_v, nq;
 };
+constexpr int FREE_FLYER = 7;
 
 class Space {
  public:
@@ -71,6 +74,19 @@ class Space {
   void add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset);
   // sphere: F = |p(q) - center| - radius
   void add_sphere(int frame, const Eigen::Vector3d& center, double radius);
+  // Whole-body terms (see the block "Whole-body terms" in space.cpp).
+  // orientation: F = basis (2, 3) . R(q) axis (constraints/orientation.py)
+  void add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis);
+  // linear: F = A (r, n) q - y (constraints/joint_linear.py)
+  void add_linear(const RowMat& A, const Vec& y);
+  // Inequalities G(q) <= 0, stacked in the order added (checked after the equalities, before collision).
+  // com polygon: G = normals (H, 2) . com(q)[x, y] - bounds (H,) (constraints/balance.py's CoM margin)
+  void add_com_polygon(const RowMat& normals, const Vec& bounds);
+  // hemisphere: G = -direction . R(q) axis (constraints/orientation.py's inequality)
+  void add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction);
+  int g() const;                                    // inequality rows
+  void inequality(const double* q, double* G);      // (g,)
+  bool inequalities_hold(const double* q);          // every G_i <= 0 (true when there is none)
   void set_tolerance(const Vec& tolerance);  // (m,) after the terms
   // Conservative sphere models (see set_spheres in module.cpp): joint (S,), center (S, 3) in the
   // joint frame, radius (S,), geometry (S,) the robot geometry each covers.
@@ -95,7 +111,8 @@ class Space {
   // Exact verdict (coal); with sphere models set, a state whose spheres touch nothing is free without coal.
   bool collision_free(const double* q);
   bool spheres_free(const double* q);  // the sphere models' verdict alone (conservative), else exact
-  // first failed test, lazily; exact = false: the sphere models' verdict alone
+  // first failed test (limits, equality within limit x tolerance, inequalities, collision), lazily;
+  // exact = false: the sphere models' verdict alone
   int code(const double* q, double limit, bool collision, bool exact);
 
   // A motion's states (k, n) in order: how many leading ones are valid (intermediate states within the

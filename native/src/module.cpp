@@ -67,7 +67,7 @@ NB_MODULE(manifoldgen_core, m) {
           "model_file"_a, "geometry_file"_a, "reference"_a, "active"_a, "lower"_a, "upper"_a, "margin"_a,
           "resolution"_a,
           "A constrained space from pinocchio binary serializations of the model and the collision model; "
-          "active: (idx_q, idx_v, nq) per coordinate.")
+          "active: (idx_q, idx_v, nq) per joint (nq 7: the free flyer, first, six coordinates x y z yaw pitch roll).")
       .def(
           "add_pose",
           [](Space& s, int frame, const In2& rotation, const std::vector<int>& position_axes,
@@ -95,6 +95,52 @@ NB_MODULE(manifoldgen_core, m) {
             s.add_sphere(frame, Eigen::Vector3d(center(0), center(1), center(2)), radius);
           },
           "frame"_a, "center"_a, "radius"_a, "F = |p - center| - radius of frame.")
+      // whole-body terms: orientation, linear, and the inequalities (CoM polygon, hemisphere)
+      .def(
+          "add_orientation",
+          [](Space& s, int frame, const In1& axis, const In2& basis) {
+            if (axis.shape(0) != 3 || basis.shape(0) != 2 || basis.shape(1) != 3)
+              throw nb::value_error("orientation needs axis (3,) and basis (2, 3)");
+            Eigen::Matrix<double, 2, 3> B;
+            for (int i = 0; i < 2; ++i)
+              for (int j = 0; j < 3; ++j) B(i, j) = basis(i, j);
+            s.add_orientation(frame, Eigen::Vector3d(axis(0), axis(1), axis(2)), B);
+          },
+          "frame"_a, "axis"_a, "basis"_a, "F = basis (2, 3) . R axis of frame.")
+      .def(
+          "add_linear",
+          [](Space& s, const In2& A, const In1& y) {
+            s.add_linear(Eigen::Map<const RowMat>(A.data(), static_cast<long>(A.shape(0)), static_cast<long>(A.shape(1))),
+                         vec_of(y));
+          },
+          "A"_a, "y"_a, "F = A (r, n) q - y.")
+      .def(
+          "add_com_polygon",
+          [](Space& s, const In2& normals, const In1& bounds) {
+            if (normals.shape(1) != 2) throw nb::value_error("CoM polygon normals must be (H, 2)");
+            s.add_com_polygon(Eigen::Map<const RowMat>(normals.data(), static_cast<long>(normals.shape(0)), 2),
+                              vec_of(bounds));
+          },
+          "normals"_a, "bounds"_a, "Inequalities G = normals (H, 2) . com[x, y] - bounds (H,) <= 0.")
+      .def(
+          "add_hemisphere",
+          [](Space& s, int frame, const In1& axis, const In1& direction) {
+            if (axis.shape(0) != 3 || direction.shape(0) != 3) throw nb::value_error("axis and direction must be (3,)");
+            s.add_hemisphere(frame, Eigen::Vector3d(axis(0), axis(1), axis(2)),
+                             Eigen::Vector3d(direction(0), direction(1), direction(2)));
+          },
+          "frame"_a, "axis"_a, "direction"_a, "Inequality G = -direction . R axis of frame <= 0.")
+      .def_prop_ro("g", &Space::g, "inequality rows")
+      .def(
+          "inequality",
+          [](Space& s, const In2& q) {
+            check_cols(q, s);
+            const std::size_t B = q.shape(0), gg = s.g();
+            std::vector<double> G(B * gg);
+            for (std::size_t b = 0; b < B; ++b) s.inequality(q.data() + b * s.n(), G.data() + b * gg);
+            return owned(std::move(G), {B, gg});
+          },
+          "q"_a, "(B, g) inequality values of q (B, n) (<= 0: holds).")
       .def("set_tolerance", [](Space& s, const In1& t) { s.set_tolerance(vec_of(t)); }, "tolerance"_a)
       .def(
           "set_spheres",

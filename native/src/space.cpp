@@ -1,8 +1,12 @@
 // The constrained space in C++ (see core.hpp): manifoldgen.space.ConstrainedSpace's rule with the
 // constraint terms of constraints/pose.py, rotation.py (a pose term without position axes) and
 // closed_chain.py, the projection of constraints/projection.py, and a sphere-model collision test.
+// Whole-body (the block "Whole-body terms"): a floating base as manifoldgen.robot's six Euler
+// coordinates, orientation.py's and joint_linear.py's terms, and inequalities (balance.py's CoM margin,
+// orientation.py's hemisphere); balance.py's equalities are pose terms.
 #include "core.hpp"
 
+#include <pinocchio/algorithm/center-of-mass.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/geometry.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
@@ -17,6 +21,7 @@
 #include <coal/shape/geometric_shapes.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
@@ -31,16 +36,40 @@ using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 namespace {
 
 struct Term {
-  int kind;  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius))
+  int kind;  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius)), 3: orientation, 4: linear
   pinocchio::FrameIndex frame, frame_b;
   Eigen::Matrix3d rotation;
   std::vector<int> position_axes, orientation_axes;
-  Vec y;                   // pose: the conditioned positions
+  Vec y;                   // pose: the conditioned positions; linear: y
   Eigen::Vector3d offset;  // chain: d * axis
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero();                    // orientation: the frame's axis
+  Eigen::Matrix<double, 2, 3> basis = Eigen::Matrix<double, 2, 3>::Zero();  // orientation: e1, e2
+  RowMat A;                                                          // linear: (r, n)
   int rows() const {
-    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size()) : kind == 1 ? 6 : 1;
+    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size())
+           : kind == 1 ? 6
+           : kind == 3 ? 2
+           : kind == 4 ? static_cast<int>(A.rows())
+                       : 1;
   }
 };
+
+// An inequality G(q) <= 0 (whole-body terms).
+struct Inequality {
+  int kind;  // 0: CoM support polygon, 1: hemisphere
+  pinocchio::FrameIndex frame = 0;
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero(), direction = Eigen::Vector3d::Zero();
+  RowMat normals;  // (H, 2)
+  Vec bounds;      // (H,)
+  int rows() const { return kind == 0 ? static_cast<int>(normals.rows()) : 1; }
+};
+
+// R = Rz(yaw) Ry(pitch) Rx(roll), manifoldgen.robot's floating-base rotation.
+Eigen::Matrix3d zyx(double yaw, double pitch, double roll) {
+  return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
 
 // A scene primitive the spheres are tested against (world pose fixed at construction of the pair list).
 struct Shape {
@@ -89,8 +118,14 @@ struct Space::Impl {
   pinocchio::GeometryModel geom;
   std::unique_ptr<pinocchio::GeometryData> geom_data;
   std::unique_ptr<Manager> manager;
-  std::vector<Active> active;
+  std::vector<Active> active;  // the one-coordinate joints (after the base's six coordinates when floating)
+  bool floating = false;       // the first six coordinates are the free flyer's (x, y, z, yaw, pitch, roll)
+  int base_q = 0, base_v = 0;  // where the free flyer sits in pinocchio's q and v
+  Eigen::Matrix<double, 6, 6> base_map;  // d(free-flyer v) / d(base coordinates) at the latest Jacobian's q
   std::vector<Term> terms;
+  std::vector<Inequality> inequalities;
+  int g = 0;
+  bool com_needed = false;
   Vec full, lower, upper, tolerance;
   Matrix6x Ja, Jb;
   double margin = 0.05, resolution = 0.005;
@@ -110,24 +145,47 @@ struct Space::Impl {
   std::vector<Shape> shapes;  // per geometry
 
   const Eigen::VectorXd& to_full(const double* q) {
+    const int offset = floating ? 6 : 0;
+    if (floating) set_base(q);
     for (std::size_t i = 0; i < active.size(); ++i) {
       const Active& a = active[i];
+      const double x = q[offset + i];
       if (a.nq == 2) {
-        full[a.idx_q] = std::cos(q[i]);
-        full[a.idx_q + 1] = std::sin(q[i]);
+        full[a.idx_q] = std::cos(x);
+        full[a.idx_q + 1] = std::sin(x);
       } else {
-        full[a.idx_q] = q[i];
+        full[a.idx_q] = x;
       }
     }
     return full;
   }
 
-  int n() const { return static_cast<int>(active.size()); }
+  int n() const { return static_cast<int>(active.size()) + (floating ? 6 : 0); }
+
+  // Jacobian row (n) from a row over pinocchio's v (rowvec(i): its i-th entry); the base columns through
+  // base_map (computed by map_base for the same q).
+  template <typename Row>
+  void put_row(double* J, const Row& rowvec) {
+    const int offset = floating ? 6 : 0;
+    for (std::size_t i = 0; i < active.size(); ++i) J[offset + i] = rowvec(active[i].idx_v);
+    if (!floating) return;
+    double v[6];
+    for (int k = 0; k < 6; ++k) v[k] = rowvec(base_v + k);
+    for (int c = 0; c < 6; ++c) {
+      double sum = 0.0;
+      for (int k = 0; k < 6; ++k) sum += v[k] * base_map(k, c);
+      J[c] = sum;
+    }
+  }
 
   // Residual rows of every term from data's joint placements (forward kinematics done).
-  void fill_residual(double* F) {
+  void fill_residual(const double* q, double* F) {
     int row = 0;
     for (const Term& t : terms) {
+      if (t.kind >= 3) {
+        row += whole_body_residual(t, q, F + row);
+        continue;
+      }
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
       if (t.kind == 2) {
         F[row++] = (A.translation() - t.offset).norm() - t.y[0];
@@ -148,13 +206,16 @@ struct Space::Impl {
   }
 
   // J (m, n) row-major from the frame Jacobians (computeJointJacobians done).
-  void fill_jacobian(double* F, double* J) {
+  void fill_jacobian(const double* q, double* F, double* J) {
     const int nn = n();
-    auto put = [&](int row, const auto& rowvec) {  // rowvec over nv
-      for (int i = 0; i < nn; ++i) J[row * nn + i] = rowvec(active[i].idx_v);
-    };
+    if (floating) map_base(q);
+    auto put = [&](int row, const auto& rowvec) { put_row(J + static_cast<long>(row) * nn, rowvec); };  // rowvec over nv
     int row = 0;
     for (const Term& t : terms) {
+      if (t.kind >= 3) {
+        row += whole_body_jacobian(t, q, F + row, J + static_cast<long>(row) * nn);
+        continue;
+      }
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
       Ja.setZero();
       pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
@@ -203,6 +264,78 @@ struct Space::Impl {
           put(row++, Jrot.row(i));
         }
       }
+    }
+  }
+
+  // ---------------------------------------------------------------- Whole-body terms
+  // The floating base: pinocchio's free flyer at (x, y, z) with the quaternion of Rz(yaw) Ry(pitch) Rx(roll).
+  void set_base(const double* q) {
+    const Eigen::Quaterniond r(zyx(q[3], q[4], q[5]));
+    full.segment<3>(base_q) = Eigen::Map<const Eigen::Vector3d>(q);
+    full[base_q + 3] = r.x();
+    full[base_q + 4] = r.y();
+    full[base_q + 5] = r.z();
+    full[base_q + 6] = r.w();
+  }
+
+  // base_map: the free flyer's v (linear and angular velocity in the base frame) per unit change of
+  // (x, y, z, yaw, pitch, roll): v_lin = R^T dp, omega = R^T E dtheta, E's columns the world axes of
+  // yaw (z), pitch (Rz y) and roll (Rz Ry x).
+  void map_base(const double* q) {
+    const Eigen::Matrix3d Rz = zyx(q[3], 0.0, 0.0), Rzy = zyx(q[3], q[4], 0.0), R = zyx(q[3], q[4], q[5]);
+    Eigen::Matrix3d E;
+    E.col(0) = Eigen::Vector3d::UnitZ();
+    E.col(1) = Rz.col(1);
+    E.col(2) = Rzy.col(0);
+    base_map.setZero();
+    base_map.topLeftCorner<3, 3>() = R.transpose();
+    base_map.bottomRightCorner<3, 3>() = R.transpose() * E;
+  }
+
+  // Rows of an orientation (3) or linear (4) term at q (forward kinematics done); returns their count.
+  int whole_body_residual(const Term& t, const double* q, double* F) {
+    if (t.kind == 4) {
+      Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, n()) - t.y;
+      return static_cast<int>(t.A.rows());
+    }
+    const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
+    Eigen::Map<Eigen::Vector2d>{F} = t.basis * (A.rotation() * t.axis);
+    return 2;
+  }
+
+  // The same rows and their Jacobian rows (J: the first row's start, n per row; joint Jacobians done).
+  int whole_body_jacobian(const Term& t, const double* q, double* F, double* J) {
+    const int nn = n();
+    if (t.kind == 4) {
+      Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, nn) - t.y;
+      Eigen::Map<RowMat>(J, t.A.rows(), nn) = t.A;
+      return static_cast<int>(t.A.rows());
+    }
+    const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
+    Ja.setZero();
+    pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
+    const Eigen::Vector3d pointing = A.rotation() * t.axis;
+    Eigen::Map<Eigen::Vector2d>{F} = t.basis * pointing;
+    // d(R axis) = omega x (R axis) = -hat(R axis) omega
+    const Eigen::Matrix<double, 2, Eigen::Dynamic> rows = -(t.basis * pinocchio::skew(pointing)) * Ja.bottomRows<3>();
+    for (int r = 0; r < 2; ++r) put_row(J + static_cast<long>(r) * nn, rows.row(r));
+    return 2;
+  }
+
+  // G (g,) at q: the CoM polygon's rows from pinocchio's centre of mass, a hemisphere's from the frame.
+  void fill_inequality(const double* q, double* G) {
+    if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
+    else pinocchio::forwardKinematics(model, data, to_full(q));
+    int row = 0;
+    for (const Inequality& c : inequalities) {
+      if (c.kind == 0) {
+        const Eigen::Vector2d com = data.com[0].head<2>();
+        Eigen::Map<Vec>(G + row, c.normals.rows()) = c.normals * com - c.bounds;
+      } else {
+        const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, c.frame);
+        G[row] = -c.direction.dot(A.rotation() * c.axis);
+      }
+      row += c.rows();
     }
   }
 
@@ -258,13 +391,24 @@ Space::Space(const std::string& model_file, const std::string& geometry_file, co
     throw std::runtime_error(std::string("cannot load the serialized robot model: ") + e.what());
   }
   if (reference.size() != p.model.nq) throw std::runtime_error("reference has the wrong size for the model");
-  if (lower.size() != static_cast<long>(active.size()) || upper.size() != lower.size())
-    throw std::runtime_error("limits must have one value per active coordinate");
+  for (std::size_t i = 0; i < active.size(); ++i) {
+    if (active[i].nq != FREE_FLYER) {
+      p.active.push_back(active[i]);
+      continue;
+    }
+    if (i != 0) throw std::runtime_error("the free flyer (nq = 7) must be the first active joint");
+    if (active[i].idx_q < 0 || active[i].idx_q + 7 > p.model.nq || active[i].idx_v < 0 || active[i].idx_v + 6 > p.model.nv)
+      throw std::runtime_error("the free flyer's idx_q / idx_v are out of the model's range");
+    p.floating = true;
+    p.base_q = active[i].idx_q;
+    p.base_v = active[i].idx_v;
+  }
+  if (lower.size() != p.n() || upper.size() != lower.size())
+    throw std::runtime_error("limits must have one value per active coordinate (six for a free flyer)");
   p.data = pinocchio::Data(p.model);
   p.cdata = pinocchio::Data(p.model);
   p.geom_data.reset(new pinocchio::GeometryData(p.geom));
   p.manager.reset(new Manager(&p.model, &p.geom, p.geom_data.get()));
-  p.active = active;
   p.full = reference;
   p.lower = lower;
   p.upper = upper;
@@ -306,6 +450,73 @@ void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) 
          center};
   p.m += t.rows();
   p.terms.push_back(t);
+}
+
+// ---------------------------------------------------------------- Whole-body terms
+void Space::add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis) {
+  Impl& p = *impl_;
+  if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("orientation frame id out of range");
+  Term t{3, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(),
+         Eigen::Vector3d::Zero()};
+  t.axis = axis;
+  t.basis = basis;
+  p.m += t.rows();
+  p.terms.push_back(t);
+}
+
+void Space::add_linear(const RowMat& A, const Vec& y) {
+  Impl& p = *impl_;
+  if (A.cols() != p.n() || A.rows() != y.size() || A.rows() == 0)
+    throw std::runtime_error("linear terms need A (r, n) over the active coordinates and y (r,)");
+  Term t{4, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, y, Eigen::Vector3d::Zero()};
+  t.A = A;
+  p.m += t.rows();
+  p.terms.push_back(t);
+}
+
+void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
+  Impl& p = *impl_;
+  if (normals.cols() != 2 || normals.rows() != bounds.size() || normals.rows() < 3)
+    throw std::runtime_error("a CoM polygon needs normals (H, 2) and bounds (H,), H >= 3");
+  Inequality c{0};
+  c.normals = normals;
+  c.bounds = bounds;
+  p.g += c.rows();
+  p.com_needed = true;
+  p.inequalities.push_back(c);
+}
+
+void Space::add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction) {
+  Impl& p = *impl_;
+  if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("hemisphere frame id out of range");
+  Inequality c{1};
+  c.frame = static_cast<pinocchio::FrameIndex>(frame);
+  c.axis = axis;
+  c.direction = direction;
+  p.g += c.rows();
+  p.inequalities.push_back(c);
+}
+
+int Space::g() const { return impl_->g; }
+
+void Space::inequality(const double* q, double* G) {
+  if (impl_->g) impl_->fill_inequality(q, G);
+}
+
+bool Space::inequalities_hold(const double* q) {
+  const int gg = impl_->g;
+  if (!gg) return true;
+  double G[64];
+  std::vector<double> big;
+  double* out = G;
+  if (gg > 64) {
+    big.resize(gg);
+    out = big.data();
+  }
+  impl_->fill_inequality(q, out);
+  for (int i = 0; i < gg; ++i)
+    if (out[i] > 0) return false;
+  return true;
 }
 
 void Space::set_tolerance(const Vec& tolerance) {
@@ -400,13 +611,13 @@ const Vec& Space::tolerance() const { return impl_->tolerance; }
 void Space::residual(const double* q, double* F) {
   ++counts.evaluations;
   pinocchio::forwardKinematics(impl_->model, impl_->data, impl_->to_full(q));
-  impl_->fill_residual(F);
+  impl_->fill_residual(q, F);
 }
 
 void Space::jacobian(const double* q, double* F, double* J) {
   ++counts.jacobians;
   pinocchio::computeJointJacobians(impl_->model, impl_->data, impl_->to_full(q));
-  impl_->fill_jacobian(F, J);
+  impl_->fill_jacobian(q, F, J);
 }
 
 double Space::violation(const double* q) {
@@ -452,6 +663,7 @@ bool Space::spheres_free(const double* q) {
 int Space::code(const double* q, double limit, bool collision, bool exact) {
   if (!within_limits(q)) return LIMITS;
   if (violation(q) > limit) return CONSTRAINT;
+  if (!inequalities_hold(q)) return INEQUALITY;
   if (collision && !(exact ? collision_free(q) : spheres_free(q))) return COLLISION;
   return VALID;
 }
@@ -527,6 +739,7 @@ PathCheck Space::validate_path(const double* path, int K) {
       const double v = violation(q);
       out.worst = std::max(out.worst, v);
       if (v > 1.0) c = CONSTRAINT;
+      else if (!inequalities_hold(q)) c = INEQUALITY;
       else if (!collision_free(q)) c = COLLISION;
     }
     if (c != VALID && out.valid) {

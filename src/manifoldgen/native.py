@@ -5,12 +5,15 @@
 geometries, obstacles, a held tool, the exact collision pairs) go over by pinocchio's own binary
 serialization (:func:`write_models`, shared with the C++ OMPL baseline), the constraint as terms with
 the condition ``y`` baked in: ``pose``, ``rotation`` (a pose term without position axes, its target
-turned by ``y``), ``closed_chain``, ``sphere``, and sets of them, on fixed-base robots. Anything else (a user's
-Python constraint, balance, a floating base) is not built in: :func:`unsupported` says why, and the
+turned by ``y``), ``closed_chain``, ``sphere``, and the whole-body ones: ``balance`` (its feet and base height as
+pose terms, its CoM margin as the support polygon's inequalities on pinocchio's centre of mass), ``orientation``
+(two rows and its hemisphere inequality), ``joint_linear``, and sets of them, on fixed or floating bases (the
+base's six Euler coordinates mapped to pinocchio's free flyer as :meth:`~manifoldgen.robot.Robot.to_pinocchio`
+does). Anything else (a user's Python constraint) is not built in: :func:`unsupported` says why, and the
 planners fall back to Python.
 
 The core applies :class:`~manifoldgen.space.ConstrainedSpace`'s rule in the same order (limits,
-equality within ``limit`` x tolerance, collision), lazily per state; projection is
+equality within ``limit`` x tolerance, inequalities, collision), lazily per state; projection is
 :func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
 compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
 ``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
@@ -37,7 +40,10 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.constraints import ConstraintSet, Projection
+from manifoldgen.constraints.balance import BalanceConstraint
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
+from manifoldgen.constraints.joint_linear import JointLinearConstraint
+from manifoldgen.constraints.orientation import OrientationConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.rotation import RotationConstraint
 from manifoldgen.constraints.sphere import SphereConstraint
@@ -73,10 +79,16 @@ def write_models(space: ConstrainedSpace, folder: Path) -> tuple[Path, Path]:
     return model_file, geometry_file
 
 
+FREE_FLYER = 7  # the core's nq of a floating base: six coordinates (x, y, z, yaw, pitch, roll)
+
+
 def active_coordinates(robot) -> list[tuple[int, int, int]]:
-    """(idx_q, idx_v, nq) of each planning-group joint in pinocchio's q and v (nq 2: continuous)."""
-    return [(robot.model.joints[j].idx_q, robot.model.joints[j].idx_v, robot.model.joints[j].nq)
-            for j in robot._joint_ids]
+    """(idx_q, idx_v, nq) of each planning-group joint in pinocchio's q and v (nq 2: continuous); a floating
+    base first, as its free flyer (nq 7), which stands for the group's six base coordinates."""
+    base = ([(robot.model.joints[1].idx_q, robot.model.joints[1].idx_v, FREE_FLYER)]
+            if robot.floating_base else [])
+    return base + [(robot.model.joints[j].idx_q, robot.model.joints[j].idx_v, robot.model.joints[j].nq)
+                   for j in robot._joint_ids]
 
 
 def _parts(space: ConstrainedSpace) -> list:
@@ -84,7 +96,8 @@ def _parts(space: ConstrainedSpace) -> list:
     return constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
 
 
-BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereConstraint)
+BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereConstraint, BalanceConstraint,
+            OrientationConstraint, JointLinearConstraint)
 
 
 def unsupported(space: ConstrainedSpace) -> str | None:
@@ -92,20 +105,39 @@ def unsupported(space: ConstrainedSpace) -> str | None:
     for part in _parts(space):
         if type(part) not in BUILT_IN:
             return (f"the compiled core has no '{part.spec()['type']}' constraint (built in: pose, rotation, "
-                    "closed_chain, sphere); a Python constraint runs in Python")
+                    "closed_chain, sphere, balance, orientation, joint_linear); a Python constraint runs in Python")
     if not isinstance(space.robot, Robot):
         return "the compiled core needs a pinocchio Robot"
-    if space.robot.floating_base:
-        return "the compiled core does not handle a floating base"
     return None
+
+
+def _balance_terms(robot: Robot, part: BalanceConstraint, y: np.ndarray) -> list[dict]:
+    """A balance constraint's equalities as pose terms in its residual order (each foot's position, then with
+    flat feet each foot's rotation, then the base frame's height), and its CoM margin as the support polygon's
+    inequalities ``normals . com[x, y] - (offsets - margin) <= 0``."""
+    terms = [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": np.eye(3).reshape(-1).tolist(),
+              "position_axes": [0, 1, 2], "orientation_axes": [], "y": target.tolist()}
+             for foot, target in zip(part.feet, part.foot_positions)]
+    if part.flat:
+        terms += [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": R.reshape(-1).tolist(),
+                   "position_axes": [], "orientation_axes": [0, 1, 2], "y": []}
+                  for foot, R in zip(part.feet, part.foot_rotations)]
+    terms.append({"type": "pose", "frame": part.base_frame, "frame_id": robot.frame_id(part.base_frame),
+                  "rotation": np.eye(3).reshape(-1).tolist(), "position_axes": [2], "orientation_axes": [],
+                  "y": y.tolist()})
+    terms.append({"type": "com_polygon", "normals": part._normals.tolist(),
+                  "bounds": (part._offsets - part.margin).tolist()})
+    return terms
 
 
 def constraint_terms(space: ConstrainedSpace) -> list[dict]:
     """``space``'s built-in constraint at its condition as the C++ terms (JSON-ready), in residual order:
     ``pose`` (frame_id, row-major rotation, position_axes, orientation_axes, y), ``chain`` (frame_a_id,
     frame_b_id, rotation, offset = d x axis) and ``sphere`` (frame_id, center, radius); a rotation
-    constraint is a pose term without position axes, its target turned by y. The compiled core and the
-    C++ OMPL baseline both build from these."""
+    constraint is a pose term without position axes, its target turned by y; ``orientation`` (frame_id, axis,
+    basis (2, 3) rows) with its ``hemisphere`` inequality (frame_id, axis, direction), ``linear`` (A (r, n), y),
+    a balance constraint as pose terms and a ``com_polygon`` inequality (normals (H, 2), bounds (H,)).
+    Inequality terms add no residual rows. The compiled core and the C++ OMPL baseline both build from these."""
     robot, terms, offset = space.robot, [], 0
     for part in _parts(space):
         y = space.y[offset:offset + part.condition.k]
@@ -118,6 +150,16 @@ def constraint_terms(space: ConstrainedSpace) -> list[dict]:
             terms.append({"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
                           "rotation": part.target(y[None])[0].reshape(-1).tolist(), "position_axes": [],
                           "orientation_axes": [0, 1, 2], "y": []})
+        elif type(part) is BalanceConstraint:
+            terms += _balance_terms(robot, part, y)
+        elif type(part) is OrientationConstraint:
+            frame_id = robot.frame_id(part.frame)
+            terms.append({"type": "orientation", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
+                          "basis": part.basis.tolist()})
+            terms.append({"type": "hemisphere", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
+                          "direction": part.direction.tolist()})
+        elif type(part) is JointLinearConstraint:
+            terms.append({"type": "linear", "A": part.coefficients.tolist(), "y": y.tolist()})
         elif type(part) is SphereConstraint:
             terms.append({"type": "sphere", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
                           "center": part.center.tolist(), "radius": float(y[0])})
@@ -149,11 +191,29 @@ def core_space(space: ConstrainedSpace):
                          term["orientation_axes"], np.asarray(term["y"], float))
         elif kind == "sphere":
             out.add_sphere(term["frame_id"], np.asarray(term["center"], float), term["radius"])
+        elif kind in WHOLE_BODY:
+            _add_whole_body(out, term)
         else:
             out.add_chain(term["frame_a_id"], term["frame_b_id"], np.reshape(term["rotation"], (3, 3)),
                           np.asarray(term["offset"], float))
     out.set_tolerance(np.asarray(space.constraint.tolerance, float))
     return out
+
+
+WHOLE_BODY = ("orientation", "linear", "com_polygon", "hemisphere")
+
+
+def _add_whole_body(core, term: dict) -> None:
+    """Add a whole-body term of :func:`constraint_terms` to ``core``."""
+    kind = term["type"]
+    if kind == "orientation":
+        core.add_orientation(term["frame_id"], np.asarray(term["axis"], float), np.asarray(term["basis"], float))
+    elif kind == "linear":
+        core.add_linear(np.ascontiguousarray(term["A"], float), np.asarray(term["y"], float))
+    elif kind == "com_polygon":
+        core.add_com_polygon(np.ascontiguousarray(term["normals"], float), np.asarray(term["bounds"], float))
+    else:
+        core.add_hemisphere(term["frame_id"], np.asarray(term["axis"], float), np.asarray(term["direction"], float))
 
 
 def set_spheres(core, spheres: dict) -> str:
