@@ -9,7 +9,12 @@
 // then for every exact OMPL solution "path K" and K lines of n numbers -> "valid" or "invalid"
 // (manifoldgen's dense check decides; on "invalid" the search restarts within the remaining time,
 // the atlas keeps its charts); finally "done {JSON}" with the outcome and the operation counts
-// (constraint FK evaluations, Jacobians, collision checks, samples OMPL's sampler drew).
+// (constraint FK evaluations, Jacobians, inequality evaluations (each with its own FK), collision checks,
+// samples OMPL's sampler drew).
+//
+// Inequalities (the CoM margin of balance, orientation's hemisphere) are not OMPL constraints: the state
+// validity checker tests them after the joint limits, before collision, as manifoldgen's rule orders them.
+// A floating base's six coordinates are plain real coordinates with the task's base_bounds, as manifoldgen's.
 //
 // Tolerance: OMPL tests || F_i / tol_i ||_2 <= t with t = settings.tolerance (1 - margin): our
 // residual scaled component-wise by our tolerances, as manifoldgen's Python OMPL bridge does.
@@ -144,9 +149,10 @@ int plan(mgnative::Problem& problem, double load_s) {
   const auto [space, si] = ompl_common::constrained_space(settings.space, ambient, constraint);
   space->setDelta(settings.delta);
   space->setLambda(settings.lambda);
+  // the inequalities (CoM margin, hemisphere) through state validity, as the Python-callback OMPL bridge takes them
   si->setStateValidityChecker([&problem](const ob::State* state) {
     const Eigen::Map<Eigen::VectorXd>& x = *state->as<ob::ConstrainedStateSpace::StateType>();
-    return problem.within_limits(x) && problem.collision_free(x);
+    return problem.within_limits(x) && problem.inequalities_hold(x) && problem.collision_free(x);
   });
 
   og::SimpleSetup setup(si);
@@ -192,11 +198,11 @@ int plan(mgnative::Problem& problem, double load_s) {
   long charts = settings.space == "projected" ? 0 : std::static_pointer_cast<ob::AtlasStateSpace>(space)->getChartCount();
   std::printf(
       "done {\"solved\": %s, \"status\": \"%s\", \"attempts\": %d, \"rejected_paths\": %d, \"vertices\": %ld, "
-      "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"collision_checks\": %ld, "
+      "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"inequalities\": %ld, \"collision_checks\": %ld, "
       "\"wall_s\": %.6f, \"cpu_s\": %.6f, \"load_s\": %.6f}\n",
       solved ? "true" : "false", status.c_str(), attempts, rejected, vertices, charts, constraint->projections,
       planner->samples,
-      problem.counts.fk, problem.counts.jacobians, problem.counts.collision_checks, wall, cpu, load_s);
+      problem.counts.fk, problem.counts.jacobians, problem.counts.inequalities, problem.counts.collision_checks, wall, cpu, load_s);
   std::fflush(stdout);
   return 0;
 }

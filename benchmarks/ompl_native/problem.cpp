@@ -43,6 +43,38 @@ std::vector<int> ints_of(const json::value& v) {
   return out;
 }
 
+mgcore::RowMat rows_of(const json::value& v) {  // a list of equal-length rows
+  const auto& a = v.as_array();
+  const Eigen::Index cols = a.empty() ? 0 : static_cast<Eigen::Index>(a[0].as_array().size());
+  mgcore::RowMat out(static_cast<Eigen::Index>(a.size()), cols);
+  for (std::size_t i = 0; i < a.size(); ++i) out.row(i) = vector_of(a[i]).transpose();
+  return out;
+}
+
+Eigen::Vector3d vector3_of(const json::value& v) {
+  const Eigen::VectorXd r = vector_of(v);
+  if (r.size() != 3) throw std::runtime_error("expected 3 numbers");
+  return r;
+}
+
+// The whole-body terms (orientation, linear; inequalities com_polygon, hemisphere); false: not one of them.
+bool add_whole_body(mgcore::Space& space, const std::string& kind, const json::object& to) {
+  if (kind == "orientation") {
+    const Eigen::Matrix<double, 2, 3> basis = rows_of(to.at("basis"));
+    space.add_orientation(static_cast<int>(to.at("frame_id").to_number<long>()), vector3_of(to.at("axis")), basis);
+  } else if (kind == "linear") {
+    space.add_linear(rows_of(to.at("A")), vector_of(to.at("y")));
+  } else if (kind == "com_polygon") {
+    space.add_com_polygon(rows_of(to.at("normals")), vector_of(to.at("bounds")));
+  } else if (kind == "hemisphere") {
+    space.add_hemisphere(static_cast<int>(to.at("frame_id").to_number<long>()), vector3_of(to.at("axis")),
+                         vector3_of(to.at("direction")));
+  } else {
+    return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 struct Problem::Impl {
@@ -97,8 +129,9 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
       const Eigen::VectorXd center = vector_of(to.at("center"));
       p.space->add_sphere(static_cast<int>(to.at("frame_id").to_number<long>()),
                           Eigen::Vector3d(center[0], center[1], center[2]), to.at("radius").to_number<double>());
-    } else {
-      throw std::runtime_error("unknown constraint term type '" + kind + "' (known: pose, chain, sphere)");
+    } else if (!add_whole_body(*p.space, kind, to)) {
+      throw std::runtime_error("unknown constraint term type '" + kind +
+                               "' (known: pose, chain, sphere, orientation, linear, com_polygon, hemisphere)");
     }
   }
   p.tolerance = vector_of(c.at("tolerance"));
@@ -143,6 +176,13 @@ void Problem::jacobian(const Eigen::Ref<const Eigen::VectorXd>& q, Eigen::Ref<Ei
 bool Problem::within_limits(const Eigen::Ref<const Eigen::VectorXd>& q) const {
   return impl_->space->within_limits(q.data());
 }
+
+bool Problem::inequalities_hold(const Eigen::Ref<const Eigen::VectorXd>& q) {
+  ++counts.inequalities;
+  return impl_->space->inequalities_hold(q.data());
+}
+
+int Problem::g() const { return impl_->space->g(); }
 
 bool Problem::collision_free(const Eigen::Ref<const Eigen::VectorXd>& q) {
   ++counts.collision_checks;

@@ -1,5 +1,5 @@
-// The planning problem the Python side exports (see manifoldgen/ompl_native.py): our pose
-// constraint and our validity checker, built with pinocchio and coal from the same model,
+// The planning problem the Python side exports (see manifoldgen/ompl_native.py): our constraint
+// (equalities, and inequalities for the validity test) and our validity checker, built with pinocchio and coal from the same model,
 // collision model, collision pairs and obstacles as manifoldgen's ConstrainedSpace.
 //
 // This header shows only Eigen and the standard library: problem.cpp is compiled against the
@@ -19,6 +19,7 @@ struct Counts {
   long fk = 0;                // configurations whose constraint kinematics was computed (residual or Jacobian)
   long jacobians = 0;         // of those, with the Jacobian
   long collision_checks = 0;  // configurations checked for collision (each computes its own FK of every link)
+  long inequalities = 0;      // configurations whose inequalities (CoM margin, hemisphere) were evaluated
 };
 
 struct Settings {
@@ -39,6 +40,7 @@ class Problem {
 
   int n() const;  // active coordinates
   int m() const;  // residual components
+  int g() const;  // inequality rows (0: none)
   const Settings& settings() const;
   const Eigen::VectorXd& lower() const;
   const Eigen::VectorXd& upper() const;
@@ -51,6 +53,8 @@ class Problem {
   void jacobian(const Eigen::Ref<const Eigen::VectorXd>& q, Eigen::Ref<Eigen::MatrixXd> out);
   bool within_limits(const Eigen::Ref<const Eigen::VectorXd>& q) const;
   bool collision_free(const Eigen::Ref<const Eigen::VectorXd>& q);
+  // every inequality G_i(q) <= 0 (the CoM over the support polygon with its margin, a hemisphere)
+  bool inequalities_hold(const Eigen::Ref<const Eigen::VectorXd>& q);
 
   Counts counts;
 

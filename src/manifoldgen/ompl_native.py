@@ -9,19 +9,22 @@ The problem goes to the C++ program as a JSON file (:func:`export_problem`): the
 people, and what the program builds from: the robot model and the collision model written by
 pinocchio's own serialization from the very objects this space checks with (robot geometries,
 scene obstacles, the exact collision pairs: SRDF-pruned or the sampled matrix), the locked joints'
-reference, the joint limits, the constraint terms of the compiled core (pose, rotation, closed chain, sphere; tolerances), start, goal,
-seed and OMPL settings. OMPL plans at native speed: the constraint, its Jacobian and the validity
-test (joint limits, then collision, as :meth:`~manifoldgen.space.ConstrainedSpace.valid` with
-``equality=False``, like the Python bridge) are C++ calls.
+reference, the joint limits (a floating base's six coordinates within the task's ``base_bounds``: OMPL's
+state-space bounds), the constraint terms of the compiled core (pose, rotation, closed chain, sphere,
+orientation, joint_linear, balance; tolerances), start, goal, seed and OMPL settings. OMPL plans at native
+speed: the equalities are OMPL's constraint, and they, their Jacobian and the validity test (joint limits,
+then the inequalities (balance's CoM margin, orientation's hemisphere), then collision, as
+:meth:`~manifoldgen.space.ConstrainedSpace.valid` with ``equality=False``, like the Python bridge) are C++ calls.
 
 Tolerance: exactly as :class:`~manifoldgen.ompl_bridge.OmplConstraint`: OMPL gets ``F_i / tol_i``
 and the tolerance ``1 - margin`` on its Euclidean norm, so a state OMPL accepts is within our
 per-component tolerance with the margin our planners keep for intermediate states.
 
 Final check and retry: every exact OMPL solution (densified by OMPL's ``interpolate``) comes back
-over a pipe and is checked here by the space's
-:meth:`~manifoldgen.space.ConstrainedSpace.validate_path`, the same dense check (every
-``ValidationSettings.resolution`` rad) every method gets. A rejected path does not end the query:
+over a pipe and is checked here by the space's rule, the same dense check (every
+``ValidationSettings.resolution`` rad) every method gets, at the same speed as our planners get it: by the
+compiled core's ``validate_path`` when the core is built (its counts booked on the space), else by
+:meth:`~manifoldgen.space.ConstrainedSpace.validate_path`. A rejected path does not end the query:
 as our planners go on searching after a candidate fails the dense check, OMPL searches again
 (``SimpleSetup::clear``: a new tree, the atlas keeps its charts) until a path passes or the time
 limit is reached. ``time_s`` runs from the go signal to the answer (the program's start-up and
@@ -41,10 +44,11 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen import native
 from manifoldgen.native import active_coordinates, constraint_terms, unsupported, write_models
 from manifoldgen.ompl_bridge import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.space import ConstrainedSpace
+from manifoldgen.space import REASONS, ConstrainedSpace
 
 SPACES = ("projected", "atlas", "tangent")
 BINARY_ENV = "MANIFOLDGEN_OMPL_NATIVE"
@@ -62,8 +66,8 @@ def native_binary() -> Path:
 
 
 def _terms(space: ConstrainedSpace) -> list[dict]:
-    """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`: pose,
-    rotation, closed chain, sphere, the compiled core's); anything else, or a floating base, is refused."""
+    """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`, the compiled
+    core's); anything else (a user's Python constraint) is refused."""
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"the C++ OMPL baseline cannot take this task ({reason}); use the Python-callback "
@@ -79,8 +83,10 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
     terms = _terms(space)
     folder = Path(folder)
     model_file, geometry_file = write_models(space, folder)
+    names = [robot.model.names[1]] if robot.floating_base else []  # the free flyer: the six base coordinates
+    names += [robot.model.names[j] for j in robot._joint_ids]
     active = [{"joint": joint, "idx_q": idx_q, "idx_v": idx_v, "nq": nq}
-              for joint, (idx_q, idx_v, nq) in zip(robot.joints, active_coordinates(robot))]
+              for joint, (idx_q, idx_v, nq) in zip(names, active_coordinates(robot))]
     problem = {
         "format_version": 1,
         "task": {"robot": robot.identity, "joints": robot.joints, "locked": robot.locked,
@@ -135,6 +141,7 @@ class NativeOmplPlanner:
         self.settings = OmplSettings() if settings is None else settings
         self.settings.check()
         self.space, self.ompl_space, self.resolution, self.seed = space, ompl_space, resolution, seed
+        self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
         self.name = f"ompl-native-{ompl_space}"
 
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
@@ -163,7 +170,7 @@ class NativeOmplPlanner:
                   "ompl_solved": solved or done["rejected_paths"] > 0, "vertices": done["vertices"],
                   "charts": done["charts"], "attempts": done["attempts"], "rejected_paths": done["rejected_paths"],
                   "resolution": self.resolution, "ompl_tolerance": 1.0 - self.space.settings.margin,
-                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "collision_checks", "samples")},
+                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks", "samples")},
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
@@ -182,10 +189,19 @@ class NativeOmplPlanner:
                 return path, worst, reason, json.loads(line[5:])
             count = int(line.split()[1])
             path = np.array([[float(v) for v in child.stdout.readline().split()] for _ in range(count)])
-            report = self.space.validate_path(path)
-            worst, reason = report.worst_violation, report.reason
-            child.stdin.write("valid\n" if report.valid else "invalid\n")
+            valid, worst, reason = self._dense_check(path)
+            child.stdin.write("valid\n" if valid else "invalid\n")
             child.stdin.flush()
+
+    def _dense_check(self, path: np.ndarray) -> tuple[bool, float, str]:
+        """The space's dense check of ``path (K, n)``: (valid, worst violation, reason)."""
+        if self.core is None:
+            report = self.space.validate_path(path)
+            return report.valid, report.worst_violation, report.reason
+        before = self.core.counts()
+        valid, worst, _, reason, segment, _ = self.core.validate_path(np.ascontiguousarray(path, float))
+        native.book(self.space, before, self.core.counts())
+        return bool(valid), float(worst), "" if valid else f"segment {segment}: {REASONS[reason - 1]}"
 
     @staticmethod
     def _expect(child, log: Path, *words: str) -> str:
