@@ -115,7 +115,8 @@ def _balance_terms(robot: Robot, part: BalanceConstraint, y: np.ndarray) -> list
     """A balance constraint's equalities as pose terms in its residual order (each foot's position, then with
     flat feet each foot's rotation, then the base frame's height), and its CoM margin as the support polygon's
     inequalities ``normals . com[x, y] - (offsets - margin) <= 0``."""
-    terms = [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": np.eye(3).reshape(-1).tolist(),
+    identity = np.eye(3).reshape(-1).tolist()
+    terms = [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": identity,
               "position_axes": [0, 1, 2], "orientation_axes": [], "y": target.tolist()}
              for foot, target in zip(part.feet, part.foot_positions)]
     if part.flat:
@@ -123,7 +124,7 @@ def _balance_terms(robot: Robot, part: BalanceConstraint, y: np.ndarray) -> list
                    "position_axes": [], "orientation_axes": [0, 1, 2], "y": []}
                   for foot, R in zip(part.feet, part.foot_rotations)]
     terms.append({"type": "pose", "frame": part.base_frame, "frame_id": robot.frame_id(part.base_frame),
-                  "rotation": np.eye(3).reshape(-1).tolist(), "position_axes": [2], "orientation_axes": [],
+                  "rotation": identity, "position_axes": [2], "orientation_axes": [],
                   "y": y.tolist()})
     terms.append({"type": "com_polygon", "normals": part._normals.tolist(),
                   "bounds": (part._offsets - part.margin).tolist()})

@@ -170,7 +170,8 @@ class NativeOmplPlanner:
                   "ompl_solved": solved or done["rejected_paths"] > 0, "vertices": done["vertices"],
                   "charts": done["charts"], "attempts": done["attempts"], "rejected_paths": done["rejected_paths"],
                   "resolution": self.resolution, "ompl_tolerance": 1.0 - self.space.settings.margin,
-                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks", "samples")},
+                  "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks",
+                                                      "samples")},
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
