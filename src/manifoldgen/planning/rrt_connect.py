@@ -45,6 +45,7 @@ class RRTConnect(Planner):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.core, self.fallback = None, ""
+        self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
         wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
         if wanted != "python":
             reason = ("the compiled core manifoldgen_core is not installed" if native.core_module() is None
@@ -54,7 +55,9 @@ class RRTConnect(Planner):
                                        else f"{reason}; use core='python' or 'auto'")
             self.core = None if reason else native.core_space(self.space)
             if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:
-                native.set_spheres(self.core, native.space_spheres(self.space))
+                spheres = native.space_spheres(self.space)
+                native.set_spheres(self.core, spheres)
+                self.sphere_fallback = spheres["fallback"]
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
         self.sphere_checks = self.cut_edges = 0
@@ -86,7 +89,8 @@ class RRTConnect(Planner):
         if self.core is None:
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
         return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
-                "cut_edges": self.cut_edges}
+                "cut_edges": self.cut_edges,
+                **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
 
     def _target(self) -> np.ndarray:
         """The configuration to grow toward: a sample."""
