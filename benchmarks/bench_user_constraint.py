@@ -42,21 +42,25 @@ set_torch_threads()
 
 
 def count_calls(constraint):
-    """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count Python calls and
-    rows; returns the running totals {"calls", "rows"}."""
-    totals, depth = {"calls": 0, "rows": 0}, [0]
+    """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count Python calls, rows
+    and the CPU seconds spent inside them; returns the running totals {"calls", "rows", "cpu"}."""
+    totals, depth = {"calls": 0, "rows": 0, "cpu": 0.0}, [0]
     for name in ("residual", "jacobian", "inequality"):
         method = getattr(constraint, name)
 
         def counted(q, y, method=method):
-            if not depth[0]:  # the autograd Jacobian's own residual call is part of its call
+            outer = not depth[0]  # the autograd Jacobian's own residual call is part of its call
+            if outer:
                 totals["calls"] += 1
                 totals["rows"] += 1 if np.ndim(q) == 1 else len(q)
+                began = time.process_time()
             depth[0] += 1
             try:
                 return method(q, y)
             finally:
                 depth[0] -= 1
+                if outer:
+                    totals["cpu"] += time.process_time() - began
         setattr(constraint, name, counted)
     return totals
 
@@ -80,23 +84,25 @@ def plan_bench():
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
             planner = RRTConnect(space, make_sampler("project", space, seed), seed=seed,
                                  settings=RRTConnectSettings(core=core))
-            totals["calls"] = totals["rows"] = 0  # building the space evaluated the constraint once
+            totals.update(calls=0, rows=0, cpu=0.0)  # building the space evaluated the constraint once
             wall, cpu = time.perf_counter(), time.process_time()
             result = planner.solve(scene.start, scene.goal, args.time)
             cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
             assert result.extras["core"] == core, result.extras
             if result.solved:
                 assert space.validate_path(result.path).valid
-            rows[core].append((result.solved, cpu, wall, totals["calls"], totals["rows"]))
+            rows[core].append((result.solved, cpu, wall, totals["calls"], totals["rows"], totals["cpu"] / cpu))
             print(f"seed {seed} {core:>6}: solved {result.solved}, {cpu:.2f} s CPU, {wall:.2f} s wall, "
-                  f"{totals['calls']} Python constraint calls, {totals['rows']} rows", flush=True)
-    print(f"\n| search | solved | median CPU (s) | median wall (s) | Python constraint calls (median) | rows per call |")
-    print("|---|---|---|---|---|---|")
+                  f"{totals['calls']} Python constraint calls, {totals['rows']} rows, "
+                  f"{totals['cpu']:.2f} s CPU inside them", flush=True)
+    print("\n| search | solved | median CPU (s) | median wall (s) | Python constraint calls (median) | rows per call "
+          "| CPU inside the user's constraint (median) |")
+    print("|---|---|---|---|---|---|---|")
     for core, runs in rows.items():
-        solved, cpu, wall, calls, n = (np.array(c, float) for c in zip(*runs))
+        solved, cpu, wall, calls, n, inside = (np.array(c, float) for c in zip(*runs))
         print(f"| {'compiled core + callbacks' if core == 'native' else 'Python'} | {int(solved.sum())}/{len(runs)} "
               f"| {np.median(cpu):.2f} | {np.median(wall):.2f} | {np.median(calls):,.0f} "
-              f"| {n.sum() / max(calls.sum(), 1):.1f} |")
+              f"| {n.sum() / max(calls.sum(), 1):.1f} | {np.median(inside):.0%} |")
 
 
 if args.plan:

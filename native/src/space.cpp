@@ -1,6 +1,8 @@
 // The constrained space in C++ (see core.hpp): manifoldgen.space.ConstrainedSpace's rule with the
 // constraint terms of constraints/pose.py, rotation.py (a pose term without position axes) and
-// closed_chain.py, the projection of constraints/projection.py, and a sphere-model collision test.
+// closed_chain.py, terms evaluated by Python callbacks on batches of configurations (any other
+// constraint: manifoldgen/native.py ConstraintCallback), the projection of constraints/projection.py, and
+// a sphere-model collision test.
 #include "core.hpp"
 
 #include <pinocchio/algorithm/frames.hpp>

@@ -14,9 +14,11 @@ pinocchio :class:`~manifoldgen.robot.Robot`): :func:`unsupported` says why, and 
 Python.
 
 The core applies :class:`~manifoldgen.space.ConstrainedSpace`'s rule in the same order (limits,
-equality within ``limit`` x tolerance, collision), lazily per state; projection is
-:func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
-compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
+equality within ``limit`` x tolerance, inequalities, collision), lazily per state (with callbacks: the
+tests before collision for a whole batch at once, as the Python space does, then collisions in order);
+projection is :func:`~manifoldgen.constraints.project`'s algorithm with its options;
+``tests/test_native.py`` and ``tests/test_native_callback.py`` compare both with the Python reference,
+``tests/test_native_bad_inputs.py`` their refusals. :class:`NativeSpace` gives a sampler the core's ``valid``,
 ``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
 in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
 pooled sample when it first tries it). :func:`plan_rrt_connect` runs
@@ -319,7 +321,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
     (``time.perf_counter`` seconds). Books iterations, samples, rejections, projections and the core's
-    operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
+    operation counts on the planner (``planner.callbacks``: calls into Python constraint callbacks and the
+    configurations they evaluated); the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
     before = core.counts()
     swapped = sampler.space is space
@@ -336,6 +339,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         after = core.counts()
         book(space, before, after)
         planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
+        planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
     planner.rejected += out["rejected_paths"]
     planner.out_of_reach += out["out_of_reach"]
