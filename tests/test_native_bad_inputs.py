@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from manifoldgen import native
-from manifoldgen.constraints import Constraint, PlaneConstraint, PoseConstraint
+from manifoldgen.constraints import Condition, Constraint, PlaneConstraint, PoseConstraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.space import ConstrainedSpace
 
@@ -136,7 +136,6 @@ class Refusing(Constraint):
 
     def __init__(self, robot):
         self.robot = robot
-        from manifoldgen.constraints import Condition
         self.condition = Condition((), (), np.zeros((1, 0)))
         self.tolerance = np.full(1, 0.01)
 
