@@ -2,7 +2,7 @@
 the compiled core through batched Python callbacks.
 
     python benchmarks/bench_user_constraint.py [--per-condition 2000] [--epochs 60]
-    python benchmarks/bench_user_constraint.py --plan [--runs 10] [--time 30]
+    python benchmarks/bench_user_constraint.py --plan [--runs 10] [--time 30] [--sampler project|cvae]
 
 The same manifold on xarm7, written twice: `examples/user_task/tool_down.py` (a user's ~20-line
 constraint, Jacobian and training penalty from its one residual) and the built-in orientation + plane
@@ -11,7 +11,8 @@ model's raw accuracy (fraction of samples within tolerance with no refinement) p
 gap (target: within 10 points), with wall and CPU time.
 
 ``--plan``: the user constraint's task (xarm7, tool down at x = 0.4, the `open` scene's query with a box
-between start and goal), RRT-Connect with the `project` sampler, the Python search against the compiled
+between start and goal), RRT-Connect with the `project` sampler (or a CVAE trained first on the user
+constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``), the Python search against the compiled
 core calling the user's residual and Jacobian (torch autograd) back in batches; seeds 0..runs-1, the two
 interleaved per seed. Prints per search: solved, median CPU and wall time of a query, and the median
 number of Python constraint calls and rows (configurations) per call.
@@ -37,6 +38,7 @@ parser.add_argument("--samples", type=int, default=4000)
 parser.add_argument("--plan", action="store_true", help="time planning: Python search vs compiled core + callbacks")
 parser.add_argument("--runs", type=int, default=10)
 parser.add_argument("--time", type=float, default=30.0)
+parser.add_argument("--sampler", choices=("project", "cvae"), default="project")
 args = parser.parse_args()
 set_torch_threads()
 
@@ -76,13 +78,24 @@ def plan_bench():
     task = get_task(str(EXAMPLES / "tool-down-xarm7.toml"))
     scene = get_scene(task, "open")
     scene = replace(scene, obstacles=[Obstacle("block", "box", Pose([0.4, -0.08, -0.02]), size=[0.2, 0.06, 0.3])])
+    sampler = "project"
+    if args.sampler == "cvae":
+        import tempfile
+        folder = Path(tempfile.mkdtemp(prefix="bench-user-cvae-"))
+        wall, cpu = time.perf_counter(), time.process_time()
+        model = get_model_class("cvae")()
+        model.fit(collect(task, args.per_condition, seed=0, progress=False), epochs=args.epochs, seed=0, progress=False)
+        model.save(folder)
+        sampler = f"cvae:{folder}"
+        print(f"CVAE trained on the user constraint ({args.per_condition} rows per condition, {args.epochs} epochs): "
+              f"{time.perf_counter() - wall:.0f} s wall, {time.process_time() - cpu:.0f} s CPU", flush=True)
     rows = {core: [] for core in ("python", "native")}
     for seed in range(args.runs):
         for core in rows:
             constraint = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
             totals = count_calls(constraint)
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
-            planner = RRTConnect(space, make_sampler("project", space, seed), seed=seed,
+            planner = RRTConnect(space, make_sampler(sampler, space, seed), seed=seed,
                                  settings=RRTConnectSettings(core=core))
             totals.update(calls=0, rows=0, cpu=0.0)  # building the space evaluated the constraint once
             wall, cpu = time.perf_counter(), time.process_time()
