@@ -150,17 +150,16 @@ def test_a_sampler_that_gives_up_ends_the_native_query_with_its_reason(panda_tas
     assert planner.sampler.space is space  # the sampler gets its own space back
 
 
-def test_core_choice_and_fallback_for_python_constraints(panda_task, wall):
+def test_core_choice_and_python_constraints_through_callbacks(panda_task, wall):
     from manifoldgen.constraints import PlaneConstraint
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.specs import make_sampler
     plane = PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]])
-    assert native.unsupported(ConstrainedSpace(plane, [0.5])) is not None
     space = ConstrainedSpace(plane, [0.5])
-    with pytest.raises(ManifoldgenError, match="compiled core has no 'plane' constraint"):
-        RRTConnect(space, make_sampler("project", space, 0), settings=RRTConnectSettings(core="native"))
+    assert native.unsupported(space) is None  # a Python constraint runs in the core through callbacks
+    assert "no 'plane' constraint term" in native.unsupported(space, callbacks=False)  # the C++ OMPL baseline's rule
     auto = RRTConnect(space, make_sampler("project", space, 0))
-    assert auto.core is None and "plane" in auto._extras()["core_fallback"]
+    assert auto.core is not None and auto.core.batched and auto._extras()["core"] == "native"
     with pytest.raises(ManifoldgenError, match="unknown core"):
         RRTConnectSettings(core="gpu").check()
     _, python = _planner(panda_task, wall, 0, core="python")

@@ -31,7 +31,15 @@ struct Counters {
   long collision_checks = 0;  // configurations checked with coal (exact meshes)
   long sphere_checks = 0;     // configurations checked with the sphere models first (coal only where they touch)
   std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
+  long callback_calls = 0;  // calls into Python constraint callbacks (residuals, Jacobians, inequalities)
+  long callback_rows = 0;   // configurations those calls evaluated
 };
+
+// Constraint terms evaluated in Python (a user's constraint; see Space::add_callback): one call
+// evaluates B configurations q (B, n). Residuals fill F (B, rows) and, when J is not null,
+// J (B, rows, n) row-major; inequalities fill G (B, p). They may throw (the exception ends the call).
+using Residuals = std::function<void(const double* q, long B, double* F, double* J)>;
+using Inequalities = std::function<void(const double* q, long B, double* G)>;
 
 struct Projection {
   bool converged;
@@ -84,9 +92,13 @@ class Space {
   void add_com_polygon(const RowMat& normals, const Vec& bounds);
   // hemisphere: G = -direction . R(q) axis (constraints/orientation.py's inequality)
   void add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction);
-  int g() const;                                    // inequality rows
+  int g() const;                                    // built-in inequality rows
   void inequality(const double* q, double* G);      // (g,)
   bool inequalities_hold(const double* q);          // every G_i <= 0 (true when there is none)
+  // callback: `rows` residual components from Python, stacked in order like the built-in terms.
+  void add_callback(int rows, Residuals residuals);
+  // G(q) <= 0 from Python, p components (at most one; replaces the previous one).
+  void set_inequalities(int p, Inequalities inequalities);
   void set_tolerance(const Vec& tolerance);  // (m,) after the terms
   // Conservative sphere models (see set_spheres in module.cpp): joint (S,), center (S, 3) in the
   // joint frame, radius (S,), geometry (S,) the robot geometry each covers.
@@ -99,6 +111,8 @@ class Space {
 
   int n() const;
   int m() const;
+  int p() const;         // inequality components from Python (0: none)
+  bool batched() const;  // Python callbacks take part: configurations are evaluated in batches
   double margin() const;
   double resolution() const;
   const Vec& tolerance() const;
@@ -122,6 +136,17 @@ class Space {
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
   // Every state every resolution along path (K, n), exact collision checks.
   PathCheck validate_path(const double* path, int K);
+
+  // Batches of B configurations q (B, n) row-major: one Python call per callback term serves them all.
+  void residuals(const double* q, long B, double* F);            // F (B, m); B evaluations
+  void jacobians(const double* q, long B, double* F, double* J);  // F (B, m), J (B, m, n); B Jacobians
+  void violations(const double* q, long B, double* v);            // (B,) max |F_i| / tol_i
+  void inequalities(const double* q, long B, double* G);          // G (B, p)
+  // (B,) first failed test of each row (limit (B,)); batched(): limits, equalities and inequalities of
+  // every row at once (as the Python space does), collisions then row by row; else lazily per row.
+  void codes(const double* q, long B, const double* limit, bool collision, bool exact, int* out);
+  // project() of every row in place, the rows still iterating evaluated together at each iteration.
+  void project_many(double* q, long B, double tol, int max_iters, double damping, double max_step, Projection* out);
 
   Counters counts;
   int stop = VALID;  // reason of the latest motion check's stop (VALID: it passed)

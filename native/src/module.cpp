@@ -44,8 +44,47 @@ nb::dict counts_of(const Space& s) {
   d["projection_steps"] = s.counts.projection_steps;
   d["collision_checks"] = s.counts.collision_checks;
   d["sphere_checks"] = s.counts.sphere_checks;
+  d["callback_calls"] = s.counts.callback_calls;
+  d["callback_rows"] = s.counts.callback_rows;
   d["stopped"] = stopped;
   return d;
+}
+
+// A (B, cols) float64 C-contiguous array returned by a Python callback, checked and copied into out.
+void take(const nb::handle& value, std::size_t B, std::size_t cols, std::size_t depth, double* out, const char* what) {
+  auto a = nb::cast<nb::ndarray<const double, nb::c_contig, nb::device::cpu>>(value);
+  const bool ok = depth == 2 ? a.ndim() == 2 && a.shape(0) == B && a.shape(1) == cols
+                             : a.ndim() == 3 && a.shape(0) == B && a.shape(1) * a.shape(2) == cols;
+  if (!ok) throw std::runtime_error(std::string("the constraint callback returned ") + what + " of the wrong shape");
+  std::copy_n(a.data(), B * cols, out);
+}
+
+// q (B, n) as a numpy array of its own (the callback may keep it).
+nb::object rows_of(const double* q, long B, int n) {
+  std::vector<double> copy(q, q + B * n);
+  return nb::cast(owned(std::move(copy), {static_cast<std::size_t>(B), static_cast<std::size_t>(n)}));
+}
+
+// Python constraint callbacks (Space::add_callback, set_inequalities): residuals(q (B, n), jacobian: bool)
+// -> F (B, rows) or (F, J (B, rows, n)); inequalities(q (B, n)) -> G (B, p). Called with the GIL held
+// (the core never releases it).
+void add_callback(Space& s, int rows, nb::callable fn) {
+  const int n = s.n();
+  s.add_callback(rows, [fn, rows, n](const double* q, long B, double* F, double* J) {
+    nb::object out = fn(rows_of(q, B, n), J != nullptr);
+    if (!J) return take(out, B, rows, 2, F, "residuals");
+    nb::tuple pair = nb::cast<nb::tuple>(out);
+    if (pair.size() != 2) throw std::runtime_error("the constraint callback must return (F, J) when asked for J");
+    take(pair[0], B, rows, 2, F, "residuals");
+    take(pair[1], B, static_cast<std::size_t>(rows) * n, 3, J, "a Jacobian");
+  });
+}
+
+void set_inequalities(Space& s, int p, nb::callable fn) {
+  const int n = s.n();
+  s.set_inequalities(p, [fn, p, n](const double* q, long B, double* G) {
+    take(fn(rows_of(q, B, n)), B, p, 2, G, "inequalities");
+  });
 }
 
 }  // namespace
@@ -130,7 +169,7 @@ NB_MODULE(manifoldgen_core, m) {
                              Eigen::Vector3d(direction(0), direction(1), direction(2)));
           },
           "frame"_a, "axis"_a, "direction"_a, "Inequality G = -direction . R axis of frame <= 0.")
-      .def_prop_ro("g", &Space::g, "inequality rows")
+      .def_prop_ro("g", &Space::g, "built-in inequality rows (CoM polygon, hemisphere)")
       .def(
           "inequality",
           [](Space& s, const In2& q) {
@@ -140,7 +179,14 @@ NB_MODULE(manifoldgen_core, m) {
             for (std::size_t b = 0; b < B; ++b) s.inequality(q.data() + b * s.n(), G.data() + b * gg);
             return owned(std::move(G), {B, gg});
           },
-          "q"_a, "(B, g) inequality values of q (B, n) (<= 0: holds).")
+          "q"_a, "(B, g) built-in inequality values of q (B, n) (<= 0: holds).")
+      .def("add_callback", &add_callback, "rows"_a, "residuals"_a,
+           "A term of `rows` residual components from Python: residuals(q (B, n), jacobian) -> F (B, rows), or "
+           "(F, J (B, rows, n)) when jacobian is True; called on batches of configurations.")
+      .def("set_inequalities", &set_inequalities, "p"_a, "inequalities"_a,
+           "G(q) <= 0 from Python: inequalities(q (B, n)) -> G (B, p), called on batches.")
+      .def_prop_ro("p", &Space::p, "inequality components from Python (set_inequalities)")
+      .def_prop_ro("batched", &Space::batched, "Python callbacks take part (configurations evaluated in batches)")
       .def("set_tolerance", [](Space& s, const In1& t) { s.set_tolerance(vec_of(t)); }, "tolerance"_a)
       .def(
           "set_spheres",
@@ -165,7 +211,7 @@ NB_MODULE(manifoldgen_core, m) {
             check_cols(q, s);
             const std::size_t B = q.shape(0), mm = s.m();
             std::vector<double> F(B * mm);
-            for (std::size_t b = 0; b < B; ++b) s.residual(q.data() + b * s.n(), F.data() + b * mm);
+            s.residuals(q.data(), static_cast<long>(B), F.data());
             return owned(std::move(F), {B, mm});
           },
           "q"_a, "(B, m) residuals of q (B, n).")
@@ -175,7 +221,7 @@ NB_MODULE(manifoldgen_core, m) {
             check_cols(q, s);
             const std::size_t B = q.shape(0), mm = s.m(), nn = s.n();
             std::vector<double> F(B * mm), J(B * mm * nn);
-            for (std::size_t b = 0; b < B; ++b) s.jacobian(q.data() + b * nn, F.data() + b * mm, J.data() + b * mm * nn);
+            s.jacobians(q.data(), static_cast<long>(B), F.data(), J.data());
             return nb::make_tuple(owned(std::move(F), {B, mm}), owned(std::move(J), {B, mm, nn}));
           },
           "q"_a, "(F (B, m), J (B, m, n)) of q (B, n).")
@@ -185,7 +231,7 @@ NB_MODULE(manifoldgen_core, m) {
             check_cols(q, s);
             const std::size_t B = q.shape(0);
             std::vector<double> v(B);
-            for (std::size_t b = 0; b < B; ++b) v[b] = s.violation(q.data() + b * s.n());
+            s.violations(q.data(), static_cast<long>(B), v.data());
             return owned(std::move(v), {B});
           },
           "q"_a, "(B,) max |F_i| / tol_i.")
@@ -195,8 +241,9 @@ NB_MODULE(manifoldgen_core, m) {
             check_cols(q, s);
             const std::size_t B = q.shape(0);
             if (limit.shape(0) != B) throw nb::value_error("limit must have one value per configuration");
-            std::vector<int8_t> c(B);
-            for (std::size_t b = 0; b < B; ++b) c[b] = static_cast<int8_t>(s.code(q.data() + b * s.n(), limit(b), collision, exact));
+            std::vector<int> codes(B);
+            s.codes(q.data(), static_cast<long>(B), limit.data(), collision, exact, codes.data());
+            std::vector<int8_t> c(codes.begin(), codes.end());
             return owned(std::move(c), {B});
           },
           "q"_a, "limit"_a, "collision"_a = true, "exact"_a = true,
@@ -214,14 +261,14 @@ NB_MODULE(manifoldgen_core, m) {
             check_cols(q, s);
             const std::size_t B = q.shape(0), nn = s.n();
             std::vector<double> x(q.data(), q.data() + B * nn), res(B);
-            std::vector<bool> conv(B);
-            std::vector<int64_t> it(B);
+                        std::vector<int64_t> it(B);
             std::vector<uint8_t> ok(B);
+            std::vector<mgcore::Projection> out(B);
+            s.project_many(x.data(), static_cast<long>(B), tol, max_iters, damping, max_step, out.data());
             for (std::size_t b = 0; b < B; ++b) {
-              const mgcore::Projection p = s.project(x.data() + b * nn, tol, max_iters, damping, max_step);
-              ok[b] = p.converged;
-              it[b] = p.iterations;
-              res[b] = p.residual;
+              ok[b] = out[b].converged;
+              it[b] = out[b].iterations;
+              res[b] = out[b].residual;
             }
             return nb::make_tuple(owned(std::move(x), {B, nn}), owned(std::move(ok), {B}), owned(std::move(it), {B}),
                                   owned(std::move(res), {B}));

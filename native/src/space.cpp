@@ -3,7 +3,8 @@
 // closed_chain.py, the projection of constraints/projection.py, and a sphere-model collision test.
 // Whole-body (the block "Whole-body terms"): a floating base as manifoldgen.robot's six Euler
 // coordinates, orientation.py's and joint_linear.py's terms, and inequalities (balance.py's CoM margin,
-// orientation.py's hemisphere); balance.py's equalities are pose terms.
+// orientation.py's hemisphere); balance.py's equalities are pose terms. Any other constraint (a user's:
+// manifoldgen/native.py ConstraintCallback) is evaluated by Python callbacks on batches of configurations.
 #include "core.hpp"
 
 #include <pinocchio/algorithm/center-of-mass.hpp>
@@ -36,7 +37,9 @@ using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 namespace {
 
 struct Term {
-  int kind;  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius)), 3: orientation, 4: linear
+  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius)), 3: orientation, 4: linear,
+  // 5: Python callback
+  int kind;
   pinocchio::FrameIndex frame, frame_b;
   Eigen::Matrix3d rotation;
   std::vector<int> position_axes, orientation_axes;
@@ -45,11 +48,13 @@ struct Term {
   Eigen::Vector3d axis = Eigen::Vector3d::Zero();                    // orientation: the frame's axis
   Eigen::Matrix<double, 2, 3> basis = Eigen::Matrix<double, 2, 3>::Zero();  // orientation: e1, e2
   RowMat A;                                                          // linear: (r, n)
+  int callback = -1, callback_rows = 0;  // callback: its index in Impl::callbacks, its residual rows
   int rows() const {
     return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size())
            : kind == 1 ? 6
            : kind == 3 ? 2
            : kind == 4 ? static_cast<int>(A.rows())
+           : kind == 5 ? callback_rows
                        : 1;
   }
 };
@@ -143,6 +148,11 @@ struct Space::Impl {
   std::vector<char> placed_spheres;  // per geometry: its world centres are up to date
   std::vector<PairTest> tests;
   std::vector<Shape> shapes;  // per geometry
+  // Python callbacks (Space::add_callback, set_inequalities)
+  std::vector<Residuals> callbacks;
+  Inequalities inequality;
+  int p = 0;
+  bool native_terms = false;  // some term is built in (forward kinematics needed)
 
   const Eigen::VectorXd& to_full(const double* q) {
     const int offset = floating ? 6 : 0;
@@ -182,6 +192,10 @@ struct Space::Impl {
   void fill_residual(const double* q, double* F) {
     int row = 0;
     for (const Term& t : terms) {
+      if (t.kind == 5) {  // filled by the batch's callback
+        row += t.rows();
+        continue;
+      }
       if (t.kind >= 3) {
         row += whole_body_residual(t, q, F + row);
         continue;
@@ -212,6 +226,10 @@ struct Space::Impl {
     auto put = [&](int row, const auto& rowvec) { put_row(J + static_cast<long>(row) * nn, rowvec); };  // rowvec over nv
     int row = 0;
     for (const Term& t : terms) {
+      if (t.kind == 5) {  // filled by the batch's callback
+        row += t.rows();
+        continue;
+      }
       if (t.kind >= 3) {
         row += whole_body_jacobian(t, q, F + row, J + static_cast<long>(row) * nn);
         continue;
@@ -430,6 +448,7 @@ void Space::add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vect
          Eigen::Vector3d::Zero()};
   p.m += t.rows();
   p.terms.push_back(t);
+  p.native_terms = true;
 }
 
 void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset) {
@@ -440,6 +459,7 @@ void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation,
          Vec(), offset};
   p.m += t.rows();
   p.terms.push_back(t);
+  p.native_terms = true;
 }
 
 void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) {
@@ -450,6 +470,7 @@ void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) 
          center};
   p.m += t.rows();
   p.terms.push_back(t);
+  p.native_terms = true;
 }
 
 // ---------------------------------------------------------------- Whole-body terms
@@ -462,6 +483,7 @@ void Space::add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen:
   t.basis = basis;
   p.m += t.rows();
   p.terms.push_back(t);
+  p.native_terms = true;
 }
 
 void Space::add_linear(const RowMat& A, const Vec& y) {
@@ -472,6 +494,7 @@ void Space::add_linear(const RowMat& A, const Vec& y) {
   t.A = A;
   p.m += t.rows();
   p.terms.push_back(t);
+  p.native_terms = true;
 }
 
 void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
@@ -608,17 +631,9 @@ double Space::margin() const { return impl_->margin; }
 double Space::resolution() const { return impl_->resolution; }
 const Vec& Space::tolerance() const { return impl_->tolerance; }
 
-void Space::residual(const double* q, double* F) {
-  ++counts.evaluations;
-  pinocchio::forwardKinematics(impl_->model, impl_->data, impl_->to_full(q));
-  impl_->fill_residual(q, F);
-}
+void Space::residual(const double* q, double* F) { residuals(q, 1, F); }
 
-void Space::jacobian(const double* q, double* F, double* J) {
-  ++counts.jacobians;
-  pinocchio::computeJointJacobians(impl_->model, impl_->data, impl_->to_full(q));
-  impl_->fill_jacobian(q, F, J);
-}
+void Space::jacobian(const double* q, double* F, double* J) { jacobians(q, 1, F, J); }
 
 double Space::violation(const double* q) {
   const Impl& p = *impl_;
@@ -639,7 +654,7 @@ double Space::violation(const double* q) {
 bool Space::within_limits(const double* q) const {
   const Impl& p = *impl_;
   for (int i = 0; i < p.n(); ++i)
-    if (q[i] < p.lower[i] - 1e-9 || q[i] > p.upper[i] + 1e-9) return false;
+    if (!(q[i] >= p.lower[i] - 1e-9 && q[i] <= p.upper[i] + 1e-9)) return false;  // NaN: outside
   return true;
 }
 
@@ -664,6 +679,11 @@ int Space::code(const double* q, double limit, bool collision, bool exact) {
   if (!within_limits(q)) return LIMITS;
   if (violation(q) > limit) return CONSTRAINT;
   if (!inequalities_hold(q)) return INEQUALITY;
+  if (impl_->p) {
+    std::vector<double> G(impl_->p);
+    inequalities(q, 1, G.data());
+    if (*std::max_element(G.begin(), G.end()) > 0) return INEQUALITY;
+  }
   if (collision && !(exact ? collision_free(q) : spheres_free(q))) return COLLISION;
   return VALID;
 }
@@ -671,8 +691,17 @@ int Space::code(const double* q, double limit, bool collision, bool exact) {
 int Space::valid_prefix(const double* states, int k, bool last_is_node, bool collision) {
   const int nn = n();
   const double inner = 1.0 - impl_->margin;
+  std::vector<int> batch;  // batched(): every state's verdict before collision, one callback for all
+  if (batched() && k > 0) {
+    std::vector<double> limit(k, inner);
+    if (last_is_node) limit[k - 1] = 1.0;
+    batch.resize(k);
+    codes(states, k, limit.data(), false, true, batch.data());
+  }
   for (int i = 0; i < k; ++i) {
-    const int c = code(states + static_cast<long>(i) * nn, (last_is_node && i == k - 1) ? 1.0 : inner, collision, true);
+    const double* q = states + static_cast<long>(i) * nn;
+    const int c = batch.empty() ? code(q, (last_is_node && i == k - 1) ? 1.0 : inner, collision, true)
+                  : batch[i] != VALID || !collision || collision_free(q) ? batch[i] : static_cast<int>(COLLISION);
     if (c != VALID) {
       stop = c;
       ++counts.stopped[c];
@@ -684,87 +713,254 @@ int Space::valid_prefix(const double* states, int k, bool last_is_node, bool col
 }
 
 Projection Space::project(double* q, double tol, int max_iters, double damping, double max_step) {
-  const Impl& p = *impl_;
-  const int nn = n(), mm = m();
-  Eigen::Map<Vec> x(q, nn);
-  x = x.cwiseMax(p.lower).cwiseMin(p.upper);
-  Vec F(mm), dq(nn);
-  RowMat J(mm, nn), Jb(mm, nn);
-  Eigen::MatrixXd A(mm, mm);
-  auto step = [&](const RowMat& Jm, double lam) {
-    A.noalias() = Jm * Jm.transpose();
-    A.diagonal().array() += lam;
-    dq.noalias() = -Jm.transpose() * A.ldlt().solve(F);
-  };
-  Projection out{false, max_iters, INFINITY};
-  for (int it = 0; it <= max_iters; ++it) {
-    if (mm) jacobian(q, F.data(), J.data());
-    else ++counts.jacobians;
-    const double err = mm ? F.cwiseAbs().maxCoeff() : 0.0;
-    out.residual = err;
-    if (err <= tol) {
-      out.converged = true;
-      out.iterations = it;
-      break;
-    }
-    if (it == max_iters) break;
-    ++counts.projection_steps;
-    const double lam = F.squaredNorm() + damping;
-    step(J, lam);
-    bool blocked = false;
-    Jb = J;
-    for (int i = 0; i < nn; ++i)
-      if ((x[i] <= p.lower[i] + 1e-9 && dq[i] < 0) || (x[i] >= p.upper[i] - 1e-9 && dq[i] > 0)) {
-        Jb.col(i).setZero();
-        blocked = true;
-      }
-    if (blocked) step(Jb, lam);
-    const double norm = dq.norm();
-    dq *= std::min(1.0, max_step / std::max(norm, 1e-12));
-    x = (x + dq).cwiseMax(p.lower).cwiseMin(p.upper);
-  }
+  Projection out;
+  project_many(q, 1, tol, max_iters, damping, max_step, &out);
   return out;
 }
 
 PathCheck Space::validate_path(const double* path, int K) {
   const int nn = n();
   const double res = impl_->resolution;
+  if (K < 1) throw std::invalid_argument("a path needs at least one waypoint");
   PathCheck out{true, 0.0, -1, VALID, -1, 0};
-  Vec s(nn);
-  long index = 0;
-  auto check = [&](const double* q) {
-    int c = VALID;
-    if (!within_limits(q)) c = LIMITS;
-    else {
-      const double v = violation(q);
-      out.worst = std::max(out.worst, v);
-      if (v > 1.0) c = CONSTRAINT;
-      else if (!inequalities_hold(q)) c = INEQUALITY;
-      else if (!collision_free(q)) c = COLLISION;
-    }
-    if (c != VALID && out.valid) {
-      out.valid = false;
-      out.first_invalid = index;
-      out.reason = c;
-    }
-    ++index;
-    return c == VALID;
-  };
+  // the dense states in order and the segment each lies on (the last waypoint: segment K - 2)
+  std::vector<double> states;
+  std::vector<int> segment;
   for (int seg = 0; seg + 1 < K; ++seg) {
     Eigen::Map<const Vec> a(path + static_cast<long>(seg) * nn, nn), b(path + static_cast<long>(seg + 1) * nn, nn);
     const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / res)));
     for (int j = 0; j < steps; ++j) {
-      s = a + (static_cast<double>(j) / steps) * (b - a);
-      if (!check(s.data())) {
-        out.segment = seg;
-        out.states = index;
-        return out;
-      }
+      const Vec s = a + (static_cast<double>(j) / steps) * (b - a);
+      states.insert(states.end(), s.data(), s.data() + nn);
+      segment.push_back(seg);
     }
   }
-  if (K >= 1 && !check(path + static_cast<long>(K - 1) * nn)) out.segment = std::max(K - 2, 0);
-  out.states = index;
+  if (K >= 1) {
+    states.insert(states.end(), path + static_cast<long>(K - 1) * nn, path + static_cast<long>(K) * nn);
+    segment.push_back(std::max(K - 2, 0));
+  }
+  const long M = static_cast<long>(segment.size()), chunk = 4096;  // chunk: rows per callback (batched())
+  const int pp = impl_->p;
+  std::vector<double> v, G;
+  for (long i = 0; i < M; ++i) {
+    const double* q = states.data() + i * nn;
+    if (batched() && i % chunk == 0) {
+      const long c = std::min(chunk, M - i);
+      v.resize(c);
+      violations(q, c, v.data());
+      G.resize(c * pp);
+      if (pp) inequalities(q, c, G.data());
+    }
+    int c = VALID;
+    if (!within_limits(q)) c = LIMITS;
+    else {
+      const double vi = batched() ? v[i % chunk] : violation(q);
+      out.worst = std::max(out.worst, vi);
+      if (vi > 1.0) c = CONSTRAINT;
+      else if (!inequalities_hold(q)) c = INEQUALITY;
+      else if (pp && *std::max_element(G.begin() + (i % chunk) * pp, G.begin() + (i % chunk + 1) * pp) > 0)
+        c = INEQUALITY;
+      else if (!collision_free(q)) c = COLLISION;
+    }
+    if (c != VALID) {
+      out.valid = false;
+      out.first_invalid = i;
+      out.reason = c;
+      out.segment = segment[i];
+      out.states = i + 1;
+      return out;
+    }
+  }
+  out.states = M;
   return out;
+}
+
+// ------------------------------------------------------------------ Python callbacks and batches
+void Space::add_callback(int rows, Residuals residuals) {
+  Impl& p = *impl_;
+  if (rows < 0) throw std::runtime_error("a callback term needs rows >= 0");
+  Term t{5, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(), Eigen::Vector3d::Zero()};
+  t.callback = static_cast<int>(p.callbacks.size());
+  t.callback_rows = rows;
+  p.callbacks.push_back(std::move(residuals));
+  p.m += rows;
+  p.terms.push_back(t);
+}
+
+void Space::set_inequalities(int p, Inequalities inequalities) {
+  if (p < 0) throw std::runtime_error("inequalities need p >= 0");
+  impl_->p = p;
+  impl_->inequality = std::move(inequalities);
+}
+
+int Space::p() const { return impl_->p; }
+bool Space::batched() const { return !impl_->callbacks.empty() || impl_->p > 0; }
+
+namespace {
+
+// Rows [offset, offset + rows) of F (B, m) (and of J (B, m, n)) from a callback's F (B, rows), J (B, rows, n).
+void scatter(const std::vector<double>& Fc, const std::vector<double>* Jc, long B, int rows, int offset, int m, int n,
+             double* F, double* J) {
+  for (long b = 0; b < B; ++b)
+    for (int r = 0; r < rows; ++r) {
+      F[b * m + offset + r] = Fc[b * rows + r];
+      if (J) std::copy_n(Jc->data() + (b * rows + r) * n, n, J + (b * m + offset + r) * n);
+    }
+}
+
+}  // namespace
+
+void Space::residuals(const double* q, long B, double* F) {
+  Impl& p = *impl_;
+  const int nn = n(), mm = m();
+  counts.evaluations += B;
+  if (p.native_terms)
+    for (long b = 0; b < B; ++b) {
+      pinocchio::forwardKinematics(p.model, p.data, p.to_full(q + b * nn));
+      p.fill_residual(q + b * nn, F + b * mm);
+    }
+  int offset = 0;
+  std::vector<double> Fc;
+  for (const Term& t : p.terms) {
+    if (t.kind == 5 && B > 0 && t.callback_rows > 0) {
+      Fc.assign(B * t.callback_rows, 0.0);
+      ++counts.callback_calls;
+      counts.callback_rows += B;
+      p.callbacks[t.callback](q, B, Fc.data(), nullptr);
+      scatter(Fc, nullptr, B, t.callback_rows, offset, mm, nn, F, nullptr);
+    }
+    offset += t.rows();
+  }
+}
+
+void Space::jacobians(const double* q, long B, double* F, double* J) {
+  Impl& p = *impl_;
+  const int nn = n(), mm = m();
+  counts.jacobians += B;
+  if (p.native_terms)
+    for (long b = 0; b < B; ++b) {
+      pinocchio::computeJointJacobians(p.model, p.data, p.to_full(q + b * nn));
+      p.fill_jacobian(q + b * nn, F + b * mm, J + b * mm * nn);
+    }
+  int offset = 0;
+  std::vector<double> Fc, Jc;
+  for (const Term& t : p.terms) {
+    if (t.kind == 5 && B > 0 && t.callback_rows > 0) {
+      Fc.assign(B * t.callback_rows, 0.0);
+      Jc.assign(B * t.callback_rows * nn, 0.0);
+      ++counts.callback_calls;
+      counts.callback_rows += B;
+      p.callbacks[t.callback](q, B, Fc.data(), Jc.data());
+      scatter(Fc, &Jc, B, t.callback_rows, offset, mm, nn, F, J);
+    }
+    offset += t.rows();
+  }
+}
+
+void Space::violations(const double* q, long B, double* v) {
+  const Impl& p = *impl_;
+  const int mm = m();
+  if (mm == 0) {
+    std::fill(v, v + B, 0.0);
+    return;
+  }
+  std::vector<double> F(B * mm);
+  residuals(q, B, F.data());
+  for (long b = 0; b < B; ++b) {
+    double worst = 0.0;
+    for (int i = 0; i < mm; ++i) worst = std::max(worst, std::abs(F[b * mm + i]) / p.tolerance[i]);
+    v[b] = worst;
+  }
+}
+
+void Space::inequalities(const double* q, long B, double* G) {
+  Impl& p = *impl_;
+  if (!p.p || B == 0) return;
+  ++counts.callback_calls;
+  counts.callback_rows += B;
+  p.inequality(q, B, G);
+}
+
+void Space::codes(const double* q, long B, const double* limit, bool collision, bool exact, int* out) {
+  const int nn = n(), pp = impl_->p;
+  if (!batched()) {
+    for (long b = 0; b < B; ++b) out[b] = code(q + b * nn, limit[b], collision, exact);
+    return;
+  }
+  std::vector<double> v(B), G(B * pp);
+  violations(q, B, v.data());
+  inequalities(q, B, G.data());
+  for (long b = 0; b < B; ++b) {
+    const double* x = q + b * nn;
+    if (!within_limits(x)) out[b] = LIMITS;
+    else if (v[b] > limit[b]) out[b] = CONSTRAINT;
+    else if (!inequalities_hold(x)) out[b] = INEQUALITY;
+    else if (pp && *std::max_element(G.begin() + b * pp, G.begin() + (b + 1) * pp) > 0) out[b] = INEQUALITY;
+    else if (collision && !(exact ? collision_free(x) : spheres_free(x))) out[b] = COLLISION;
+    else out[b] = VALID;
+  }
+}
+
+void Space::project_many(double* q, long B, double tol, int max_iters, double damping, double max_step,
+                         Projection* out) {
+  const Impl& p = *impl_;
+  const int nn = n(), mm = m();
+  std::vector<long> active;
+  for (long b = 0; b < B; ++b) {
+    Eigen::Map<Vec> x(q + b * nn, nn);
+    x = x.cwiseMax(p.lower).cwiseMin(p.upper);
+    out[b] = Projection{false, max_iters, INFINITY};
+    active.push_back(b);
+  }
+  RowMat X, F, J;
+  Vec Fr(mm), dq(nn);
+  RowMat Jr(mm, nn), Jb(mm, nn);
+  Eigen::MatrixXd A(mm, mm);
+  auto step = [&](const RowMat& Jm, double lam) {
+    A.noalias() = Jm * Jm.transpose();
+    A.diagonal().array() += lam;
+    dq.noalias() = -Jm.transpose() * A.ldlt().solve(Fr);
+  };
+  for (int it = 0; it <= max_iters && !active.empty(); ++it) {
+    const long a = static_cast<long>(active.size());
+    X.resize(a, nn);
+    for (long r = 0; r < a; ++r) X.row(r) = Eigen::Map<const Eigen::RowVectorXd>(q + active[r] * nn, nn);
+    F.resize(a, mm);
+    J.resize(a * mm, nn);
+    if (mm) jacobians(X.data(), a, F.data(), J.data());
+    else counts.jacobians += a;
+    std::vector<long> still;
+    for (long r = 0; r < a; ++r) {
+      const long b = active[r];
+      const double err = mm ? F.row(r).cwiseAbs().maxCoeff() : 0.0;
+      out[b].residual = err;
+      if (err <= tol) {
+        out[b].converged = true;
+        out[b].iterations = it;
+        continue;
+      }
+      if (it == max_iters) continue;
+      ++counts.projection_steps;
+      Eigen::Map<Vec> x(q + b * nn, nn);
+      Fr = F.row(r).transpose();
+      Jr = J.middleRows(r * mm, mm);
+      const double lam = Fr.squaredNorm() + damping;
+      step(Jr, lam);
+      bool blocked = false;
+      Jb = Jr;
+      for (int i = 0; i < nn; ++i)
+        if ((x[i] <= p.lower[i] + 1e-9 && dq[i] < 0) || (x[i] >= p.upper[i] - 1e-9 && dq[i] > 0)) {
+          Jb.col(i).setZero();
+          blocked = true;
+        }
+      if (blocked) step(Jb, lam);
+      const double norm = dq.norm();
+      dq *= std::min(1.0, max_step / std::max(norm, 1e-12));
+      x = (x + dq).cwiseMax(p.lower).cwiseMin(p.upper);
+      still.push_back(b);
+    }
+    active.swap(still);
+  }
 }
 
 }  // namespace mgcore

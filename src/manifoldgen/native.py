@@ -9,13 +9,19 @@ turned by ``y``), ``closed_chain``, ``sphere``, and the whole-body ones: ``balan
 pose terms, its CoM margin as the support polygon's inequalities on pinocchio's centre of mass), ``orientation``
 (two rows and its hemisphere inequality), ``joint_linear``, and sets of them, on fixed or floating bases (the
 base's six Euler coordinates mapped to pinocchio's free flyer as :meth:`~manifoldgen.robot.Robot.to_pinocchio`
-does). Anything else (a user's Python constraint) is not built in: :func:`unsupported` says why, and the
-planners fall back to Python.
+does). Any other constraint (a user's, ``plane``, ...) reaches the core through batched Python callbacks
+(:class:`ConstraintCallback`): its own residual, Jacobian (analytic or torch autograd, as the Python
+space's projection uses) and inequalities, called on all the rows a projection iteration, a motion check
+or a path chunk evaluates at once. What the core cannot take (a robot that is not a pinocchio
+:class:`~manifoldgen.robot.Robot`): :func:`unsupported` says why, and the planners fall back to Python.
 
 The core applies :class:`~manifoldgen.space.ConstrainedSpace`'s rule in the same order (limits,
-equality within ``limit`` x tolerance, inequalities, collision), lazily per state; projection is
-:func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
-compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
+equality within ``limit`` x tolerance, inequalities, collision), lazily per state (with callbacks: the
+tests before collision for a whole batch at once, as the Python space does, then collisions in order);
+projection is :func:`~manifoldgen.constraints.project`'s algorithm with its options;
+``tests/test_native.py``, ``tests/test_native_balance.py`` and ``tests/test_native_callback.py`` compare both
+with the Python reference, ``tests/test_native_bad_inputs.py`` their refusals. :class:`NativeSpace` gives a
+sampler the core's ``valid``,
 ``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
 in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
 pooled sample when it first tries it). :func:`plan_rrt_connect` runs
@@ -39,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from manifoldgen.constraints import ConstraintSet, Projection
+from manifoldgen.constraints import Constraint, ConstraintSet, Projection
 from manifoldgen.constraints.balance import BalanceConstraint
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
 from manifoldgen.constraints.joint_linear import JointLinearConstraint
@@ -48,8 +54,8 @@ from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.rotation import RotationConstraint
 from manifoldgen.constraints.sphere import SphereConstraint
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.robot import Robot
-from manifoldgen.space import REASONS, ConstrainedSpace
+from manifoldgen.robot import Robot, as_batch
+from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
 
 CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
@@ -100,12 +106,14 @@ BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereCon
             OrientationConstraint, JointLinearConstraint)
 
 
-def unsupported(space: ConstrainedSpace) -> str | None:
-    """Why the core cannot take ``space`` (a one-line reason), or None when it can."""
+def unsupported(space: ConstrainedSpace, *, callbacks: bool = True) -> str | None:
+    """Why the core cannot take ``space`` (a one-line reason), or None when it can; ``callbacks=False``: a
+    constraint that is not built in counts as unsupported too (the C++ OMPL baseline has no callbacks)."""
     for part in _parts(space):
-        if type(part) not in BUILT_IN:
-            return (f"the compiled core has no '{part.spec()['type']}' constraint (built in: pose, rotation, "
-                    "closed_chain, sphere, balance, orientation, joint_linear); a Python constraint runs in Python")
+        if type(part) not in BUILT_IN and not callbacks:
+            return (f"the compiled core has no '{part.spec()['type']}' constraint term (built in: pose, rotation, "
+                    "closed_chain, sphere, balance, orientation, joint_linear); a Python constraint reaches the "
+                    "core through callbacks only")
     if not isinstance(space.robot, Robot):
         return "the compiled core needs a pinocchio Robot"
     return None
@@ -138,37 +146,100 @@ def constraint_terms(space: ConstrainedSpace) -> list[dict]:
     constraint is a pose term without position axes, its target turned by y; ``orientation`` (frame_id, axis,
     basis (2, 3) rows) with its ``hemisphere`` inequality (frame_id, axis, direction), ``linear`` (A (r, n), y),
     a balance constraint as pose terms and a ``com_polygon`` inequality (normals (H, 2), bounds (H,)).
-    Inequality terms add no residual rows. The compiled core and the C++ OMPL baseline both build from these."""
-    robot, terms, offset = space.robot, [], 0
+    Inequality terms add no residual rows. The compiled core and the C++ OMPL baseline both build from these;
+    a part that is not built in is refused (one line)."""
+    terms = []
+    for kind, item in _layout(space):
+        if kind == "callback":
+            raise ManifoldgenError(unsupported(space, callbacks=False))
+        terms.append(item)
+    return terms
+
+
+def _layout(space: ConstrainedSpace) -> list[tuple[str, object]]:
+    """``space``'s constraint in residual order: ("term", a built-in part's C++ term, see
+    :func:`constraint_terms`) and ("callback", a :class:`ConstraintCallback` for a run of consecutive parts
+    that are not built in)."""
+    robot, out, offset = space.robot, [], 0
     for part in _parts(space):
         y = space.y[offset:offset + part.condition.k]
         offset += part.condition.k
+        if type(part) not in BUILT_IN:
+            if out and out[-1][0] == "callback":
+                out[-1][1].parts.append((part, y))
+            else:
+                out.append(("callback", ConstraintCallback([(part, y)])))
+            continue
         if type(part) is PoseConstraint:
-            terms.append({"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                          "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
-                          "orientation_axes": list(part._oidx), "y": y.tolist()})
+            term = {"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                    "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
+                    "orientation_axes": list(part._oidx), "y": y.tolist()}
         elif type(part) is RotationConstraint:
-            terms.append({"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                          "rotation": part.target(y[None])[0].reshape(-1).tolist(), "position_axes": [],
-                          "orientation_axes": [0, 1, 2], "y": []})
+            term = {"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                    "rotation": part.target(y[None])[0].reshape(-1).tolist(), "position_axes": [],
+                    "orientation_axes": [0, 1, 2], "y": []}
         elif type(part) is BalanceConstraint:
-            terms += _balance_terms(robot, part, y)
+            out += [("term", t) for t in _balance_terms(robot, part, y)]
+            continue
         elif type(part) is OrientationConstraint:
             frame_id = robot.frame_id(part.frame)
-            terms.append({"type": "orientation", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
-                          "basis": part.basis.tolist()})
-            terms.append({"type": "hemisphere", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
-                          "direction": part.direction.tolist()})
+            out.append(("term", {"type": "orientation", "frame": part.frame, "frame_id": frame_id,
+                                 "axis": part.axis.tolist(), "basis": part.basis.tolist()}))
+            term = {"type": "hemisphere", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
+                    "direction": part.direction.tolist()}
         elif type(part) is JointLinearConstraint:
-            terms.append({"type": "linear", "A": part.coefficients.tolist(), "y": y.tolist()})
+            term = {"type": "linear", "A": part.coefficients.tolist(), "y": y.tolist()}
         elif type(part) is SphereConstraint:
-            terms.append({"type": "sphere", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                          "center": part.center.tolist(), "radius": float(y[0])})
+            term = {"type": "sphere", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
+                    "center": part.center.tolist(), "radius": float(y[0])}
         else:
-            terms.append({"type": "chain", "frame_a": part.frame_a, "frame_b": part.frame_b,
-                          "frame_a_id": robot.frame_id(part.frame_a), "frame_b_id": robot.frame_id(part.frame_b),
-                          "rotation": part.rotation.reshape(-1).tolist(), "offset": (y[0] * part.axis).tolist()})
-    return terms
+            term = {"type": "chain", "frame_a": part.frame_a, "frame_b": part.frame_b,
+                    "frame_a_id": robot.frame_id(part.frame_a), "frame_b_id": robot.frame_id(part.frame_b),
+                    "rotation": part.rotation.reshape(-1).tolist(), "offset": (y[0] * part.axis).tolist()}
+        out.append(("term", term))
+    return out
+
+
+class ConstraintCallback:
+    """Constraint parts that are not built in, at their condition, as the core calls them (one call per
+    batch of configurations): :meth:`residuals` of ``q (B, n)``, with the Jacobian when asked (each part's
+    own :meth:`~manifoldgen.constraints.Constraint.jacobian`, as :func:`~manifoldgen.constraints.project`
+    uses, so both spaces agree); ``parts``: (constraint, y (k,)) in residual order."""
+
+    def __init__(self, parts: list[tuple[Constraint, np.ndarray]]):
+        self.parts = parts
+
+    @property
+    def rows(self) -> int:
+        return sum(part.m for part, _ in self.parts)
+
+    def residuals(self, q: np.ndarray, jacobian: bool):
+        """F (B, rows), or (F, J (B, rows, n)) when ``jacobian``."""
+        ys = [np.broadcast_to(y, (len(q), len(y))) for _, y in self.parts]
+        if not jacobian:
+            return np.ascontiguousarray(np.concatenate([part.residual(q, y) for (part, _), y in zip(self.parts, ys)],
+                                                       axis=1), dtype=float)
+        pairs = [part.jacobian(q, y) for (part, _), y in zip(self.parts, ys)]
+        return (np.ascontiguousarray(np.concatenate([F for F, _ in pairs], axis=1), dtype=float),
+                np.ascontiguousarray(np.concatenate([J for _, J in pairs], axis=1), dtype=float))
+
+
+def _python_inequalities(space: ConstrainedSpace):
+    """(p, G) for the parts that are not built in and have inequalities: G(q (B, n)) -> (B, p) as the core
+    calls it; None when there are none (the built-in inequalities run in C++)."""
+    parts, offset = [], 0
+    for part in _parts(space):
+        y = space.y[offset:offset + part.condition.k]
+        offset += part.condition.k
+        if type(part) not in BUILT_IN and part.inequality(space.robot.lower[None], y[None]).shape[1]:
+            parts.append((part, y))
+    if not parts:
+        return None
+
+    def inequalities(q: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.concatenate(
+            [part.inequality(q, np.broadcast_to(y, (len(q), len(y)))) for part, y in parts], axis=1), dtype=float)
+    return inequalities(space.robot.lower[None]).shape[1], inequalities
 
 
 def core_space(space: ConstrainedSpace):
@@ -185,7 +256,10 @@ def core_space(space: ConstrainedSpace):
         model_file, geometry_file = write_models(space, Path(folder))
         out = core.Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
                          robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
-    for term in constraint_terms(space):
+    for kind, term in _layout(space):
+        if kind == "callback":
+            out.add_callback(term.rows, term.residuals)
+            continue
         kind = term["type"]
         if kind == "pose":
             out.add_pose(term["frame_id"], np.reshape(term["rotation"], (3, 3)), term["position_axes"],
@@ -198,6 +272,9 @@ def core_space(space: ConstrainedSpace):
             out.add_chain(term["frame_a_id"], term["frame_b_id"], np.reshape(term["rotation"], (3, 3)),
                           np.asarray(term["offset"], float))
     out.set_tolerance(np.asarray(space.constraint.tolerance, float))
+    python_inequalities = _python_inequalities(space)
+    if python_inequalities:
+        out.set_inequalities(*python_inequalities)
     return out
 
 
@@ -238,26 +315,33 @@ _SPHERES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # CollisionCh
 def space_spheres(space: ConstrainedSpace) -> dict:
     """The sphere models of ``space``'s robot and held object (:mod:`manifoldgen.spheres`, cached on disk)
     with the pairs they leave to coal (mesh obstacles, geometries without spheres, tight self pairs), as
-    :func:`set_spheres` takes them; kept per collision checker."""
+    :func:`set_spheres` takes them, and ``fallback``: geometry name -> why it has no spheres (every pair
+    it is in is checked exactly; said once in a one-line warning); kept per collision checker."""
     checker = space.checker
     if checker not in _SPHERES:
         from manifoldgen.spheres import SphereChecker
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the pairs left to coal are listed in "exact"
             spheres = SphereChecker(checker)
+        if spheres.fallback:
+            warnings.warn("sphere models: " + "; ".join(f"{name} has none ({why})" for name, why in
+                                                        spheres.fallback.items())
+                          + "; coal checks its pairs exactly", stacklevel=2)
         _SPHERES[checker] = {"joint": spheres.joint, "center": spheres.center, "radius": spheres.radius,
-                             "geometry": spheres.geometry, "exact": list(spheres.exact_pairs)}
+                             "geometry": spheres.geometry, "exact": list(spheres.exact_pairs),
+                             "fallback": dict(spheres.fallback)}
     return _SPHERES[checker]
 
 
 def _rows(q: np.ndarray, n: int) -> np.ndarray:
-    q = np.ascontiguousarray(q, dtype=float)
-    return q.reshape(1, n) if q.ndim == 1 else q
+    """``q`` as (B, n) C-contiguous floats, refused as the Python space refuses it."""
+    return np.ascontiguousarray(as_batch(q, n))
 
 
 class NativeSpace:
     """``space``'s rule on the compiled ``core``: what a sampler asks (``valid``, ``violation``,
-    ``project``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
+    ``project``), motion and path checks (``valid_prefix``, ``validate_path``, with the same refusals and
+    reports as ``space``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
     runs the search (:func:`plan_rrt_connect`), not here. ``collision=False``: :meth:`valid` leaves the
     collision test out (for a search that checks every state it keeps, samples included)."""
 
@@ -280,6 +364,27 @@ class NativeSpace:
         x, ok, iterations, residual = self._core.project(_rows(q, self._space.n), tol, max_iters, damping, max_step)
         return Projection(x, ok.astype(bool), iterations, residual)
 
+    def valid_prefix(self, states: np.ndarray, last_is_node: bool) -> int:
+        """:meth:`ConstrainedSpace.valid_prefix` in the core (``stop`` set alike)."""
+        count = self._core.valid_prefix(_rows(states, self._space.n), last_is_node)
+        self.stop = REASONS[self._core.stop - 1] if self._core.stop else None
+        return count
+
+    def validate_path(self, path: np.ndarray) -> PathReport:
+        """:meth:`ConstrainedSpace.validate_path` in the core: the same report (the first invalid state
+        described by the Python space's :meth:`~ConstrainedSpace.problem`)."""
+        resolution = self._space.settings.resolution
+        path = np.asarray(path, dtype=float)
+        why = malformed_path(path, self._space.n)
+        if why:
+            return PathReport(False, np.inf, why, resolution=resolution)
+        valid, worst, first, _, segment, states = self._core.validate_path(np.ascontiguousarray(path))
+        if valid:
+            return PathReport(True, worst, "", -1, states, resolution)
+        state = densify(path, resolution)[0][first]
+        return PathReport(False, worst, f"segment {segment}: {self._space.problem(state)}", segment, states,
+                          resolution)
+
 
 def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
     """Add the core's counts between ``before`` and ``after`` to ``space``'s counters."""
@@ -293,7 +398,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
     (``time.perf_counter`` seconds). Books iterations, samples, rejections, projections and the core's
-    operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
+    operation counts on the planner (``planner.callbacks``: calls into Python constraint callbacks and the
+    configurations they evaluated); the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
     before = core.counts()
     swapped = sampler.space is space
@@ -310,6 +416,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         after = core.counts()
         book(space, before, after)
         planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
+        planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
     planner.rejected += out["rejected_paths"]
     planner.out_of_reach += out["out_of_reach"]

@@ -68,7 +68,7 @@ def native_binary() -> Path:
 def _terms(space: ConstrainedSpace) -> list[dict]:
     """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`, the compiled
     core's); anything else (a user's Python constraint) is refused."""
-    reason = unsupported(space)
+    reason = unsupported(space, callbacks=False)
     if reason:
         raise ManifoldgenError(f"the C++ OMPL baseline cannot take this task ({reason}); use the Python-callback "
                                "ompl-SPACE-PLANNER methods")

@@ -64,6 +64,15 @@ class PathReport:
                 "segment": self.segment, "states_checked": self.states_checked, "resolution": self.resolution}
 
 
+def malformed_path(path: np.ndarray, n: int) -> str | None:
+    """Why ``path`` is no path of ``(K >= 1, n)`` finite waypoints (one line), or None."""
+    if path.ndim != 2 or path.shape[1] != n or len(path) == 0:
+        return f"path must have shape (K, {n}) with K >= 1, got {path.shape}"
+    if not np.all(np.isfinite(path)):
+        return "path contains NaN or infinite values"
+    return None
+
+
 def densify(path: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """States every ``resolution`` along each segment of ``path (K, n)`` -> (M, n) states and
     (M,) the segment each state lies on (the last waypoint belongs to segment K - 2)."""
@@ -92,7 +101,16 @@ class ConstrainedSpace:
     def __init__(self, constraint: Constraint, y: np.ndarray, checker: CollisionChecker | None = None,
                  settings: ValidationSettings = ValidationSettings()):
         self.constraint, self.robot, self.checker, self.settings = constraint, constraint.robot, checker, settings
-        self.y = np.asarray(y, dtype=float).reshape(constraint.condition.k)
+        condition = constraint.condition
+        y = np.asarray(y, dtype=float).reshape(-1)
+        if len(y) != condition.k or not np.all(np.isfinite(y)):
+            raise ManifoldgenError(f"condition needs {condition.k} finite value(s) ({', '.join(condition.names)}), "
+                                   f"got {y.tolist()}")
+        tolerance = np.asarray(constraint.tolerance, dtype=float)
+        if tolerance.ndim != 1 or not np.all(np.isfinite(tolerance) & (tolerance > 0)):
+            raise ManifoldgenError(f"constraint tolerances must be positive and finite, got {tolerance.tolist()}; "
+                                   "give each residual component a tolerance > 0")
+        self.y = y
         self._inequalities = constraint.inequality(self.robot.lower[None], self.y).shape[1] > 0
         self.evaluations = self.jacobians = self.projection_steps = self.collision_checks = 0
         self.stopped = dict.fromkeys(REASONS, 0)
@@ -235,11 +253,9 @@ class ConstrainedSpace:
         however the path was made."""
         resolution = self.settings.resolution
         path = np.asarray(path, dtype=float)
-        if path.ndim != 2 or path.shape[1] != self.n or len(path) == 0:
-            return PathReport(False, np.inf, f"path must have shape (K, {self.n}) with K >= 1, got {path.shape}",
-                              resolution=resolution)
-        if not np.all(np.isfinite(path)):
-            return PathReport(False, np.inf, "path contains NaN or infinite values", resolution=resolution)
+        why = malformed_path(path, self.n)
+        if why:
+            return PathReport(False, np.inf, why, resolution=resolution)
         states, segment = densify(path, resolution)
         worst = 0.0
         for lo in range(0, len(states), CHUNK):

@@ -23,8 +23,10 @@ An open mesh has no solid; its surface (what coal tests) is covered all the same
 the mesh's principal axes; of the column counts tried, the fewest spheres whose union is within
 ``VOLUME_SLACK`` times the solid's volume (or a ``SHELL_SLACK`` thick shell) of the smallest union
 found. Boxes are their 12 triangles, cylinders a circumscribed 24-sided prism (which holds the
-cylinder), spheres themselves. A geometry of another type (capsule, convex, height field ...) gets no
-spheres and its pairs are checked exactly by coal (one warning). Models are cached under
+cylinder), spheres themselves. A geometry that cannot be fitted (another type: capsule, convex, height
+field ...; a mesh with no triangles or with non-finite vertices; a fit that fails) gets no spheres, and
+its pairs are checked exactly by coal: ``SphereModel.unfitted`` and ``reasons`` say which and why, and
+:class:`SphereChecker` says so in one warning (``fallback``). Models are cached under
 ``collision.cache_dir()/spheres``, keyed by the robot's geometry model and the bytes of its mesh files.
 """
 
@@ -64,9 +66,9 @@ class SphereModel:
 
     joint (S,): pinocchio joint id (the geometry's parentJoint); center (S, 3): in that joint's frame;
     radius (S,); geometry (S,): index into the robot's collision model (the checker's geometry model
-    starts with the same objects). unfitted: geometry indices with no spheres (checked exactly).
-    solid_volume, union_volume (G,): per geometry, the solid's volume and its spheres' union (m³,
-    estimated on the fitting grid; 0 for unfitted ones).
+    starts with the same objects). unfitted: geometry indices with no spheres (checked exactly), and
+    reasons: why, one line each. solid_volume, union_volume (G,): per geometry, the solid's volume and its
+    spheres' union (m³, estimated on the fitting grid; 0 for unfitted ones).
     """
 
     joint: np.ndarray
@@ -76,6 +78,7 @@ class SphereModel:
     unfitted: tuple[int, ...]
     solid_volume: np.ndarray
     union_volume: np.ndarray
+    reasons: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.radius)
@@ -116,13 +119,35 @@ def triangles_of(geometry: coal.CollisionGeometry) -> np.ndarray | None:
 
 def fit_geometry(geometry: coal.CollisionGeometry) -> tuple[np.ndarray, np.ndarray, float, float] | None:
     """Covering spheres of one geometry in its own frame: centers (k, 3), radii (k,), the solid's volume
-    and the spheres' union volume (m³); None for an unsupported type."""
+    and the spheres' union volume (m³); None when it cannot be fitted (:func:`fit_or_reason` says why)."""
+    return fit_or_reason(geometry)[0]
+
+
+def fit_or_reason(geometry: coal.CollisionGeometry) -> tuple[tuple | None, str | None]:
+    """(:func:`fit_geometry`'s fit, None), or (None, why the geometry cannot be fitted: one line)."""
     if isinstance(geometry, coal.Sphere):
+        if not (np.isfinite(geometry.radius) and geometry.radius >= 0):
+            return None, f"sphere radius {geometry.radius}"
         volume = 4 / 3 * np.pi * geometry.radius ** 3
-        return np.zeros((1, 3)), np.array([geometry.radius + MARGIN]), volume, volume
+        return (np.zeros((1, 3)), np.array([geometry.radius + MARGIN]), volume, volume), None
+    if not isinstance(geometry, (coal.BVHModelBase, coal.Box, coal.Cylinder)):
+        return None, f"{type(geometry).__name__} has no sphere fitting"
     tris = triangles_of(geometry)
     if tris is None:
-        return None
+        return None, "its mesh has no triangles"
+    if not np.all(np.isfinite(tris)):
+        return None, "its mesh has non-finite vertex coordinates"
+    try:
+        fit = _fit_triangles(tris)
+    except (ValueError, QhullError, np.linalg.LinAlgError, MemoryError) as exc:
+        return None, f"fitting failed: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+    if not (np.all(np.isfinite(fit[0])) and np.all(np.isfinite(fit[1]))):
+        return None, "the fit gave non-finite spheres"
+    return fit, None
+
+
+def _fit_triangles(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """:func:`fit_geometry` of a closed triangle surface ``tris (T, 3, 3)`` with finite vertices."""
     vertices = tris.reshape(-1, 3)
     solid = _volume(tris)
     extent = np.ptp(vertices, axis=0)
@@ -235,7 +260,8 @@ def sphere_model(robot: Robot) -> SphereModel:
                                              "union_volume")}
     arrays["unfitted"] = np.array(model.unfitted, int)
     try:
-        save_npz(path, {"robot": robot.name, **stamp, "arrays_sha256": _arrays_digest(arrays)}, **arrays)
+        save_npz(path, {"robot": robot.name, **stamp, "arrays_sha256": _arrays_digest(arrays),
+                        "reasons": list(model.reasons)}, **arrays)
     except ManifoldgenError as exc:  # an unwritable cache costs time, not correctness
         warnings.warn(f"sphere model not cached: {exc}")
     return model
@@ -251,14 +277,15 @@ def cache_stamp(robot: Robot) -> dict:
 def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None) -> SphereModel:
     """Spheres of the given objects (default all) of a pinocchio geometry model, in their joints' frames."""
     objects = range(len(geom.geometryObjects)) if objects is None else objects
-    joint, center, radius, owner, unfitted = [], [], [], [], []
+    joint, center, radius, owner, unfitted, reasons = [], [], [], [], [], []
     solid = np.zeros(len(geom.geometryObjects))
     union = np.zeros(len(geom.geometryObjects))
     for i in objects:
         g = geom.geometryObjects[i]
-        fit = fit_geometry(g.geometry)
+        fit, why = fit_or_reason(g.geometry)
         if fit is None:
             unfitted.append(i)
+            reasons.append(why)
             continue
         c, r, solid[i], union[i] = fit
         placement = g.placement.homogeneous
@@ -268,7 +295,7 @@ def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None) -> Sphe
         owner += [i] * len(r)
     return SphereModel(np.array(joint, int), np.concatenate(center) if center else np.zeros((0, 3)),
                        np.concatenate(radius) if radius else np.zeros(0), np.array(owner, int), tuple(unfitted),
-                       solid, union)
+                       solid, union, tuple(reasons))
 
 
 def _digest(value) -> str:
@@ -320,9 +347,13 @@ def read_cache(path: Path, stamp: dict, objects: int) -> SphereModel | None:
     if (arrays["center"].shape != (S, 3) or arrays["joint"].shape != (S,) or arrays["geometry"].shape != (S,)
             or arrays["solid_volume"].shape != (objects,) or np.any(arrays["geometry"] >= objects)):
         return _stale(path, "its arrays have the wrong shapes")
+    unfitted = tuple(int(i) for i in arrays["unfitted"])
+    reasons = tuple(meta.get("reasons") or ["no spheres"] * len(unfitted))
+    if len(reasons) != len(unfitted):
+        return _stale(path, "its reasons do not match its unfitted geometries")
     return SphereModel(arrays["joint"].astype(int), arrays["center"], arrays["radius"],
-                       arrays["geometry"].astype(int), tuple(int(i) for i in arrays["unfitted"]),
-                       arrays["solid_volume"], arrays["union_volume"])
+                       arrays["geometry"].astype(int), unfitted, arrays["solid_volume"], arrays["union_volume"],
+                       reasons)
 
 
 def _stale(path: Path, why: str) -> None:
@@ -359,6 +390,9 @@ class SphereChecker:
         robot_objects = len(robot.collision_model.geometryObjects)
         unfitted = (set(range(robot_objects)) - set(model.geometry.tolist())) | set(held.unfitted)
         objects = geom.geometryObjects
+        why = dict(zip(model.unfitted, model.reasons)) | dict(zip(held.unfitted, held.reasons))
+        # robot and held geometries without spheres, name -> why: coal checks every pair they are in
+        self.fallback = {objects[i].name: why.get(i, "no spheres") for i in sorted(unfitted)}
         shapes = {oid: objects[oid].geometry for oid in checker.obstacle_ids}
         exact_obstacles = {oid for oid, s in shapes.items()
                            if not isinstance(s, (coal.Box, coal.Sphere, coal.Cylinder))}
@@ -381,7 +415,7 @@ class SphereChecker:
             else:
                 self_pairs.append((a, b))
         notes = [f"{objects[o].name} (a mesh obstacle)" for o in sorted(exact_obstacles)]
-        notes += [f"{objects[i].name} ({type(objects[i].geometry).__name__}, no spheres)" for i in sorted(unfitted)]
+        notes += [f"{name} (no spheres: {reason})" for name, reason in self.fallback.items()]
         if exact:
             warnings.warn(f"sphere check of {robot.name}: {len(exact)} pairs use coal's exact check: "
                           f"{', '.join(notes)}")

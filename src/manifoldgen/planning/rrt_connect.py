@@ -1,7 +1,7 @@
 """RRT-Connect (Kuffner & LaValle 2000): two trees, extend one toward a sample, connect the other.
 
-The search runs in the compiled core (:mod:`manifoldgen.native`) when it is built and takes the
-space's constraint (``core="auto"``, the default), else here in Python, which stays the reference
+The search runs in the compiled core (:mod:`manifoldgen.native`) when it is built and can take the
+space (``core="auto"``, the default), else here in Python, which stays the reference
 the core is tested against.
 """
 
@@ -20,11 +20,12 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 @dataclass
 class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
-    search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and the constraint is built
-    in, else Python; the result's ``extras['core']`` says which, ``extras['core_fallback']`` why not
-    native), ``python``, or ``native`` (an error when the core cannot run it); ``spheres``: the core's
-    planning checks use conservative sphere models of the robot (:mod:`manifoldgen.spheres`), the final
-    dense check of a path stays exact."""
+    search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and can take the space, a
+    Python constraint through callbacks, else Python; the result's ``extras['core']`` says which,
+    ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an error when the core cannot
+    run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
+    (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
+    says which and why), the final dense check of a path stays exact."""
 
     core: str = "auto"
     spheres: bool = False
@@ -45,6 +46,7 @@ class RRTConnect(Planner):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.core, self.fallback = None, ""
+        self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
         wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
         if wanted != "python":
             reason = ("the compiled core manifoldgen_core is not installed" if native.core_module() is None
@@ -54,10 +56,13 @@ class RRTConnect(Planner):
                                        else f"{reason}; use core='python' or 'auto'")
             self.core = None if reason else native.core_space(self.space)
             if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:
-                native.set_spheres(self.core, native.space_spheres(self.space))
+                spheres = native.space_spheres(self.space)
+                native.set_spheres(self.core, spheres)
+                self.sphere_fallback = spheres["fallback"]
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
         self.sphere_checks = self.cut_edges = 0
+        self.callbacks = {"calls": 0, "rows": 0}  # the core's calls into a Python constraint
 
     def _direct(self, start, goal):
         return None if self.core is not None else super()._direct(start, goal)
@@ -86,7 +91,9 @@ class RRTConnect(Planner):
         if self.core is None:
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
         return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
-                "cut_edges": self.cut_edges}
+                "cut_edges": self.cut_edges,
+                **({"callbacks": dict(self.callbacks)} if self.callbacks["calls"] else {}),
+                **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
 
     def _target(self) -> np.ndarray:
         """The configuration to grow toward: a sample."""
