@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from manifoldgen.cli import app
 from manifoldgen.data import Dataset, collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CVAE, load_model
-from manifoldgen.training import check_dataset, train
+from manifoldgen.training import check_dataset, manifold_dimension, train
 
 TINY = {"hidden": [16, 16], "batch": 16, "patience": 100}
 runner = CliRunner()
@@ -102,3 +103,12 @@ def test_train_command(tiny, tmp_path):
     assert bad.exit_code == 2 and "did you mean cvae" in bad.output
     resume = runner.invoke(app, ["train", str(data), "-o", str(tmp_path / "new"), "--resume"])
     assert resume.exit_code == 2 and "no checkpoint" in resume.output
+
+
+def test_a_latent_below_the_manifold_dimension_is_warned(tiny):
+    assert manifold_dimension(check_dataset(tiny), tiny.q[:3], tiny.y[:3]) == 3  # panda, 7 joints - 4 pose rows
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        CVAE(**TINY).fit(tiny, epochs=1, progress=False)  # latent 3 = the dimension: no warning
+    with pytest.warns(UserWarning, match="latent 2 is below the constraint manifold's dimension 3.*--set latent=3"):
+        CVAE(**{**TINY, "latent": 2}).fit(tiny, epochs=1, progress=False)

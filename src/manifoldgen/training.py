@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -95,6 +96,24 @@ def _fingerprint(dataset: Dataset) -> str:
     return digest.hexdigest()[:16]
 
 
+def manifold_dimension(task, q: np.ndarray, y: np.ndarray) -> int:
+    """Dimension of ``task``'s constraint manifold at rows q (B, n), y (B, k): n minus the largest rank of the
+    constraint's Jacobian over the rows (the equalities' rank; 1e-6 tolerance)."""
+    _, J = task.constraint.jacobian(np.asarray(q, float), np.asarray(y, float))
+    return task.robot.n - max(int(np.linalg.matrix_rank(j, tol=1e-6)) for j in J)
+
+
+def _check_latent(model: ConditionalSampler, task, dataset: Dataset) -> None:
+    """Warn when the model's latent is smaller than the manifold's dimension (at the first dataset rows):
+    its samples then cover at most a latent-dimensional sheet of the manifold."""
+    latent = model.config.get("latent")
+    dimension = manifold_dimension(task, dataset.q[:3], dataset.y[:3])
+    if latent is not None and int(latent) < dimension:
+        warnings.warn(f"{model.name} latent {latent} is below the constraint manifold's dimension {dimension} "
+                      f"(joints minus the constraint Jacobian's rank): its samples cover at most a {latent}-"
+                      f"dimensional sheet of it; train with --set latent={dimension}", stacklevel=3)
+
+
 def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
           validation: float = 0.1) -> TrainingLog:
@@ -131,6 +150,7 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
         model.setup(dataset.meta, dataset.q[train_idx.numpy()], dataset.y[train_idx.numpy()],
                     task.robot.lower, task.robot.upper)
     model.residual_fn = task.constraint.penalty if model.config.get("residual_weight", 0.0) > 0 else None
+    _check_latent(model, task, dataset)
     q_train, y_train = model.normalise_q(q_all[train_idx]), model.normalise_y(y_all[train_idx])
     q_val, y_val = model.normalise_q(q_all[val_idx]), model.normalise_y(y_all[val_idx])
     y_low, y_high = y_train.min(0).values, y_train.max(0).values
