@@ -143,7 +143,7 @@ def test_native_rrt_connect_paths_pass_the_python_check_state_by_state(panda_tas
 
 def test_a_sampler_that_gives_up_ends_the_native_query_with_its_reason(panda_task, wall):
     space, planner = _planner(panda_task, wall, 0)
-    planner.sampler.candidates = lambda count: np.zeros((0, space.n))
+    planner.sampler.raw = lambda count: np.zeros((0, space.n))  # the model's rows, before refinement
     planner.sampler.max_batches = 3
     result = planner.solve(wall.start, wall.goal, 5.0)
     assert not result.solved and "found no valid configuration in 3 batches" in result.extras["failure"]

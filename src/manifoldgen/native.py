@@ -52,6 +52,9 @@ TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the 
 # lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
 # (the trees grow through the maze's walls), so off
 LAZY = False
+# lazy samples (planner.cpp): the sampler's raw rows go to the search, which refines and checks a row only
+# when it first uses it
+LAZY_SAMPLES = True
 
 
 def core_module():
@@ -228,21 +231,38 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
+def _raw_draw(planner):
+    """The search's callback for lazy samples: ``count`` -> (count, n) raw rows of the planner's sampler."""
+    from manifoldgen.planning.base import SamplerFailed
+
+    def draw(count: int) -> np.ndarray:
+        planner.samples += count
+        try:
+            return planner.sampler.raw_many(count)
+        except ManifoldgenError as exc:
+            raise SamplerFailed(str(exc)) from exc
+    return draw
+
+
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
-    (``time.perf_counter`` seconds). Books iterations, samples, rejections, projections and the core's
+    (``time.perf_counter`` seconds). With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core,
+    which refines (``sampler.lazy_refine`` iterations) and checks each when it first uses it. Books
+    iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
     operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
+    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
     before = core.counts()
     swapped = sampler.space is space
     if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
         sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               planner._draw_many,
+                               _raw_draw(planner) if lazy else planner._draw_many,
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
-                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY)
+                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY,
+                               int(sampler.lazy_refine) if lazy else -1)
     finally:
         if swapped:
             sampler.space = space
@@ -255,4 +275,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     planner.local.projections += out["projections"]
     planner.native_nodes = list(out["nodes"])
     planner.cut_edges = out["cut_edges"]
+    if lazy:
+        sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
+        sampler.stats.accepted += out["accepted"]
     return out["path"] if len(out["path"]) else None
