@@ -12,13 +12,14 @@ planners fall back to Python.
 The core applies :class:`~manifoldgen.space.ConstrainedSpace`'s rule in the same order (limits,
 equality within ``limit`` x tolerance, collision), lazily per state; projection is
 :func:`~manifoldgen.constraints.project`'s algorithm with its options; ``tests/test_native.py``
-compares both with the Python reference. :class:`NativeSpace` gives a sampler the core's ``valid``,
-``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
-in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
-pooled sample when it first tries it). :func:`plan_rrt_connect` runs
+compares both with the Python reference. :func:`plan_rrt_connect` runs
 :class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
-(the planner's ``_draw_many``), and books the core's operation counts on the planner's space, so results carry
-the same counters as a Python search.
+with its raw rows (:meth:`~manifoldgen.sampling.Sampler.raw_many`: lazy samples, :data:`LAZY_SAMPLES`):
+the core refines and checks a row (limits, constraint) only when the search first uses it, and checks
+its collisions as it checks every state it keeps, so most pooled rows cost a decode and nothing more.
+:class:`NativeSpace` gives a sampler the core's ``valid``, ``violation`` and ``project`` during a native
+search (for samplers fed eagerly, ``LAZY_SAMPLES = False``). The core's operation counts are booked on
+the planner's space, so results carry the same counters as a Python search.
 
 Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
 check robot-vs-primitive and robot-robot pairs with them (exact coal for the pairs they do not
