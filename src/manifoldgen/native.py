@@ -253,7 +253,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
     operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
-    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
+    # a core built before lazy samples has no `refine` argument: it gets checked samples, as it expects
+    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many") and "refine" in (core_module().rrt_connect.__doc__ or "")
     before = core.counts()
     swapped = sampler.space is space
     if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
@@ -263,7 +264,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
                                _raw_draw(planner) if lazy else planner._draw_many,
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
                                s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY,
-                               int(sampler.lazy_refine) if lazy else -1)
+                               **({"refine": int(sampler.lazy_refine)} if lazy else {}))
     finally:
         if swapped:
             sampler.space = space
