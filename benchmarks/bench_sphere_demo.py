@@ -18,7 +18,9 @@ three bands, south pole to north pole). Methods, interleaved per seed (run r use
 Prints per method: success, median CPU and wall time (an unsolved run counts as slower than every
 solved one), and the medians over solved runs of constraint evaluations (F or J; ours: every
 configuration whose constraint kinematics was computed), Jacobians, validity checks (ours: collision
-checks; OMPL: its validity checker's calls plus the dense check's states), samples drawn, tree nodes.
+checks with coal, beside the sphere tests that ran first with ``--set spheres=true``; OMPL: its validity
+checker's calls plus the dense check's states), samples drawn (ours: raw rows the sampler made), samples
+used (ours: rows refined and checked when the search first used them, valid), tree nodes.
 Ours: CPU of ``Planner.solve`` (its own final dense check included); C++: CPU from building the
 space to the final verdict. Every run is a JSON line in ``OUT/runs.jsonl``; ``--resume`` keeps them.
 """
@@ -82,16 +84,21 @@ def _median(values: list[float], failures: int) -> str:
 
 def table(records: list[dict], labels: list[str]) -> list[str]:
     lines = ["| method | solved | median CPU (s) | median wall (s) | constraint evaluations | Jacobians | "
-             "validity checks | samples | nodes |", "|---|---|---|---|---|---|---|---|---|"]
+             "validity checks | sphere tests | samples | samples used | nodes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for label in labels:
         runs = [r for r in records if r["method"] == label]
         solved = [r for r in runs if r["solved"]]
         ops = {k: f"{np.median([r['ops'][k] for r in solved]):,.0f}" if solved else "-"
                for k in ("fk", "jacobians", "collision_checks", "samples", "nodes")}
+        spheres = [r.get("extras", {}).get("sphere_checks", 0) for r in solved]
+        used = [r["extras"]["sampler"]["accepted"] for r in solved if "sampler" in r.get("extras", {})]
         failed = len(runs) - len(solved)
         lines.append(f"| {label} | {len(solved)}/{len(runs)} | {_median([r['cpu_s'] for r in solved], failed)} "
                      f"| {_median([r['time_s'] for r in solved], failed)} | {ops['fk']} | "
-                     f"{ops['jacobians']} | {ops['collision_checks']} | {ops['samples']} | {ops['nodes']} |")
+                     f"{ops['jacobians']} | {ops['collision_checks']} | "
+                     f"{f'{np.median(spheres):,.0f}' if any(spheres) else '-'} | {ops['samples']} | "
+                     f"{f'{np.median(used):,.0f}' if used else '-'} | {ops['nodes']} |")
     return lines
 
 

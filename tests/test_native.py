@@ -143,7 +143,7 @@ def test_native_rrt_connect_paths_pass_the_python_check_state_by_state(panda_tas
 
 def test_a_sampler_that_gives_up_ends_the_native_query_with_its_reason(panda_task, wall):
     space, planner = _planner(panda_task, wall, 0)
-    planner.sampler.candidates = lambda count: np.zeros((0, space.n))
+    planner.sampler.raw = lambda count: np.zeros((0, space.n))  # the model's rows, before refinement
     planner.sampler.max_batches = 3
     result = planner.solve(wall.start, wall.goal, 5.0)
     assert not result.solved and "found no valid configuration in 3 batches" in result.extras["failure"]
@@ -213,3 +213,32 @@ def test_the_spheres_setting_fits_the_robot_and_keeps_the_search(panda_task, wal
     assert a.solved and a.extras["sphere_checks"] > 0
     np.testing.assert_array_equal(a.path, b.path)
     assert a.extras["collision_checks"] < b.extras["collision_checks"] / 2
+
+
+def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeypatch):
+    """The core takes the sampler's raw rows and refines and checks a row only when it first uses it: the same
+    rows as the eager sampler would refine, valid paths, and far fewer Jacobians than refining every row."""
+    assert "refine" in native.core_module().rrt_connect.__doc__, "manifoldgen_core predates lazy samples: rebuild it"
+    space, planner = _planner(panda_task, wall, 0)
+    sampler = planner.sampler
+    _, twin = _planner(panda_task, wall, 0)
+    raw = twin.sampler.raw(40)
+    refined = space.project(raw, max_iters=twin.sampler.lazy_refine).q
+    np.testing.assert_allclose(refined, sampler.candidates(40), atol=1e-12)  # raw rows, then the refinement
+    assert len(twin.sampler.raw_many(40)) == 40 and twin.sampler.stats.generated == twin.sampler.batch
+    assert twin.sampler.stats.accepted == 0  # raw rows are not samples yet
+    sampler.stats = type(sampler.stats)()
+    before = space.counts()
+    lazy = planner.solve(wall.start, wall.goal, 20.0)
+    lazy_jacobians = space.counts()["jacobians"] - before["jacobians"]
+    stats = lazy.extras["sampler"]
+    assert lazy.solved and 0 < stats["accepted"] <= stats["refined"] < stats["generated"] / 4
+    states = densify(lazy.path, space.settings.resolution)[0]
+    assert panda_task.constraint.violation(states, space.y).max() <= 1.0
+    assert not space.checker.in_collision(states).any() and space.validate_path(lazy.path).valid
+    monkeypatch.setattr(native, "LAZY_SAMPLES", False)
+    eager_space, eager = _planner(panda_task, wall, 0)
+    before = eager_space.counts()
+    result = eager.solve(wall.start, wall.goal, 20.0)
+    assert result.solved and result.extras["sampler"]["refined"] >= result.samples_drawn
+    assert 2 * lazy_jacobians < eager_space.counts()["jacobians"] - before["jacobians"]

@@ -165,11 +165,15 @@ struct PlannerSettings {
   // lazy: tree edges are checked for collision only when they lie on a candidate path (nodes at once);
   // an edge found colliding then is cut, keeping its collision-free part (see planner.cpp)
   bool lazy = false;
+  // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
+  // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
+  int refine = -1;
 };
 
 struct PlanOutput {
   RowMat path;  // (K, n); 0 rows: unsolved
   long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
+  long refined = 0, accepted = 0;  // raw candidates made samples when first used (refine >= 0), and of those valid
   std::vector<long> nodes;
 };
 

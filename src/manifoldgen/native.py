@@ -20,14 +20,14 @@ equality within ``limit`` x tolerance, inequalities, collision), lazily per stat
 tests before collision for a whole batch at once, as the Python space does, then collisions in order);
 projection is :func:`~manifoldgen.constraints.project`'s algorithm with its options;
 ``tests/test_native.py``, ``tests/test_native_balance.py`` and ``tests/test_native_callback.py`` compare both
-with the Python reference, ``tests/test_native_bad_inputs.py`` their refusals. :class:`NativeSpace` gives a
-sampler the core's ``valid``,
-``violation`` and ``project`` during a native search (the learned sampler's refinement and checks run
-in C++ too; its candidates' collisions are left to the search, which checks every state it keeps, a
-pooled sample when it first tries it). :func:`plan_rrt_connect` runs
+with the Python reference, ``tests/test_native_bad_inputs.py`` their refusals. :func:`plan_rrt_connect` runs
 :class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
-(the planner's ``_draw_many``), and books the core's operation counts on the planner's space, so results carry
-the same counters as a Python search.
+with its raw rows (:meth:`~manifoldgen.sampling.Sampler.raw_many`: lazy samples, :data:`LAZY_SAMPLES`):
+the core refines and checks a row (limits, constraint) only when the search first uses it, and checks
+its collisions as it checks every state it keeps, so most pooled rows cost a decode and nothing more.
+:class:`NativeSpace` gives a sampler the core's ``valid``, ``violation`` and ``project`` during a native
+search (for samplers fed eagerly, ``LAZY_SAMPLES = False``). The core's operation counts are booked on
+the planner's space, so results carry the same counters as a Python search.
 
 Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
 check robot-vs-primitive and robot-robot pairs with them (exact coal for the pairs they do not
@@ -64,6 +64,9 @@ TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the 
 # lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
 # (the trees grow through the maze's walls), so off
 LAZY = False
+# lazy samples (planner.cpp): the sampler's raw rows go to the search, which refines and checks a row only
+# when it first uses it
+LAZY_SAMPLES = True
 
 
 def core_module():
@@ -394,22 +397,40 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
+def _raw_draw(planner):
+    """The search's callback for lazy samples: ``count`` -> (count, n) raw rows of the planner's sampler."""
+    from manifoldgen.planning.base import SamplerFailed
+
+    def draw(count: int) -> np.ndarray:
+        planner.samples += count
+        try:
+            return planner.sampler.raw_many(count)
+        except ManifoldgenError as exc:
+            raise SamplerFailed(str(exc)) from exc
+    return draw
+
+
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
-    (``time.perf_counter`` seconds). Books iterations, samples, rejections, projections and the core's
+    (``time.perf_counter`` seconds). With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core,
+    which refines (``sampler.lazy_refine`` iterations) and checks each when it first uses it. Books
+    iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
     operation counts on the planner (``planner.callbacks``: calls into Python constraint callbacks and the
     configurations they evaluated); the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
+    # a core built before lazy samples has no `refine` argument: it gets checked samples, as it expects
+    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many") and "refine" in (core_module().rrt_connect.__doc__ or "")
     before = core.counts()
     swapped = sampler.space is space
     if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
         sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               planner._draw_many,
+                               _raw_draw(planner) if lazy else planner._draw_many,
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
-                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY)
+                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY,
+                               **({"refine": int(sampler.lazy_refine)} if lazy else {}))
     finally:
         if swapped:
             sampler.space = space
@@ -423,4 +444,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     planner.local.projections += out["projections"]
     planner.native_nodes = list(out["nodes"])
     planner.cut_edges = out["cut_edges"]
+    if lazy:
+        sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
+        sampler.stats.accepted += out["accepted"]
     return out["path"] if len(out["path"]) else None

@@ -4,10 +4,16 @@ Every sampler serves one :class:`~manifoldgen.space.ConstrainedSpace` (a constra
 condition ``y``, with or without a collision checker) and returns, from ``sample()``, one
 configuration ``(n,)`` valid in it. Candidates are produced in batches and kept in a buffer, as
 in the paper's Algorithm 1; ``stats`` counts what it cost.
+
+A candidate is a raw row (a model decode, a uniform seed: :meth:`Sampler.raw`) refined by
+``lazy_refine`` projection iterations and checked. :meth:`Sampler.sample_many` does both before it
+returns a row; :meth:`Sampler.raw_many` returns raw rows for a search that refines and checks a row
+only when it first uses it (the compiled core's RRT-Connect: most pooled rows are never used).
 """
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass
 
@@ -18,6 +24,8 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
+
+PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # the projection sampler's iterations
 
 
 @dataclass
@@ -42,11 +50,17 @@ class Sampler(ABC):
         self.batch, self.max_batches = batch, max_batches
         self.rng = np.random.default_rng(seed)
         self.stats = SamplerStats()
-        self._buffer = np.zeros((0, space.n))
+        self._buffer = self._raw = np.zeros((0, space.n))
+
+    lazy_refine: int = 0  # projection iterations (constraints.project, default options) that refine a raw row
 
     @abstractmethod
     def candidates(self, count: int) -> np.ndarray:
-        """(count, n) new candidate configurations (not yet checked)."""
+        """(count, n) new candidate configurations (refined, not yet checked)."""
+
+    def raw(self, count: int) -> np.ndarray:
+        """(count, n) new raw candidates: :meth:`candidates` before ``lazy_refine`` projection iterations."""
+        return self.candidates(count)
 
     def _refill(self) -> None:
         q = self.candidates(self.batch)
@@ -76,6 +90,27 @@ class Sampler(ABC):
             self.stats.accepted += len(take)
         return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
 
+    def raw_many(self, count: int) -> np.ndarray:
+        """(count, n) raw candidates (see :meth:`raw`), unrefined and unchecked: the caller refines each
+        with ``lazy_refine`` projection iterations, checks it, and books ``stats.refined`` and
+        ``stats.accepted``. Made ``batch`` at a time as :meth:`sample_many`; an error after
+        ``max_batches`` empty batches in a row."""
+        rows, need, empty = [], count, 0
+        while need:
+            if not len(self._raw):
+                if empty == self.max_batches:
+                    raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
+                                           f"{self.max_batches} batches of {self.batch}")
+                self._raw = self.raw(self.batch)
+                self.stats.generated += len(self._raw)
+                self.stats.batches += 1
+                empty = 0 if len(self._raw) else empty + 1
+                continue
+            take, self._raw = self._raw[:need], self._raw[need:]
+            rows.append(take)
+            need -= len(take)
+        return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
+
 
 class UniformSampler(Sampler):
     """Rejection sampling: uniform in the joint limits (almost never on a thin manifold)."""
@@ -87,9 +122,13 @@ class UniformSampler(Sampler):
 class ProjectionSampler(Sampler):
     """Uniform seeds projected onto the manifold (the projection-based baseline)."""
 
+    lazy_refine = PROJECT_ITERS
+
+    def raw(self, count):
+        return self.space.robot.sample_uniform(count, self.rng)
+
     def candidates(self, count):
-        space = self.space
-        q = space.project(space.robot.sample_uniform(count, self.rng)).q
+        q = self.space.project(self.raw(count), max_iters=self.lazy_refine).q
         self.stats.refined += count
         return q
 
@@ -128,8 +167,15 @@ class ModelSampler(Sampler):
         self.model, self.refine = model, int(refine)
         self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
 
+    @property
+    def lazy_refine(self) -> int:
+        return self.refine
+
+    def raw(self, count):
+        return self.model.sample(self.space.y, count, self.generator)
+
     def candidates(self, count):
-        q = self.model.sample(self.space.y, count, self.generator)
+        q = self.raw(count)
         q = self.space.project(q, max_iters=self.refine).q if self.refine else q
         self.stats.refined += count if self.refine else 0
         return q

@@ -2,7 +2,10 @@
 
 The search runs in the compiled core (:mod:`manifoldgen.native`) when it is built and can take the
 space (``core="auto"``, the default), else here in Python, which stays the reference
-the core is tested against.
+the core is tested against. Two things differ there, for speed, not in what a path must pass: the core
+takes the sampler's raw rows and refines and checks each only when the search first uses it (lazy samples;
+here every row is refined and checked when drawn), and its stepping-stone pool tracks only whether a
+sample is within range of each tree (the same decisions as :class:`~manifoldgen.planning.base.SamplePool`).
 """
 
 from __future__ import annotations
