@@ -37,9 +37,10 @@ py=.venv/bin/python
 mkdir -p "$out"
 settings=(--set pool=32 --set pool_batch=64)
 model() {  # model TASK ROBOT NAME [COLLECT OPTIONS] [-- TRAIN OPTIONS]: dataset and CVAE
-  local task=$1 robot=$2 name=$3 collect=(--per-condition 2500) train=()
+  local task=$1 robot=$2 name=$3 collect=() train=()
   shift 3
   while [ $# -gt 0 ] && [ "$1" != -- ]; do collect+=("$1"); shift; done
+  [ ${#collect[@]} -gt 0 ] || collect=(--per-condition 2500)
   [ $# -gt 0 ] && shift && train=("$@")
   [ -f "$out/$name.npz" ] || "${mg[@]}" collect "$task" --robot "$robot" "${collect[@]}" --seed 0 -o "$out/$name.npz"
   [ -f "$out/$name-cvae/model.json" ] || "${mg[@]}" train "$out/$name.npz" --model cvae --seed 0 "${train[@]}" \
