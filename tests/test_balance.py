@@ -139,6 +139,30 @@ def test_centauro_wheels_stay_upright_over_their_contacts(centauro, rng):
         assert np.abs(moved - start).max() > 0.01  # the seeds had them elsewhere: projection put them back
 
 
+def test_centauro_reach_needs_planning(centauro):
+    """The reach scene (the paper's Pholus task): the goal, solved from the left hand's target, is balanced and
+    collision-free with the hand on the target, and neither RRT-Connect's direct connection from the stance (projected
+    step by step) nor the balance-blind planner's straight one gets there: the post in front of the bottle blocks
+    both, so the planner must find a way round it with its sampler's configurations."""
+    from manifoldgen.planning import PLANNERS
+    from manifoldgen.scene import get_scene
+    from manifoldgen.space import ConstrainedSpace
+    from manifoldgen.specs import make_sampler
+    from manifoldgen.stability import blind_space
+
+    scene = get_scene(centauro, "reach")
+    robot, checker = centauro.robot, scene.checker(centauro.robot)
+    space = ConstrainedSpace(centauro.constraint, scene.condition, checker)
+    assert space.valid(np.stack([scene.start, scene.goal])).all()
+    hand = robot.frame_pose(scene.goal, scene.targets["goal"]["frame"])[0][0]
+    assert np.abs(hand - scene.targets["goal"]["position"]).max() < 0.01
+    for local, sampler, where in (("auto", "project", space), ("direct", "uniform", blind_space(robot, checker))):
+        planner = PLANNERS.get("rrtconnect")(where, make_sampler(sampler, where, 0), local=local, seed=0)
+        assert planner._direct(scene.start, scene.goal) is None, local
+    line = scene.start + np.linspace(0, 1, 21)[:, None] * (scene.goal - scene.start)
+    assert any(("post" in pair) for q in line for pair in checker.collisions(q))
+
+
 def _bad_task(tmp_path, robot, name, *edits):
     """The built-in balance task file of ``robot`` with ``edits`` (old, new) made, written to ``tmp_path / name``."""
     text = (BUILTIN_DIR / f"balance-{robot}.toml").read_text().replace('"scenes/', f'"{BUILTIN_DIR}/scenes/')
