@@ -29,6 +29,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 
@@ -74,6 +76,22 @@ Eigen::Matrix3d zyx(double yaw, double pitch, double roll) {
   return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
+}
+
+// The convex hull of a mesh (with its triangles, for coal's hill-climbing support), built once per mesh content
+// and process: qhull costs about 1 ms a mesh, and every plan builds a new Space. Null when qhull fails.
+std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
+  static std::mutex guard;
+  static std::map<std::string, std::shared_ptr<coal::ConvexBase>> built;
+  if (!mesh.vertices || mesh.num_vertices < 4) return nullptr;
+  std::string key(reinterpret_cast<const char*>(mesh.vertices->data()), mesh.num_vertices * sizeof(coal::Vec3s));
+  std::lock_guard<std::mutex> hold(guard);
+  auto found = built.find(key);
+  if (found != built.end()) return found->second;
+  std::shared_ptr<coal::ConvexBase> hull;
+  if (mesh.buildConvexHull(true, "Qt")) hull = mesh.convex;
+  built.emplace(std::move(key), hull);
+  return hull;
 }
 
 // A scene primitive the spheres are tested against (world pose fixed at construction of the pair list).
@@ -359,7 +377,7 @@ struct Space::Impl {
     outer_ready[g] = true;
     const auto& shape = geom.geometryObjects[g].geometry;
     if (auto mesh = std::dynamic_pointer_cast<coal::BVHModelBase>(shape)) {
-      if (mesh->num_vertices >= 4 && mesh->buildConvexHull(true, "Qt")) outer[g] = mesh->convex;
+      outer[g] = mesh_hull(*mesh);
     } else if (shape && shape->getObjectType() == coal::OT_GEOM) {
       outer[g] = shape;
     }
@@ -681,6 +699,10 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
     static const int rank[3] = {1, 0, 2};
     return rank[x.kind] < rank[y.kind];
   });
+  for (const auto& pair : p.geom.collisionPairs) {  // the hulls now, not in the first plan's checks
+    p.outer_of(static_cast<int>(pair.first));
+    p.outer_of(static_cast<int>(pair.second));
+  }
 }
 
 void Space::clear_spheres() {
