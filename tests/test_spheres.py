@@ -200,3 +200,42 @@ def test_tight_pairs_go_to_coal_and_stay_conservative(panda_task, panda_model, r
     loose, tight = default.in_collision(q), strict.in_collision(q)
     assert not np.any(exact & ~loose) and not np.any(exact & ~tight)
     assert np.sum(tight & ~exact) < np.sum(loose & ~exact)
+
+
+TALOS_PARTS = ("leg_left_3", "leg_right_3", "leg_left_4", "leg_right_4", "torso_2", "arm_left_2", "arm_right_2",
+               "base_link")
+
+
+def test_the_cores_per_pair_broad_phase_keeps_every_verdict_on_talos():
+    """Spheres per pair, then convex hulls, then coal: every verdict is coal's alone, on talos's close links (thighs,
+    shins, torso beside the shoulders) in uniform states and states near its stance, visited in order as a path
+    check does (the hulls' GJK is warm-started from the previous state)."""
+    pytest.importorskip("manifoldgen_core")
+    from manifoldgen import native
+    from manifoldgen.space import ConstrainedSpace
+
+    task = get_task("balance", "talos")
+    robot = task.robot
+    space = ConstrainedSpace(task.constraint, task.home_condition, held_checker(robot, None, []))
+    core = native.core_space(space)
+    geom = robot.collision_model
+    parts = [i for i, g in enumerate(geom.geometryObjects) if g.name.startswith(TALOS_PARTS)]
+    model = spheres.fit_model(geom, parts)  # the other geometries stay exact: a partial model is allowed
+    rng = np.random.default_rng(2)
+    near = np.clip(task.home + rng.normal(0, 0.2, (150, robot.n)), robot.lower, robot.upper)
+    walk = task.home + np.linspace(0, 1, 150)[:, None] * (near[0] - task.home)  # consecutive close states
+    q = np.concatenate([robot.sample_uniform(150, rng), near, walk])
+    limit = np.full(len(q), np.inf)  # collision alone decides
+    exact = core.codes(q, limit, True, True)
+    native.set_spheres(core, {"joint": model.joint, "center": model.center, "radius": model.radius,
+                              "geometry": model.geometry, "exact": [(parts[0], parts[1])]})
+    flagged = core.codes(q, limit, True, False)
+    before = core.counts()
+    np.testing.assert_array_equal(core.codes(q, limit, True, True), exact)
+    after = core.counts()
+    collide = exact == 4
+    assert collide.sum() >= 10 and not collide.all() and not np.any(collide & ~(flagged == 4))
+    # every state that reached the collision test (limits and the CoM margin come first) had the sphere test;
+    # those the spheres flagged went on to coal, the others did not
+    assert after["sphere_checks"] - before["sphere_checks"] == np.sum((exact == 0) | collide) > 100
+    assert after["collision_checks"] - before["collision_checks"] == np.sum(flagged == 4)

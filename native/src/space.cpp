@@ -18,14 +18,20 @@
 #include <pinocchio/serialization.hpp>
 #include <pinocchio/spatial.hpp>
 
+#include <coal/BVH/BVH_model.h>
 #include <coal/broadphase/broadphase_dynamic_AABB_tree.h>
+#include <coal/collision.h>
+#include <coal/shape/convex.h>
 #include <coal/shape/geometric_shapes.h>
+#include <pinocchio/collision/coal-pinocchio-conversions.hpp>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 
@@ -33,6 +39,7 @@ namespace mgcore {
 
 using Manager = pinocchio::BroadPhaseManagerTpl<coal::DynamicAABBTreeCollisionManager>;
 using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+constexpr double HULL_MARGIN = 1e-4;  // m: convex outer shapes closer than this go on to coal's exact test
 
 namespace {
 
@@ -74,6 +81,25 @@ Eigen::Matrix3d zyx(double yaw, double pitch, double roll) {
   return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
+}
+
+// The convex hull of a mesh (with its triangles, for coal's hill-climbing support), built once per mesh content
+// and process: qhull costs about 1 ms a mesh, and every plan builds a new Space. Null when qhull fails or the
+// mesh cannot have a hull (fewer than 4 vertices, no triangles, a non-finite vertex: qhull would crash on it).
+std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
+  static std::mutex guard;
+  static std::map<std::string, std::shared_ptr<coal::ConvexBase>> built;
+  if (!mesh.vertices || mesh.num_vertices < 4 || mesh.num_tris < 1) return nullptr;
+  for (unsigned int i = 0; i < mesh.num_vertices; ++i)
+    if (!(*mesh.vertices)[i].allFinite()) return nullptr;
+  std::string key(reinterpret_cast<const char*>(mesh.vertices->data()), mesh.num_vertices * sizeof(coal::Vec3s));
+  std::lock_guard<std::mutex> hold(guard);
+  auto found = built.find(key);
+  if (found != built.end()) return found->second;
+  std::shared_ptr<coal::ConvexBase> hull;
+  if (mesh.buildConvexHull(true, "Qt")) hull = mesh.convex;
+  built.emplace(std::move(key), hull);
+  return hull;
 }
 
 // A scene primitive the spheres are tested against (world pose fixed at construction of the pair list).
@@ -153,6 +179,14 @@ struct Space::Impl {
   Inequalities inequality;
   int p = 0;
   bool native_terms = false;  // some term is built in (forward kinematics needed)
+  // per geometry: what a pair's mid phase tests before coal's exact test (a mesh's convex hull, built on
+  // first use; a primitive itself), and whether it was looked up
+  std::vector<std::shared_ptr<coal::CollisionGeometry>> outer;
+  std::vector<char> outer_ready;
+  // per collision pair: the mid phase's request, warm-started from the pair's latest GJK (successive states
+  // are close; the guess changes how fast GJK converges, not its verdict)
+  std::vector<coal::CollisionRequest> outer_requests;
+  bool placed_geometries = false;  // geom_data's placements are those of the latest collision kinematics
 
   const Eigen::VectorXd& to_full(const double* q) {
     const int offset = floating ? 6 : 0;
@@ -357,39 +391,114 @@ struct Space::Impl {
     }
   }
 
-  // Sphere test of the latest collision kinematics (cdata): true when some tested pair may collide.
-  bool spheres_hit(const double* q) {
-    pinocchio::forwardKinematics(model, cdata, to_full(q));
-    // world centres, placed when a geometry's bounding ball is first needed
-    std::fill(placed_spheres.begin(), placed_spheres.end(), false);
-    for (std::size_t g = 0; g < bound_joint.size(); ++g)
-      if (bound_joint[g] >= 0) bound_world[g] = cdata.oMi[bound_joint[g]].act(bound_center[g]);
-    auto place = [&](int g) {
-      if (placed_spheres[g]) return;
-      placed_spheres[g] = true;
-      for (int s : spheres_of[g])
-        world[s] = cdata.oMi[sphere_joint[s]].act(Eigen::Vector3d(sphere_center.row(s).transpose()));
-    };
-    bool placed = false;
+  // A geometry's convex outer shape (a mesh's hull with its triangles, for coal's hill-climbing support;
+  // a box, sphere, cylinder, capsule or convex itself); null when none.
+  const coal::CollisionGeometry* outer_of(int g) {
+    if (outer_ready[g]) return outer[g].get();
+    outer_ready[g] = true;
+    const auto& shape = geom.geometryObjects[g].geometry;
+    if (auto mesh = std::dynamic_pointer_cast<coal::BVHModelBase>(shape)) {
+      outer[g] = mesh_hull(*mesh);
+    } else if (shape && shape->getObjectType() == coal::OT_GEOM) {
+      outer[g] = shape;
+    }
+    return outer[g].get();
+  }
+
+  // Exact verdict of one collision pair at the latest collision kinematics: coal's test, after a mid
+  // phase on the two geometries' convex outer shapes (each holds its geometry, so outer shapes apart by
+  // more than HULL_MARGIN mean geometries apart: the verdict is coal's either way).
+  bool pair_collides(std::size_t k) {
+    if (!placed_geometries) {
+      pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
+      placed_geometries = true;
+    }
+    const pinocchio::CollisionPair& pair = geom.collisionPairs[k];
+    const coal::CollisionGeometry* oa = outer_of(static_cast<int>(pair.first));
+    const coal::CollisionGeometry* ob = outer_of(static_cast<int>(pair.second));
+    if (oa && ob) {
+      coal::CollisionRequest& request = outer_requests[k];
+      coal::CollisionResult result;
+      coal::collide(oa, pinocchio::toCoalTransform3s(geom_data->oMg[pair.first]), ob,
+                    pinocchio::toCoalTransform3s(geom_data->oMg[pair.second]), request, result);
+      request.updateGuess(result);
+      if (!result.isCollision()) return false;
+    }
+    return pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(k));
+  }
+
+  // Exact collision test with the sphere models as a per-pair broad phase: a pair whose spheres touch
+  // nothing is free; every other pair (spheres touching, exact pairs) gets pair_collides. flagged: some
+  // pair's spheres touched (the sphere test alone would have called the state in collision).
+  bool pairs_collide(const double* q, bool& flagged) {
+    place_kinematics(q);
+    flagged = false;
     for (const PairTest& t : tests) {
       if (t.kind == 0) {
         if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
         place(t.a);
         place(t.b);
-        for (int i : spheres_of[t.a])
-          for (int j : spheres_of[t.b])
-            if ((world[i] - world[j]).squaredNorm() <= std::pow(sphere_radius[i] + sphere_radius[j], 2)) return true;
+        if (!spheres_touch(t.a, t.b)) continue;
       } else if (t.kind == 1) {
         const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
         const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
         if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
         place(t.a);
-        for (int i : spheres_of[t.a])
-          if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
+        if (!spheres_touch_shape(t.a, t.b, pose)) continue;
+      }
+      if (t.kind != 2) flagged = true;
+      if (pair_collides(t.pair)) return true;
+    }
+    return false;
+  }
+
+  // Collision kinematics at q, bounding balls placed; sphere centres placed lazily by place().
+  void place_kinematics(const double* q) {
+    pinocchio::forwardKinematics(model, cdata, to_full(q));
+    std::fill(placed_spheres.begin(), placed_spheres.end(), false);
+    placed_geometries = false;
+    for (std::size_t g = 0; g < bound_joint.size(); ++g)
+      if (bound_joint[g] >= 0) bound_world[g] = cdata.oMi[bound_joint[g]].act(bound_center[g]);
+  }
+
+  void place(int g) {
+    if (placed_spheres[g]) return;
+    placed_spheres[g] = true;
+    for (int s : spheres_of[g]) world[s] = cdata.oMi[sphere_joint[s]].act(Eigen::Vector3d(sphere_center.row(s).transpose()));
+  }
+
+  bool spheres_touch(int a, int b) const {
+    for (int i : spheres_of[a])
+      for (int j : spheres_of[b])
+        if ((world[i] - world[j]).squaredNorm() <= std::pow(sphere_radius[i] + sphere_radius[j], 2)) return true;
+    return false;
+  }
+
+  bool spheres_touch_shape(int a, int b, const pinocchio::SE3& pose) const {
+    for (int i : spheres_of[a])
+      if (shape_distance(shapes[b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
+    return false;
+  }
+
+  // Sphere test of the latest collision kinematics (cdata): true when some tested pair may collide.
+  bool spheres_hit(const double* q) {
+    place_kinematics(q);
+    for (const PairTest& t : tests) {
+      if (t.kind == 0) {
+        if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
+        place(t.a);
+        place(t.b);
+        if (spheres_touch(t.a, t.b)) return true;
+      } else if (t.kind == 1) {
+        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
+        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        place(t.a);
+        if (spheres_touch_shape(t.a, t.b, pose)) return true;
       } else {
-        if (!placed) {
+        if (!placed_geometries) {
           pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
-          placed = true;
+          placed_geometries = true;
         }
         if (pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(t.pair))) return true;
       }
@@ -588,6 +697,15 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
   }
   p.shapes.clear();
   for (const auto& g : p.geom.geometryObjects) p.shapes.push_back(shape_of(g));
+  p.outer.assign(ng, nullptr);
+  p.outer_ready.assign(ng, false);
+  p.outer_requests.clear();
+  for (std::size_t k = 0; k < p.geom.collisionPairs.size(); ++k) {
+    coal::CollisionRequest request(coal::NO_REQUEST, 1);
+    request.security_margin = p.geom_data->collisionRequests[k].security_margin + HULL_MARGIN;
+    request.gjk_initial_guess = coal::GJKInitialGuess::CachedGuess;
+    p.outer_requests.push_back(request);
+  }
   p.tests.clear();
   for (std::size_t k = 0; k < p.geom.collisionPairs.size(); ++k) {
     const int a = static_cast<int>(p.geom.collisionPairs[k].first), b = static_cast<int>(p.geom.collisionPairs[k].second);
@@ -607,6 +725,10 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
     static const int rank[3] = {1, 0, 2};
     return rank[x.kind] < rank[y.kind];
   });
+  for (const auto& pair : p.geom.collisionPairs) {  // the hulls now, not in the first plan's checks
+    p.outer_of(static_cast<int>(pair.first));
+    p.outer_of(static_cast<int>(pair.second));
+  }
 }
 
 void Space::clear_spheres() {
@@ -661,9 +783,12 @@ bool Space::within_limits(const double* q) const {
 bool Space::collision_free(const double* q) {
   Impl& p = *impl_;
   if (p.geom.collisionPairs.empty()) return true;
-  if (!p.sphere_joint.empty()) {  // the broad phase: spheres that touch nothing cover meshes that touch nothing
+  if (!p.sphere_joint.empty()) {  // spheres as a per-pair broad phase: coal only for pairs whose spheres touch
     ++counts.sphere_checks;
-    if (!p.spheres_hit(q)) return true;
+    bool flagged = false;
+    const bool hit = p.pairs_collide(q, flagged);
+    if (flagged) ++counts.collision_checks;  // counted as before: states the spheres sent on to coal
+    return !hit;
   }
   ++counts.collision_checks;
   return !pinocchio::computeCollisions(p.model, p.cdata, *p.manager, p.to_full(q), true);
