@@ -71,7 +71,8 @@ def main() -> None:
     parser.add_argument("--out", default="runs/ompl-native")
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a setting of our planners (e.g. spheres=true); OMPL's methods ignore it")
+                        help="a setting of our planners (e.g. spheres=true, which the C++ OMPL methods take too: "
+                        "the same collision checks); the other OMPL settings stay OMPL's")
     args = parser.parse_args()
     settings = parse_settings(args.set, None, {f.name: f.default for f in fields(RRTConnectSettings)}, "planner")
     methods = [m.format(model=pretrained_model_dir()) for m in METHODS]

@@ -92,3 +92,17 @@ def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
         ompl_native.NativeOmplPlanner(ConstrainedSpace(plane, [0.4]))
     with pytest.raises(ManifoldgenError, match="unknown native OMPL space"):
         ompl_native.NativeOmplPlanner(space, ompl_space="curved")
+
+
+@needs_binary
+def test_the_sphere_broad_phase_changes_no_verdict_of_the_baseline(maze):
+    """With our sphere models (--set spheres=true) the C++ Atlas search is the same, seed for seed, with fewer
+    coal checks: the spheres only spare coal where they touch nothing."""
+    task, scene, space = maze
+    plain = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(scene.start, scene.goal, 20.0)
+    spheres = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4, spheres=True).solve(
+        scene.start, scene.goal, 20.0)
+    assert plain.solved and spheres.solved
+    np.testing.assert_array_equal(spheres.path, plain.path)
+    assert spheres.extras["sphere_checks"] > 0 and plain.extras["sphere_checks"] == 0
+    assert spheres.extras["native_ops"]["collision_checks"] < plain.extras["native_ops"]["collision_checks"]

@@ -199,10 +199,12 @@ int plan(mgnative::Problem& problem, double load_s) {
   std::printf(
       "done {\"solved\": %s, \"status\": \"%s\", \"attempts\": %d, \"rejected_paths\": %d, \"vertices\": %ld, "
       "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"inequalities\": %ld, \"collision_checks\": %ld, "
+      "\"sphere_checks\": %ld, "
       "\"wall_s\": %.6f, \"cpu_s\": %.6f, \"load_s\": %.6f}\n",
       solved ? "true" : "false", status.c_str(), attempts, rejected, vertices, charts, constraint->projections,
       planner->samples,
-      problem.counts.fk, problem.counts.jacobians, problem.counts.inequalities, problem.counts.collision_checks, wall, cpu, load_s);
+      problem.counts.fk, problem.counts.jacobians, problem.counts.inequalities, problem.counts.collision_checks,
+      problem.counts.sphere_checks, wall, cpu, load_s);
   std::fflush(stdout);
   return 0;
 }

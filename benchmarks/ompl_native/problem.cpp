@@ -136,6 +136,16 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
   }
   p.tolerance = vector_of(c.at("tolerance"));
   p.space->set_tolerance(p.tolerance);
+  if (o.contains("spheres")) {  // the core's sphere broad phase, as our planner gets it (--set spheres=true)
+    const auto& sp = o.at("spheres").as_object();
+    std::vector<std::pair<int, int>> exact;
+    for (const auto& pair : sp.at("exact").as_array()) {
+      const std::vector<int> ab = ints_of(pair);
+      exact.emplace_back(ab.at(0), ab.at(1));
+    }
+    p.space->set_spheres(ints_of(sp.at("joint")), rows_of(sp.at("center")), vector_of(sp.at("radius")),
+                         ints_of(sp.at("geometry")), exact);
+  }
   p.J.resize(p.space->m(), p.space->n());
   const auto& s = o.at("settings").as_object();
   p.settings.space = std::string(s.at("space").as_string());
@@ -185,8 +195,12 @@ bool Problem::inequalities_hold(const Eigen::Ref<const Eigen::VectorXd>& q) {
 int Problem::g() const { return impl_->space->g(); }
 
 bool Problem::collision_free(const Eigen::Ref<const Eigen::VectorXd>& q) {
-  ++counts.collision_checks;
-  return impl_->space->collision_free(q.data());
+  const mgcore::Counters& c = impl_->space->counts;  // the core counts coal's checks and the sphere tests
+  const long coal = c.collision_checks, spheres = c.sphere_checks;
+  const bool free = impl_->space->collision_free(q.data());
+  counts.collision_checks += c.collision_checks - coal;
+  counts.sphere_checks += c.sphere_checks - spheres;
+  return free;
 }
 
 }  // namespace mgnative

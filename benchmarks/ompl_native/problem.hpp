@@ -18,7 +18,8 @@ namespace mgnative {
 struct Counts {
   long fk = 0;                // configurations whose constraint kinematics was computed (residual or Jacobian)
   long jacobians = 0;         // of those, with the Jacobian
-  long collision_checks = 0;  // configurations checked for collision (each computes its own FK of every link)
+  long collision_checks = 0;  // configurations checked by coal (with sphere models: those the spheres flagged)
+  long sphere_checks = 0;     // configurations whose sphere models were tested first (0 without sphere models)
   long inequalities = 0;      // configurations whose inequalities (CoM margin, hemisphere) were evaluated
 };
 

@@ -377,7 +377,8 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE for our planners "
-                                                  "(repeatable; each planner takes those it has)"),
+                                                  "(repeatable; each planner takes those it has; spheres=true "
+                                                  "also gives the C++ OMPL baseline the sphere broad phase)"),
                config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
                snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "
                                               "method's run-0 path, when solved"),

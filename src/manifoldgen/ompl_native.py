@@ -77,8 +77,9 @@ def _terms(space: ConstrainedSpace) -> list[dict]:
 
 def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray, folder: Path, *,
                    ompl_space: str, resolution: float, seed: int, time_limit: float,
-                   settings: OmplSettings) -> Path:
-    """Write ``problem.json``, ``model.bin`` and ``geometry.bin`` into ``folder``; the JSON's path."""
+                   settings: OmplSettings, spheres: bool = False) -> Path:
+    """Write ``problem.json``, ``model.bin`` and ``geometry.bin`` into ``folder``; the JSON's path. ``spheres``:
+    the program's collision checks use the robot's sphere models first, as the core's do with them."""
     robot = space.robot
     terms = _terms(space)
     folder = Path(folder)
@@ -101,6 +102,13 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
                      "tolerance": 1.0 - space.settings.margin, "max_iterations": settings.max_iterations,
                      "time_limit": time_limit, "seed": int(seed)},
     }
+    if spheres and space.checker is not None:  # the core's sphere broad phase (same verdicts, cheaper checks)
+        model = native.space_spheres(space)
+        problem["spheres"] = {"joint": np.asarray(model["joint"], int).tolist(),
+                              "center": np.asarray(model["center"], float).tolist(),
+                              "radius": np.asarray(model["radius"], float).tolist(),
+                              "geometry": np.asarray(model["geometry"], int).tolist(),
+                              "exact": [[int(a), int(b)] for a, b in model["exact"]]}
     path = folder / "problem.json"
     path.write_text(json.dumps(problem, indent=1))
     return path
@@ -127,11 +135,13 @@ class NativeOmplPlanner:
     """OMPL ``ompl_space`` + RRTConnect in C++ for our ``space`` (see the module docstring).
 
     resolution: OMPL's manifold step ``delta`` (rad); seed: OMPL's RNG seed (as the Python
-    bridge sets it, so both draw the same numbers for a seed); settings: as the Python bridge's.
+    bridge sets it, so both draw the same numbers for a seed); settings: as the Python bridge's; spheres:
+    the collision checks (the search's and the final dense check's) use the robot's sphere models as the broad
+    phase, as our planner's do with ``spheres=True`` (same verdicts, cheaper checks).
     """
 
     def __init__(self, space: ConstrainedSpace, *, ompl_space: str = "atlas", resolution: float = 0.05,
-                 seed: int = 0, settings: OmplSettings | None = None):
+                 seed: int = 0, settings: OmplSettings | None = None, spheres: bool = False):
         if ompl_space not in SPACES:
             raise ManifoldgenError(f"unknown native OMPL space '{ompl_space}'; known: {', '.join(SPACES)}")
         if resolution <= 0:
@@ -142,6 +152,10 @@ class NativeOmplPlanner:
         self.settings.check()
         self.space, self.ompl_space, self.resolution, self.seed = space, ompl_space, resolution, seed
         self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
+        self.spheres = spheres and space.checker is not None
+        self.dense_sphere_checks = 0  # sphere tests of the current solve's dense checks (spheres only)
+        if self.spheres and self.core is not None:
+            native.set_spheres(self.core, native.space_spheres(space))
         self.name = f"ompl-native-{ompl_space}"
 
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
@@ -150,10 +164,11 @@ class NativeOmplPlanner:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
         n = self.space.n
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
+        self.dense_sphere_checks = 0
         with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
             problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
                                      resolution=self.resolution, seed=self.seed, time_limit=time_limit,
-                                     settings=self.settings)
+                                     settings=self.settings, spheres=self.spheres)
             log = Path(folder) / "stderr.txt"  # a file, not a pipe: OMPL's warnings can never block the program
             with log.open("w") as errors, subprocess.Popen([str(self.binary), str(problem)], stdin=subprocess.PIPE,
                                                            stdout=subprocess.PIPE, stderr=errors, text=True) as child:
@@ -172,6 +187,7 @@ class NativeOmplPlanner:
                   "resolution": self.resolution, "ompl_tolerance": 1.0 - self.space.settings.margin,
                   "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks",
                                                       "samples")},
+                  "sphere_checks": done["sphere_checks"] + self.dense_sphere_checks,
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
@@ -201,7 +217,9 @@ class NativeOmplPlanner:
             return report.valid, report.worst_violation, report.reason
         before = self.core.counts()
         valid, worst, _, reason, segment, _ = self.core.validate_path(np.ascontiguousarray(path, float))
-        native.book(self.space, before, self.core.counts())
+        after = self.core.counts()
+        native.book(self.space, before, after)
+        self.dense_sphere_checks += after["sphere_checks"] - before["sphere_checks"]
         return bool(valid), float(worst), "" if valid else f"segment {segment}: {REASONS[reason - 1]}"
 
     @staticmethod

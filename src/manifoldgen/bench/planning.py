@@ -206,7 +206,8 @@ def build(experiment: Experiment, method: Method, seed: int):
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
-                                    resolution=experiment.resolution, seed=seed)
+                                    resolution=experiment.resolution, seed=seed,
+                                    spheres=bool(experiment.planner_settings.get("spheres", False)))
     elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
