@@ -63,10 +63,17 @@ class Sampler(ABC):
         return self.candidates(count)
 
     def _refill(self) -> None:
+        """A new batch of checked candidates into the buffer :meth:`sample_many` takes from."""
         q = self.candidates(self.batch)
         self.stats.generated += len(q)
         self.stats.batches += 1
         self._buffer = q[self.space.valid(q)]
+
+    def _refill_raw(self) -> None:
+        """A new batch of raw candidates into the buffer :meth:`raw_many` takes from."""
+        self._raw = self.raw(self.batch)
+        self.stats.generated += len(self._raw)
+        self.stats.batches += 1
 
     def sample(self) -> np.ndarray:
         """One valid configuration (n,)."""
@@ -75,40 +82,33 @@ class Sampler(ABC):
     def sample_many(self, count: int) -> np.ndarray:
         """(count, n) valid configurations: the buffer taken in order, in slices, refilled a batch at a
         time; an error after ``max_batches`` refills in a row found none."""
-        rows, need, empty = [], count, 0
-        while need:
-            if not len(self._buffer):
-                if empty == self.max_batches:
-                    raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
-                                           f"{self.max_batches} batches of {self.batch}")
-                self._refill()
-                empty = 0 if len(self._buffer) else empty + 1
-                continue
-            take, self._buffer = self._buffer[:need], self._buffer[need:]
-            rows.append(take)
-            need -= len(take)
-            self.stats.accepted += len(take)
-        return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
+        rows = self._take(count, "_buffer", self._refill)
+        self.stats.accepted += len(rows)
+        return rows
 
     def raw_many(self, count: int) -> np.ndarray:
         """(count, n) raw candidates (see :meth:`raw`), unrefined and unchecked: the caller refines each
         with ``lazy_refine`` projection iterations, checks it, and books ``stats.refined`` and
         ``stats.accepted``. Made ``batch`` at a time as :meth:`sample_many`; an error after
         ``max_batches`` empty batches in a row."""
+        return self._take(count, "_raw", self._refill_raw)
+
+    def _take(self, count: int, buffer: str, refill) -> np.ndarray:
+        """(count, n) rows taken in order from the array attribute ``buffer``, in slices, ``refill()`` putting a
+        new batch there when it is empty; an error after ``max_batches`` empty refills in a row."""
         rows, need, empty = [], count, 0
         while need:
-            if not len(self._raw):
+            if not len(getattr(self, buffer)):
                 if empty == self.max_batches:
                     raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
                                            f"{self.max_batches} batches of {self.batch}")
-                self._raw = self.raw(self.batch)
-                self.stats.generated += len(self._raw)
-                self.stats.batches += 1
-                empty = 0 if len(self._raw) else empty + 1
+                refill()
+                empty = 0 if len(getattr(self, buffer)) else empty + 1
                 continue
-            take, self._raw = self._raw[:need], self._raw[need:]
-            rows.append(take)
-            need -= len(take)
+            rest = getattr(self, buffer)
+            rows.append(rest[:need])
+            setattr(self, buffer, rest[need:])
+            need -= len(rows[-1])
         return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
 
 
