@@ -5,9 +5,9 @@ from __future__ import annotations
 import contextlib
 import errno
 import io
+import signal
 import socket
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -75,13 +75,16 @@ def open_viewer(file: str | Path, host: str = "127.0.0.1", port: int = 8080, tas
 
 
 def serve(viewer: Viewer) -> None:
-    """Run the animation (when ``play`` is ticked) until Ctrl-C; then close the server."""
+    """Run the animation (when ``play`` is ticked) until Ctrl-C or SIGTERM; then close the server. The signals
+    only set a flag the loop reads between frames: an interrupt raised inside a viser call could leave one of
+    its locks held, and the process would then hang at exit."""
+    stop = threading.Event()
+    handlers = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while True:
+        while not stop.wait(1 / FPS):
             if viewer.play is not None and viewer.play.value:
                 viewer.slider.value = (int(viewer.slider.value) + 1) % len(viewer.frames)  # moves the robot
-            time.sleep(1 / FPS)
-    except KeyboardInterrupt:
-        pass
     finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
         stop_server(viewer.server)
