@@ -178,7 +178,14 @@ struct Space::Impl {
   std::vector<Residuals> callbacks;
   Inequalities inequality;
   int p = 0;
-  bool native_terms = false;  // some term is built in (forward kinematics needed)
+  bool native_terms = false;  // some term is built in (forward kinematics needed): set by add
+
+  // Append a term: its rows to m, and whether forward kinematics is needed.
+  void add(const Term& t) {
+    m += t.rows();
+    terms.push_back(t);
+    native_terms = native_terms || t.kind != 5;
+  }
   // per geometry: what a pair's mid phase tests before coal's exact test (a mesh's convex hull, built on
   // first use; a primitive itself), and whether it was looked up
   std::vector<std::shared_ptr<coal::CollisionGeometry>> outer;
@@ -555,9 +562,7 @@ void Space::add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vect
   if (y.size() != static_cast<long>(position_axes.size())) throw std::runtime_error("pose y must give each position axis");
   Term t{0, static_cast<pinocchio::FrameIndex>(frame), 0, rotation, position_axes, orientation_axes, y,
          Eigen::Vector3d::Zero()};
-  p.m += t.rows();
-  p.terms.push_back(t);
-  p.native_terms = true;
+  p.add(t);
 }
 
 void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset) {
@@ -566,9 +571,7 @@ void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation,
   if (frame_a < 0 || frame_b < 0 || frame_a >= nf || frame_b >= nf) throw std::runtime_error("chain frame id out of range");
   Term t{1, static_cast<pinocchio::FrameIndex>(frame_a), static_cast<pinocchio::FrameIndex>(frame_b), rotation, {}, {},
          Vec(), offset};
-  p.m += t.rows();
-  p.terms.push_back(t);
-  p.native_terms = true;
+  p.add(t);
 }
 
 void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) {
@@ -577,9 +580,7 @@ void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) 
   if (!(radius > 0)) throw std::runtime_error("sphere radius must be positive");
   Term t{2, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec::Constant(1, radius),
          center};
-  p.m += t.rows();
-  p.terms.push_back(t);
-  p.native_terms = true;
+  p.add(t);
 }
 
 // ---------------------------------------------------------------- Whole-body terms
@@ -590,9 +591,7 @@ void Space::add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen:
          Eigen::Vector3d::Zero()};
   t.axis = axis;
   t.basis = basis;
-  p.m += t.rows();
-  p.terms.push_back(t);
-  p.native_terms = true;
+  p.add(t);
 }
 
 void Space::add_linear(const RowMat& A, const Vec& y) {
@@ -601,9 +600,7 @@ void Space::add_linear(const RowMat& A, const Vec& y) {
     throw std::runtime_error("linear terms need A (r, n) over the active coordinates and y (r,)");
   Term t{4, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, y, Eigen::Vector3d::Zero()};
   t.A = A;
-  p.m += t.rows();
-  p.terms.push_back(t);
-  p.native_terms = true;
+  p.add(t);
 }
 
 void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
@@ -908,8 +905,7 @@ void Space::add_callback(int rows, Residuals residuals) {
   t.callback = static_cast<int>(p.callbacks.size());
   t.callback_rows = rows;
   p.callbacks.push_back(std::move(residuals));
-  p.m += rows;
-  p.terms.push_back(t);
+  p.add(t);
 }
 
 void Space::set_inequalities(int p, Inequalities inequalities) {
