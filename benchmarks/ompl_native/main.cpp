@@ -173,27 +173,13 @@ int plan(mgnative::Problem& problem, double load_s) {
   setup.setPlanner(planner);
   setup.setup();
 
-  bool solved = false;
-  int attempts = 0, rejected = 0;
-  long vertices = 0;
-  std::string status = "not run";
-  while (!solved) {
-    const double remaining = time_limit - (wall_seconds() - wall0);
-    if (remaining <= 0) break;
-    if (attempts++) setup.clear();
-    status = setup.solve(remaining).asString();
-    ob::PlannerData data(si);
-    setup.getPlannerData(data);
-    vertices += data.numVertices();
-    if (!setup.haveExactSolutionPath()) break;  // out of time (RRTConnect stops only then)
-    og::PathGeometric path = setup.getSolutionPath();
-    path.interpolate();
-    write_path(path, n);
-    std::string verdict;
-    std::getline(std::cin, verdict);
-    solved = verdict == "valid";
-    rejected += !solved;
-  }
+  const ompl_common::Outcome run =
+      ompl_common::solve_with_retries(setup, si, time_limit, wall0, [&](og::PathGeometric& path) {
+        write_path(path, n);  // the caller's dense check answers
+        std::string verdict;
+        std::getline(std::cin, verdict);
+        return verdict == "valid";
+      });
   const double wall = wall_seconds() - wall0, cpu = cpu_seconds() - cpu0;
   long charts = settings.space == "projected" ? 0 : std::static_pointer_cast<ob::AtlasStateSpace>(space)->getChartCount();
   std::printf(
@@ -201,7 +187,8 @@ int plan(mgnative::Problem& problem, double load_s) {
       "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"inequalities\": %ld, \"collision_checks\": %ld, "
       "\"sphere_checks\": %ld, "
       "\"wall_s\": %.6f, \"cpu_s\": %.6f, \"load_s\": %.6f}\n",
-      solved ? "true" : "false", status.c_str(), attempts, rejected, vertices, charts, constraint->projections,
+      run.solved ? "true" : "false", run.status.c_str(), run.attempts, run.rejected, run.vertices, charts,
+      constraint->projections,
       planner->samples,
       problem.counts.fk, problem.counts.jacobians, problem.counts.inequalities, problem.counts.collision_checks,
       problem.counts.sphere_checks, wall, cpu, load_s);

@@ -181,28 +181,15 @@ void run(const Options& o, long seed) {
   setup.setPlanner(planner);
   setup.setup();
 
-  bool solved = false;
-  int attempts = 0, rejected = 0;
-  long vertices = 0, dense = 0;
+  long dense = 0;
   double length = 0;
   std::size_t states = 0;
-  std::string status = "not run";
-  while (!solved) {
-    const double remaining = o.time - (wall_seconds() - wall0);
-    if (remaining <= 0) break;
-    if (attempts++) setup.clear();
-    status = setup.solve(remaining).asString();
-    ob::PlannerData data(si);
-    setup.getPlannerData(data);
-    vertices += data.numVertices();
-    if (!setup.haveExactSolutionPath()) break;  // out of time (RRTConnect stops only then)
-    og::PathGeometric path = setup.getSolutionPath();
-    path.interpolate();
-    solved = o.check_tolerance <= 0 || dense_check(path, o, dense);
-    rejected += !solved;
-    length = path.length();
-    states = path.getStateCount();
-  }
+  const ompl_common::Outcome run =
+      ompl_common::solve_with_retries(setup, si, o.time, wall0, [&](og::PathGeometric& path) {
+        length = path.length();
+        states = path.getStateCount();
+        return o.check_tolerance <= 0 || dense_check(path, o, dense);
+      });
   const double wall = wall_seconds() - wall0, cpu = cpu_seconds() - cpu0;
   std::printf(
       "{\"space\": \"%s\", \"seed\": %ld, \"solved\": %s, \"status\": \"%s\", \"time_s\": %.6f, \"cpu_s\": %.6f, "
@@ -210,9 +197,9 @@ void run(const Options& o, long seed) {
       "\"jacobian_calls\": %ld, \"projections\": %ld, \"validity_checks\": %ld, \"dense_checks\": %ld, "
       "\"samples\": %ld, \"vertices\": %ld, \"charts\": %ld, \"radius\": %g, \"tolerance\": %g, "
       "\"check_tolerance\": %g, \"resolution\": %g, \"time_limit\": %g}\n",
-      o.space.c_str(), seed, solved ? "true" : "false", status.c_str(), wall, cpu, solved ? length : 0.0,
-      solved ? states : 0, attempts, rejected, constraint->function_calls, constraint->jacobian_calls,
-      constraint->projections, validity_checks, dense, planner->samples, vertices,
+      o.space.c_str(), seed, run.solved ? "true" : "false", run.status.c_str(), wall, cpu,
+      run.solved ? length : 0.0, run.solved ? states : 0, run.attempts, run.rejected, constraint->function_calls,
+      constraint->jacobian_calls, constraint->projections, validity_checks, dense, planner->samples, run.vertices,
       atlas ? static_cast<long>(atlas->getChartCount()) : 0L, o.radius, o.tolerance, o.check_tolerance,
       o.resolution, o.time);
   std::fflush(stdout);
