@@ -419,8 +419,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     operation counts on the planner (``planner.callbacks``: calls into Python constraint callbacks and the
     configurations they evaluated); the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
-    # a core built before lazy samples has no `refine` argument: it gets checked samples, as it expects
-    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many") and "refine" in (core_module().rrt_connect.__doc__ or "")
+    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
     before = core.counts()
     swapped = sampler.space is space
     if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
@@ -430,7 +429,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
                                _raw_draw(planner) if lazy else planner._draw_many,
                                max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
                                s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY,
-                               **({"refine": int(sampler.lazy_refine)} if lazy else {}))
+                               refine=int(sampler.lazy_refine) if lazy else -1)
     finally:
         if swapped:
             sampler.space = space
