@@ -23,12 +23,13 @@ from manifoldgen.training import CHECKPOINT
 
 def collect_and_train(task, per_condition: int, epochs: int, seed: int, output: Path, console: Console,
                       figures: dict, *, dataset: str, conditions: np.ndarray | None = None,
-                      settings: dict | None = None, what: str = "") -> object:
-    """Collect ``per_condition`` rows per condition into ``output/dataset``, train a CVAE into
-    ``output/cvae`` (resuming a stopped demo's training); returns the model."""
+                      settings: dict | None = None, what: str = "", near_home: float = 0.0) -> object:
+    """Collect ``per_condition`` rows per condition into ``output/dataset`` (``near_home`` > 0: seeds normal
+    around the task's home, see :func:`~manifoldgen.data.collect`), train a CVAE into ``output/cvae``
+    (resuming a stopped demo's training); returns the model."""
     console.rule(f"1. collect{what}")
     start = time.perf_counter()
-    rows = collect(task, per_condition, seed, output / dataset, conditions=conditions)
+    rows = collect(task, per_condition, seed, output / dataset, conditions=conditions, near_home=near_home)
     figures["rows"], figures["collect_s"] = len(rows), time.perf_counter() - start
     console.rule("2. train a CVAE")
     model = get_model_class("cvae")(**(settings or {}))
