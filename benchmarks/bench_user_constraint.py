@@ -3,6 +3,7 @@ the compiled core through batched Python callbacks.
 
     python benchmarks/bench_user_constraint.py [--per-condition 2000] [--epochs 60]
     python benchmarks/bench_user_constraint.py --plan [--runs 10] [--time 30] [--sampler project|cvae]
+    python benchmarks/bench_user_constraint.py --jacobians
 
 The same manifold on xarm7, written twice: `examples/user_task/tool_down.py` (a user's ~20-line
 constraint, Jacobian and training penalty from its one residual) and the built-in orientation + plane
@@ -12,10 +13,15 @@ gap (target: within 10 points), with wall and CPU time.
 
 ``--plan``: the user constraint's task (xarm7, tool down at x = 0.4, the `open` scene's query with a box
 between start and goal), RRT-Connect with the `project` sampler (or a CVAE trained first on the user
-constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``), the Python search against the compiled
-core calling the user's residual and Jacobian (torch autograd) back in batches; seeds 0..runs-1, the two
-interleaved per seed. Prints per search: solved, median CPU and wall time of a query, and the median
-number of Python constraint calls and rows (configurations) per call.
+constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``); three searches interleaved per seed
+(seeds 0..runs-1): the Python search, the compiled core calling the user's residual back with the Jacobian by
+torch autograd (the callback path before central differences: ``native.FD_ROWS = 0``), and the core as it is
+(central differences of the numpy residual, :func:`manifoldgen.native.central_difference`). Prints per search:
+solved, median CPU and wall time of a query, the median number of Python constraint calls and configurations
+per call, the Jacobian calls and their median batch, and the CPU share inside the user's constraint.
+
+``--jacobians``: the callback's Jacobian alone on random xarm7 rows, per batch size: CPU per call of torch
+autograd (the constraint's default ``jacobian``) and of central differences, and their largest difference.
 """
 
 import argparse
@@ -25,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from manifoldgen import native
 from manifoldgen.data import collect
 from manifoldgen.models import get_model_class
 from manifoldgen.runtime import set_torch_threads
@@ -39,22 +46,29 @@ parser.add_argument("--plan", action="store_true", help="time planning: Python s
 parser.add_argument("--runs", type=int, default=10)
 parser.add_argument("--time", type=float, default=30.0)
 parser.add_argument("--sampler", choices=("project", "cvae"), default="project")
+parser.add_argument("--jacobians", action="store_true", help="time the callback's Jacobian: autograd vs central "
+                    "differences, per batch size")
 args = parser.parse_args()
 set_torch_threads()
+FD_ROWS = native.FD_ROWS
 
 
 def count_calls(constraint):
-    """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count Python calls, rows
-    and the CPU seconds spent inside them; returns the running totals {"calls", "rows", "cpu"}."""
-    totals, depth = {"calls": 0, "rows": 0, "cpu": 0.0}, [0]
+    """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count the Python search's
+    calls, rows (configurations) and the CPU seconds spent inside them, and its Jacobian calls and their rows;
+    returns the running totals {"calls", "rows", "cpu", "jacobian_calls", "jacobian_rows"}."""
+    totals, depth = {"calls": 0, "rows": 0, "cpu": 0.0, "jacobian_calls": 0, "jacobian_rows": 0}, [0]
     for name in ("residual", "jacobian", "inequality"):
         method = getattr(constraint, name)
 
-        def counted(q, y, method=method):
+        def counted(q, y, method=method, name=name):
             outer = not depth[0]  # the autograd Jacobian's own residual call is part of its call
             if outer:
                 totals["calls"] += 1
                 totals["rows"] += 1 if np.ndim(q) == 1 else len(q)
+                if name == "jacobian":
+                    totals["jacobian_calls"] += 1
+                    totals["jacobian_rows"] += 1 if np.ndim(q) == 1 else len(q)
                 began = time.process_time()
             depth[0] += 1
             try:
@@ -89,36 +103,94 @@ def plan_bench():
         sampler = f"cvae:{folder}"
         print(f"CVAE trained on the user constraint ({args.per_condition} rows per condition, {args.epochs} epochs): "
               f"{time.perf_counter() - wall:.0f} s wall, {time.process_time() - cpu:.0f} s CPU", flush=True)
-    rows = {core: [] for core in ("python", "native")}
+    searches = {"python": "Python", "autograd": "compiled core + callbacks, autograd Jacobian (before)",
+                "native": "compiled core + callbacks, central differences"}
+    rows = {search: [] for search in searches}
     for seed in range(args.runs):
-        for core in rows:
+        for search in rows:
             constraint = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
-            totals = count_calls(constraint)
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
+            native.FD_ROWS = 0 if search == "autograd" else FD_ROWS
+            core = "python" if search == "python" else "native"
             planner = RRTConnect(space, make_sampler(sampler, space, seed), seed=seed,
                                  settings=RRTConnectSettings(core=core))
-            totals.update(calls=0, rows=0, cpu=0.0)  # building the space evaluated the constraint once
+            totals = count_calls(constraint) if core == "python" else callback_totals
+            totals.update(calls=0, rows=0, cpu=0.0, jacobian_calls=0, jacobian_rows=0)
             wall, cpu = time.perf_counter(), time.process_time()
             result = planner.solve(scene.start, scene.goal, args.time)
             cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
             assert result.extras["core"] == core, result.extras
+            if core == "native":  # the core's own count of its calls into Python agrees with ours
+                assert result.extras["callbacks"] == {"calls": totals["calls"], "rows": totals["rows"]}
             if result.solved:
                 assert space.validate_path(result.path).valid
-            rows[core].append((result.solved, cpu, wall, totals["calls"], totals["rows"], totals["cpu"] / cpu))
-            print(f"seed {seed} {core:>6}: solved {result.solved}, {cpu:.2f} s CPU, {wall:.2f} s wall, "
-                  f"{totals['calls']} Python constraint calls, {totals['rows']} rows, "
+            rows[search].append((result.solved, cpu, wall, totals["calls"], totals["rows"], totals["jacobian_calls"],
+                                 totals["jacobian_rows"], totals["cpu"] / cpu))
+            print(f"seed {seed} {search:>8}: solved {result.solved}, {cpu:.2f} s CPU, {wall:.2f} s wall, "
+                  f"{totals['calls']} Python constraint calls, {totals['rows']} configurations, "
+                  f"{totals['jacobian_calls']} Jacobian calls ({totals['jacobian_rows']} configurations), "
                   f"{totals['cpu']:.2f} s CPU inside them", flush=True)
-    print("\n| search | solved | median CPU (s) | median wall (s) | Python constraint calls (median) | rows per call "
-          "| CPU inside the user's constraint (median) |")
-    print("|---|---|---|---|---|---|---|")
-    for core, runs in rows.items():
-        solved, cpu, wall, calls, n, inside = (np.array(c, float) for c in zip(*runs))
-        print(f"| {'compiled core + callbacks' if core == 'native' else 'Python'} | {int(solved.sum())}/{len(runs)} "
-              f"| {np.median(cpu):.2f} | {np.median(wall):.2f} | {np.median(calls):,.0f} "
-              f"| {n.sum() / max(calls.sum(), 1):.1f} | {np.median(inside):.0%} |")
+    native.FD_ROWS = FD_ROWS
+    print("\n| search | solved | median CPU (s) | median wall (s) | Python constraint calls (median) | configurations "
+          "per call | Jacobian calls (median) | configurations per Jacobian call | CPU inside the user's constraint "
+          "(median) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for search, runs in rows.items():
+        solved, cpu, wall, calls, n, jcalls, jn, inside = (np.array(c, float) for c in zip(*runs))
+        print(f"| {searches[search]} | {int(solved.sum())}/{len(runs)} | {np.median(cpu):.2f} | {np.median(wall):.2f} "
+              f"| {np.median(calls):,.0f} | {n.sum() / max(calls.sum(), 1):.1f} | {np.median(jcalls):,.0f} "
+              f"| {jn.sum() / max(jcalls.sum(), 1):.1f} | {np.median(inside):.0%} |")
 
 
+def count_callbacks() -> dict:
+    """Wrap :class:`manifoldgen.native.ConstraintCallback`'s ``residuals`` (what the core calls) to count the
+    native searches' calls, configurations, Jacobian calls and their configurations, and the CPU inside them;
+    returns the running totals (keys as :func:`count_calls`')."""
+    totals, residuals = {}, native.ConstraintCallback.residuals
+
+    def counted(self, q, jacobian):
+        totals["calls"] += 1
+        totals["rows"] += len(q)
+        totals["jacobian_calls"] += int(jacobian)
+        totals["jacobian_rows"] += len(q) if jacobian else 0
+        began = time.process_time()
+        try:
+            return residuals(self, q, jacobian)
+        finally:
+            totals["cpu"] += time.process_time() - began
+    native.ConstraintCallback.residuals = counted
+    return totals
+
+
+def jacobian_bench():
+    """CPU per call of the callback's Jacobian on random xarm7 rows: autograd vs central differences."""
+    constraint = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
+    robot, rng = constraint.robot, np.random.default_rng(0)
+
+    def per_call(f, reps):
+        f()
+        began = time.process_time()
+        for _ in range(reps):
+            f()
+        return (time.process_time() - began) / reps
+
+    print("| configurations per call | autograd (ms CPU a call) | central differences (ms CPU a call) | speed-up "
+          "| max abs difference |")
+    print("|---|---|---|---|---|")
+    for B in (1, 4, 16, 32, 64, 128, 256, 512):
+        q, y = robot.sample_uniform(B, rng), np.full((B, 1), 0.4)
+        reps = max(5, 1000 // B)
+        autograd = per_call(lambda: constraint.jacobian(q, y), reps)
+        differences = per_call(lambda: native.central_difference(constraint.residual, q, y), reps)
+        error = np.abs(constraint.jacobian(q, y)[1] - native.central_difference(constraint.residual, q, y)[1]).max()
+        print(f"| {B} | {autograd * 1e3:.2f} | {differences * 1e3:.2f} | {autograd / differences:.1f}x | {error:.1e} |")
+
+
+if args.jacobians:
+    jacobian_bench()
+    raise SystemExit(0)
 if args.plan:
+    callback_totals = count_callbacks()
     plan_bench()
     raise SystemExit(0)
 
