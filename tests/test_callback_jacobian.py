@@ -58,6 +58,8 @@ def test_central_differences_equal_autograd_on_random_rows(task):
         np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12)
         np.testing.assert_allclose(J, J_ref, rtol=0, atol=1e-9)  # entries are O(1): metres and unit vectors
         assert np.abs(J_ref).max() > 0.5
+    F, J = native.central_difference(lambda q, y: q[:, :0], q, y)  # a part with inequalities only
+    assert F.shape == (200, 0) and J.shape == (200, 0, 7)
 
 
 def test_callback_takes_differences_on_small_batches_and_autograd_on_large_ones(task, monkeypatch):

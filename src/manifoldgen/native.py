@@ -224,7 +224,7 @@ def central_difference(residual, q: np.ndarray, y: np.ndarray) -> tuple[np.ndarr
     shifted[1 + n + j, :, j] -= h
     step = shifted[1 + j, :, j] - shifted[1 + n + j, :, j]  # (n, B): the steps as represented
     F = np.asarray(residual(shifted.reshape(-1, n), np.tile(y, (2 * n + 1, 1))), dtype=float)
-    F = F.reshape(2 * n + 1, B, -1)
+    F = F.reshape(2 * n + 1, B, F.shape[1])
     J = (F[1:n + 1] - F[n + 1:]) / step[:, :, None]  # (n, B, m)
     return F[0], J.transpose(1, 2, 0)
 
