@@ -11,7 +11,7 @@ pose terms, its CoM margin as the support polygon's inequalities on pinocchio's 
 base's six Euler coordinates mapped to pinocchio's free flyer as :meth:`~manifoldgen.robot.Robot.to_pinocchio`
 does). Any other constraint (a user's, ``plane``, ...) reaches the core through batched Python callbacks
 (:class:`ConstraintCallback`): its own residual, Jacobian (analytic, else central differences of its numpy
-residual: torch autograd's within ~1e-9, and ~17x cheaper on the single rows the sequential searches ask for) and
+residual: torch autograd's within ~1e-9, and ~14x cheaper on the single rows the sequential searches ask for) and
 inequalities, called on all the rows a projection iteration, a motion check or a path chunk evaluates at once.
 What the core cannot take (a robot that is not a pinocchio :class:`~manifoldgen.robot.Robot`): :func:`unsupported`
 says why, and the planners fall back to Python.
@@ -206,8 +206,9 @@ def _layout(space: ConstrainedSpace) -> list[tuple[str, object]]:
 
 # The Jacobian of a Python part without an analytic one (measured on the xarm7 user task, 2 cores, CPU per call:
 # benchmarks/bench_user_constraint.py --jacobians): torch autograd costs ~3 ms at any batch up to ~128 rows (its
-# per-operation overhead), central differences on the numpy residual 0.17 ms at 1 row, 0.7 ms at 32, 2.2 ms at
-# 128; the core's sequential searches (a projected walk's steps, a lazily refined sample) ask for single rows.
+# per-operation overhead), central differences of the numpy residual 0.20 ms at 1 row, 0.69 ms at 32, 3.5 ms at
+# 128 (autograd 3.7); the core's sequential searches (a projected walk's steps, a lazily refined sample) ask for
+# single rows.
 FD_STEP = 3e-6  # central-difference step, times max(1, |q_j|): near eps^(1/3); user task: |J - autograd's| <= 1e-10
 FD_ROWS = 2048  # above (2n + 1) x B residual rows a call, autograd is cheaper (n = 7: B > 136)
 FD_AGREE = 1e-6  # first use: central differences must match autograd within this x max(1, max |J|)
