@@ -10,8 +10,8 @@ planner; its search runs in the compiled core when ``manifoldgen_core`` is built
 with our constraint and collision checker compiled; build it first with
 ``benchmarks/ompl_native/build.sh``). Every path gets the same dense check (0.005 rad) and the same
 retry policy. Prints per scene and method: success, median CPU and wall time (an unsolved run
-counts as slower than every solved one; CPU includes our dense check of the returned paths, and
-the C++ baseline's share is given apart), and the median coal collision checks, sphere tests (ours with
+counts as slower than every solved one; CPU includes the dense check of the returned paths; the C++
+baseline's is its program's plus that check, not the harness that starts it and passes paths), and the median coal collision checks, sphere tests (ours with
 ``--set spheres=true``), FK evaluations, samples drawn (ours: rows decoded by the CVAE; OMPL's: by its
 own sampler) and, ours, samples used (refined and checked when the search first used them, valid) of
 the solved runs; each

@@ -106,3 +106,12 @@ def test_the_sphere_broad_phase_changes_no_verdict_of_the_baseline(maze):
     np.testing.assert_array_equal(spheres.path, plain.path)
     assert spheres.extras["sphere_checks"] > 0 and plain.extras["sphere_checks"] == 0
     assert spheres.extras["native_ops"]["collision_checks"] < plain.extras["native_ops"]["collision_checks"]
+
+
+@needs_binary
+def test_bench_charges_the_baseline_its_program_and_our_dense_check_not_the_harness():
+    from manifoldgen.bench.planning import Experiment, Method, run_once
+    record = run_once(Experiment("wall", time_limit=20.0), Method.parse("atlas-c++=ompl-native-atlas"), 0)
+    extras = record["extras"]
+    assert record["solved"] and extras["dense_cpu_s"] > 0 and record["harness_cpu_s"] >= 0
+    assert record["cpu_s"] == pytest.approx(extras["native_cpu_s"] + extras["dense_cpu_s"])

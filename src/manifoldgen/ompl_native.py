@@ -154,6 +154,7 @@ class NativeOmplPlanner:
         self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
         self.spheres = spheres and space.checker is not None
         self.dense_sphere_checks = 0  # sphere tests of the current solve's dense checks (spheres only)
+        self.dense_cpu_s = 0.0  # CPU of the current solve's dense checks (this process)
         if self.spheres and self.core is not None:
             native.set_spheres(self.core, native.space_spheres(space))
         self.name = f"ompl-native-{ompl_space}"
@@ -164,7 +165,7 @@ class NativeOmplPlanner:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
         n = self.space.n
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
-        self.dense_sphere_checks = 0
+        self.dense_sphere_checks, self.dense_cpu_s = 0, 0.0
         with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
             problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
                                      resolution=self.resolution, seed=self.seed, time_limit=time_limit,
@@ -189,6 +190,7 @@ class NativeOmplPlanner:
                                                       "samples")},
                   "sphere_checks": done["sphere_checks"] + self.dense_sphere_checks,
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
+                  "dense_cpu_s": self.dense_cpu_s,
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
         return PlanResult(solved, path, elapsed, int(done["vertices"]), 0, int(done["projections"]), self.name,
@@ -206,7 +208,9 @@ class NativeOmplPlanner:
                 return path, worst, reason, json.loads(line[5:])
             count = int(line.split()[1])
             path = np.array([[float(v) for v in child.stdout.readline().split()] for _ in range(count)])
+            cpu = time.process_time()
             valid, worst, reason = self._dense_check(path)
+            self.dense_cpu_s += time.process_time() - cpu
             child.stdin.write("valid\n" if valid else "invalid\n")
             child.stdin.flush()
 

@@ -195,8 +195,8 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "violation is max |F_i| / tol_i over every state of every solved path, checked every "
             f"{ValidationSettings.resolution} rad."
             "\n\n" + table + _stability_section(records, order)
-            + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own, "
-            "plus the C++ baseline's; FK: configurations whose constraint kinematics was computed, Jacobians "
+            + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own; the C++ "
+            "baseline's: its program's plus our dense check of its paths, not the harness around it; FK: configurations whose constraint kinematics was computed, Jacobians "
             "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "
             "each with its own FK of every link; samples: from our samplers, or drawn by the C++ OMPL baseline's "
             "sampler, not counted for the Python-callback OMPL methods):\n\n"
