@@ -30,6 +30,7 @@ struct Counters {
   long projection_steps = 0;  // projection iterations, summed over rows
   long collision_checks = 0;  // configurations checked with coal (exact meshes)
   long sphere_checks = 0;     // configurations checked with the sphere models first (coal only where they touch)
+  long sweep_checks = 0;      // certified sweep tests of spans of dense path states (validate_path, spheres set)
   std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
   long callback_calls = 0;  // calls into Python constraint callbacks (residuals, Jacobians, inequalities)
   long callback_rows = 0;   // configurations those calls evaluated
@@ -107,6 +108,20 @@ class Space {
                    const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact = {});
   void clear_spheres();
   bool has_spheres() const;
+  // Certified sweeps (space.cpp, "Certified sweeps"): with sphere models set, validate_path tests whole spans of
+  // consecutive dense states at once and checks single states only where a span cannot be certified; the same
+  // PathCheck as state by state. On by default; off: state by state. sweeps() says whether they are used.
+  void set_sweeps(bool on);
+  bool sweeps() const;
+  std::string sweep_report() const;  // why sweeps are unavailable ("" when they are)
+  // The states (k, n) taken as consecutive dense states of a path: true when every state of the polyline through
+  // them is certified collision-free (one sweep test; counted). Needs sweeps().
+  bool sweep_free(const double* states, int k);
+  // (S,) bounds on how far each sphere centre moves from the middle state (k / 2) along the polyline through
+  // states (k, n) (what sweep_free inflates the spheres by, before relative motion is taken out).
+  std::vector<double> sweep_bounds(const double* states, int k);
+  // (S, 3) world centres of the spheres at q (n,).
+  RowMat sphere_centers(const double* q);
   std::string sphere_report() const;  // what the sphere check covers, for people
 
   int n() const;
@@ -154,6 +169,8 @@ class Space {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  // validate_path's dense states (M, n) and their segments, checked with certified sweeps
+  PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment);
 };
 
 // RRT-Connect settings (manifoldgen.planning.base.PlannerSettings) and the local planner's name.
