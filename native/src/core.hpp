@@ -31,6 +31,8 @@ struct Counters {
   long collision_checks = 0;  // configurations checked with coal (exact meshes)
   long sphere_checks = 0;     // configurations checked with the sphere models first (coal only where they touch)
   long sweep_checks = 0;      // certified sweep tests of spans of dense path states (validate_path, spheres set)
+  long hull_tests = 0;        // pair tests on convex outer shapes (the mid phase, per state and per sweep)
+  long mesh_tests = 0;        // pair tests with coal's exact test of the geometries (after the mid phase)
   std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
   long callback_calls = 0;  // calls into Python constraint callbacks (residuals, Jacobians, inequalities)
   long callback_rows = 0;   // configurations those calls evaluated

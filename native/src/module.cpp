@@ -45,6 +45,8 @@ nb::dict counts_of(const Space& s) {
   d["collision_checks"] = s.counts.collision_checks;
   d["sphere_checks"] = s.counts.sphere_checks;
   d["sweep_checks"] = s.counts.sweep_checks;
+  d["hull_tests"] = s.counts.hull_tests;
+  d["mesh_tests"] = s.counts.mesh_tests;
   d["callback_calls"] = s.counts.callback_calls;
   d["callback_rows"] = s.counts.callback_rows;
   d["stopped"] = stopped;

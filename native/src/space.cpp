@@ -194,6 +194,7 @@ struct Space::Impl {
   // are close; the guess changes how fast GJK converges, not its verdict)
   std::vector<coal::CollisionRequest> outer_requests;
   bool placed_geometries = false;  // geom_data's placements are those of the latest collision kinematics
+  Counters* tally = nullptr;       // the Space's counters (hull and mesh tests are counted here)
 
   const Eigen::VectorXd& to_full(const double* q) {
     const int offset = floating ? 6 : 0;
@@ -424,6 +425,7 @@ struct Space::Impl {
     const coal::CollisionGeometry* oa = outer_of(static_cast<int>(pair.first));
     const coal::CollisionGeometry* ob = outer_of(static_cast<int>(pair.second));
     if (oa && ob) {
+      ++tally->hull_tests;
       coal::CollisionRequest& request = outer_requests[k];
       coal::CollisionResult result;
       coal::collide(oa, pinocchio::toCoalTransform3s(geom_data->oMg[pair.first]), ob,
@@ -431,6 +433,7 @@ struct Space::Impl {
       request.updateGuess(result);
       if (!result.isCollision()) return false;
     }
+    ++tally->mesh_tests;
     return pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(k));
   }
 
@@ -509,6 +512,7 @@ struct Space::Impl {
           pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
           placed_geometries = true;
         }
+        ++tally->mesh_tests;
         if (pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(t.pair))) return true;
       }
     }
@@ -550,12 +554,25 @@ struct Space::Impl {
   // |x - o_base|), and in k's frame (the base's) x moves only through the deeper joints, by at most
   // sum_{k' deeper} rate_k' d_k' over the span. So rate_k = min(lever_k, rho_k + r + sum_{k' deeper} lever_k' d_k')
   // holds over the whole span as well.
+  // First order, tighter still where the joints' motions cancel (a constrained hand): with c_k(q) the velocity of
+  // x per unit q_k (a column of x's Jacobian) and delta(s) = q(s) - q(m),
+  //   x(s) - x(m) = J(m) delta(s) + integral (c_k(q(t)) - c_k(q(m))) dq_k(t),
+  // and |c_k(q(t)) - c_k(q(m))| <= E_k: c_k is, in k's frame, a x (x^k - o_k) (revolute; a prismatic joint's: a),
+  // which changes by at most B_k = sum_{k' deeper} lever_k' d_k', turned by the rotation of k's frame, at most
+  // Theta_k = sum of d over the rotating coordinates at k and above (rotations compose: angles add; the base's
+  // yaw, pitch, roll axes turn with yaw and pitch too: twice that for them); so E_k = lever_k Theta_k + B_k
+  // (prismatic: Theta_k; the base's x, y, z: 0). |J(m) delta(s)| is convex along each straight piece of the
+  // polyline: its largest value is at a vertex (the span's ends, the path's waypoints inside it). A point of the
+  // ball, x + u, moves by at most r sum_{rotating k} d_k more. Hence
+  //   D <= max_vertices |J(m) delta| + sum_k d_k E_k + r sum_{rotating k} d_k,
+  // over the non-common coordinates for a pair (in the common joint's frame, whose own rotation cancels in |.|);
+  // the smaller of this and the rate bound is used.
   struct Reach {
     int coord;     // active coordinate
     double rate;   // lever (or 1): bound on |dx/dq_coord| anywhere
     int depth;     // position of the joint it moves in the holder's joint's supports (0: the universe)
     int joint;     // that joint
-    int kind;      // 0 revolute, 1 unit rate (prismatic, the base's x, y, z), 2 the base's yaw, pitch, roll
+    int kind;      // 0 revolute, 1 prismatic, 2 the base's yaw, pitch, roll, 3 the base's x, y, z
   };
   struct Holder {
     std::vector<Reach> reach;
@@ -564,7 +581,11 @@ struct Space::Impl {
     double radius = 0.0;
     long offset = 0;   // of its tail in the tails buffer (depth + 1 entries)
   };
-  std::vector<double> scratch;  // fill_tail's static suffix sums
+  std::vector<double> scratch, turn, second, order1;  // fill_tail's sums by depth
+  std::vector<Eigen::Vector3d> moved;                 // fill_tail's first-order displacements (vertex, depth)
+  const double* span_states = nullptr;                // the path's dense states (rows of n)
+  long span_mid = 0;                                  // the current span's middle state
+  std::vector<long> span_vertices;                    // its states where the polyline may turn (ends, waypoints)
   bool sweeps_on = true;
   std::string sweep_unavailable;  // why no sweep ("" when available)
   std::vector<Holder> sphere_holder, geometry_holder;
@@ -631,7 +652,7 @@ struct Space::Impl {
       const int k = coord_of[l];
       if (k < 0) continue;
       if (floating && k == 0 && model.joints[l].idx_q() == base_q) {
-        for (int b = 0; b < 3; ++b) h.reach.push_back({b, 1.0, p, l, 1});
+        for (int b = 0; b < 3; ++b) h.reach.push_back({b, 1.0, p, l, 3});
         for (int b = 3; b < 6; ++b) h.reach.push_back({b, lever, p, l, 2});
       } else {
         h.reach.push_back({k, prismatic[l] ? 1.0 : lever, p, l, prismatic[l] ? 1 : 0});
@@ -688,26 +709,58 @@ struct Space::Impl {
   // tail[p + 1] = sum over the holder's rates deeper than p of rate * d (p = -1 .. depth - 1), the rates
   // tightened at the span's middle state (collision kinematics and joint Jacobians there: span_free).
   void fill_tail(const Holder& h, double* tail) {
-    scratch.assign(h.depth + 1, 0.0);  // scratch[p]: sum of lever * d over depth >= p
-    for (const Reach& e : h.reach) scratch[e.depth] += e.rate * span_d[e.coord];
-    for (int p = h.depth - 1; p >= 0; --p) scratch[p] += scratch[p + 1];
-    std::fill(tail, tail + h.depth + 1, 0.0);
-    const Eigen::Vector3d x = cdata.oMi[h.joint].act(h.center);
+    const int D = h.depth, V = static_cast<int>(span_vertices.size()), nn = n();
+    scratch.assign(D + 1, 0.0);  // scratch[p]: sum of lever * d over depth >= p
+    turn.assign(D + 1, 0.0);     // turn[p]: sum of d over the rotating coordinates at depth <= p
     for (const Reach& e : h.reach) {
-      double rate = e.rate;
-      if (e.kind != 1 && span_d[e.coord] > 0) {
-        double speed;
-        if (e.kind == 0) {
-          const auto column = cdata.J.col(model.joints[e.joint].idx_v());
-          speed = (column.head<3>() + column.tail<3>().cross(x)).norm();  // v + w x x: |x|'s speed per unit q
-        } else {
-          speed = (x - cdata.oMi[e.joint].translation()).norm();
-        }
-        rate = std::min(rate, speed + h.radius + scratch[e.depth + 1]);
-      }
-      tail[e.depth] += rate * span_d[e.coord];  // contribution at index depth
+      scratch[e.depth] += e.rate * span_d[e.coord];
+      if (e.kind == 0 || e.kind == 2) turn[e.depth] += span_d[e.coord];
     }
-    for (int p = h.depth - 1; p >= 0; --p) tail[p] += tail[p + 1];  // suffix sums: tail[p] = depth >= p
+    for (int p = D - 1; p >= 0; --p) scratch[p] += scratch[p + 1];
+    for (int p = 1; p <= D; ++p) turn[p] += turn[p - 1];
+    std::fill(tail, tail + D + 1, 0.0);
+    second.assign(D + 1, 0.0);
+    moved.assign(static_cast<std::size_t>(V) * (D + 1), Eigen::Vector3d::Zero());
+    const Eigen::Vector3d x = cdata.oMi[h.joint].act(h.center);
+    const double* qm = span_states + span_mid * nn;
+    for (const Reach& e : h.reach) {
+      const double d = span_d[e.coord];
+      if (d == 0) continue;  // the coordinate does not move in the span
+      Eigen::Vector3d column;  // c_k at the middle state
+      double speed = 1.0, change = 0.0;  // |c_k| there; E_k
+      if (e.kind == 0 || e.kind == 1) {
+        const auto J = cdata.J.col(model.joints[e.joint].idx_v());  // world: v (at the origin), w
+        column = J.head<3>() + J.tail<3>().cross(x);
+        speed = column.norm();
+        change = e.kind == 0 ? e.rate * turn[e.depth] + scratch[e.depth + 1] : turn[e.depth];
+      } else if (e.kind == 3) {
+        column = Eigen::Vector3d::Unit(e.coord);
+      } else {
+        const Eigen::Vector3d axis = e.coord == 3 ? Eigen::Vector3d::UnitZ().eval()
+                                     : e.coord == 4 ? zyx(qm[3], 0.0, 0.0).col(1)
+                                                    : zyx(qm[3], qm[4], 0.0).col(0);
+        const Eigen::Vector3d arm = x - cdata.oMi[e.joint].translation();
+        column = axis.cross(arm);
+        speed = arm.norm();
+        change = 2.0 * e.rate * turn[e.depth] + scratch[e.depth + 1];
+      }
+      const double rate = e.kind == 0 || e.kind == 2 ? std::min(e.rate, speed + h.radius + scratch[e.depth + 1]) : e.rate;
+      tail[e.depth] += rate * d;  // contribution at index depth
+      second[e.depth] += d * (change + (e.kind == 0 || e.kind == 2 ? h.radius : 0.0));
+      for (int v = 0; v < V; ++v)
+        moved[static_cast<std::size_t>(v) * (D + 1) + e.depth] += column * (span_states[span_vertices[v] * nn + e.coord] - qm[e.coord]);
+    }
+    // suffix sums: index p holds the sums over depth >= p
+    for (int p = D - 1; p >= 0; --p) {
+      tail[p] += tail[p + 1];
+      second[p] += second[p + 1];
+      for (int v = 0; v < V; ++v) moved[static_cast<std::size_t>(v) * (D + 1) + p] += moved[static_cast<std::size_t>(v) * (D + 1) + p + 1];
+    }
+    for (int p = 0; p <= D; ++p) {
+      double first = 0.0;
+      for (int v = 0; v < V; ++v) first = std::max(first, moved[static_cast<std::size_t>(v) * (D + 1) + p].norm());
+      tail[p] = std::min(tail[p], first + second[p]);
+    }
   }
   double sphere_tail(int s, int common) const { return sphere_tails[sphere_holder[s].offset + common + 1]; }
   double geometry_tail(int g, int common) const { return geometry_tails[geometry_holder[g].offset + common + 1]; }
@@ -717,30 +770,42 @@ struct Space::Impl {
     for (int s : spheres_of[g]) fill_tail(sphere_holder[s], sphere_tails.data() + sphere_holder[s].offset);
   }
 
-  // d (n,) of the span [i, j] of the states whose cumulative variation is var (rows of n), middle state m.
-  void span_variation(const double* var, long i, long m, long j) {
+  // The span [i, j] of states (rows of n; var: their cumulative variation; turns: per state, whether the polyline
+  // may turn there, null: at every state), middle state m: d (n,), its vertices.
+  void span_variation(const double* states, const double* var, const char* turns, long i, long m, long j) {
     const int nn = n();
     for (int k = 0; k < nn; ++k)
       span_d[k] = std::max(var[m * nn + k] - var[i * nn + k], var[j * nn + k] - var[m * nn + k]);
+    span_states = states;
+    span_mid = m;
+    span_vertices.assign(1, i);
+    for (long t = i + 1; t < j; ++t)
+      if (!turns || turns[t]) span_vertices.push_back(t);
+    if (j > i) span_vertices.push_back(j);
     std::fill(sphere_tails_ready.begin(), sphere_tails_ready.end(), false);
   }
 
   // Whether every configuration of the span whose middle state is q is collision-free (span_variation done):
-  // per pair, as the per-state check, the spheres first, then the convex outer shapes.
+  // per pair, as the per-state check, the spheres first, then the convex outer shapes; the pair that stopped the
+  // latest span first (neighbouring spans fail on the same pair).
   bool span_free(const double* q) {
     place_kinematics(q, true);
     for (const Holder& h : geometry_holder) fill_tail(h, geometry_tails.data() + h.offset);
-    for (const PairTest& t : tests) {
-      const int common = pair_common[t.pair];
-      if (t.kind == 0 && !spheres_apart(t, common)) {
-        if (!outers_apart(t.pair, common)) return false;
-      } else if (t.kind == 1 && !sphere_primitive_apart(t, common)) {
-        if (!outers_apart(t.pair, common)) return false;
-      } else if (t.kind == 2 && !outers_apart(t.pair, common)) {
+    if (last_stop >= 0 && !pair_apart(tests[last_stop])) return false;
+    for (std::size_t k = 0; k < tests.size(); ++k)
+      if (static_cast<long>(k) != last_stop && !pair_apart(tests[k])) {
+        last_stop = static_cast<long>(k);
         return false;
       }
-    }
     return true;
+  }
+  long last_stop = -1;  // the test that stopped the latest uncertified span
+
+  bool pair_apart(const PairTest& t) {
+    const int common = pair_common[t.pair];
+    if (t.kind == 0 && spheres_apart(t, common)) return true;
+    if (t.kind == 1 && sphere_primitive_apart(t, common)) return true;
+    return outers_apart(t.pair, common);
   }
 
   // The spheres of a pair (kind 0), each grown by its motion bound, do not touch.
@@ -785,6 +850,7 @@ struct Space::Impl {
       pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
       placed_geometries = true;
     }
+    ++tally->hull_tests;
     coal::CollisionRequest request = outer_requests[k];
     request.security_margin +=
         geometry_tail(static_cast<int>(pair.first), common) + geometry_tail(static_cast<int>(pair.second), common);
@@ -800,6 +866,7 @@ Space::Space(const std::string& model_file, const std::string& geometry_file, co
              const std::vector<Active>& active, const Vec& lower, const Vec& upper, double margin, double resolution)
     : impl_(new Impl) {
   Impl& p = *impl_;
+  p.tally = &counts;
   try {
     p.model.loadFromBinary(model_file);
     p.geom.loadFromBinary(geometry_file);
@@ -1009,6 +1076,7 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
     p.outer_of(static_cast<int>(pair.second));
   }
   p.span_d = Vec::Zero(p.n());
+  p.last_stop = -1;
   p.build_holders();
 }
 
@@ -1038,7 +1106,7 @@ bool Space::sweep_free(const double* states, int k) {
   if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
   if (k < 1) throw std::invalid_argument("a span needs at least one state");
   cumulative_variation(states, k, n(), p.variation);
-  p.span_variation(p.variation.data(), 0, k / 2, k - 1);
+  p.span_variation(states, p.variation.data(), nullptr, 0, k / 2, k - 1);
   ++counts.sweep_checks;
   return p.span_free(states + static_cast<long>(k / 2) * n());
 }
@@ -1048,7 +1116,7 @@ std::vector<double> Space::sweep_bounds(const double* states, int k) {
   if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
   if (k < 1) throw std::invalid_argument("a span needs at least one state");
   cumulative_variation(states, k, n(), p.variation);
-  p.span_variation(p.variation.data(), 0, k / 2, k - 1);
+  p.span_variation(states, p.variation.data(), nullptr, 0, k / 2, k - 1);
   p.place_kinematics(states + static_cast<long>(k / 2) * n(), true);
   std::vector<double> out;
   for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.fill_sphere_tails(g);
@@ -1241,6 +1309,8 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
   const long chunk = batched() ? 4096 : 128;  // states whose constraint tests run before their collision tests
   PathCheck out{true, 0.0, -1, VALID, -1, 0};
   cumulative_variation(states.data(), M, nn, p.variation);
+  std::vector<char> turns(M, false);  // the path's waypoints
+  for (long i = 0; i < M; ++i) turns[i] = i == 0 || i == M - 1 || segment[i] != segment[i - 1];
   std::vector<double> v(chunk), G;
   std::vector<char> limits_ok(chunk);
   long L = 8;  // span length, carried from span to span
@@ -1280,7 +1350,7 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
         continue;
       }
       const long j = i + L - 1, m = (i + j) / 2;
-      p.span_variation(p.variation.data(), i, m, j);
+      p.span_variation(states.data(), p.variation.data(), turns.data(), i, m, j);
       ++counts.sweep_checks;
       if (p.span_free(states.data() + m * nn)) {
         i += L;

@@ -154,6 +154,7 @@ class NativeOmplPlanner:
         self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
         self.spheres = spheres and space.checker is not None
         self.dense_sphere_checks = 0  # sphere tests of the current solve's dense checks (spheres only)
+        self.dense_sweep_checks = 0  # certified sweep tests of those dense checks (spheres only)
         if self.spheres and self.core is not None:
             native.set_spheres(self.core, native.space_spheres(space))
         self.name = f"ompl-native-{ompl_space}"
@@ -164,7 +165,7 @@ class NativeOmplPlanner:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
         n = self.space.n
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
-        self.dense_sphere_checks = 0
+        self.dense_sphere_checks = self.dense_sweep_checks = 0
         with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
             problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
                                      resolution=self.resolution, seed=self.seed, time_limit=time_limit,
@@ -188,6 +189,7 @@ class NativeOmplPlanner:
                   "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks",
                                                       "samples")},
                   "sphere_checks": done["sphere_checks"] + self.dense_sphere_checks,
+                  "sweep_checks": self.dense_sweep_checks,
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
@@ -220,6 +222,7 @@ class NativeOmplPlanner:
         after = self.core.counts()
         native.book(self.space, before, after)
         self.dense_sphere_checks += after["sphere_checks"] - before["sphere_checks"]
+        self.dense_sweep_checks += after.get("sweep_checks", 0) - before.get("sweep_checks", 0)
         return bool(valid), float(worst), "" if valid else f"segment {segment}: {REASONS[reason - 1]}"
 
     @staticmethod
