@@ -151,7 +151,8 @@ class Space {
   // collision = false: the collision test is left out (a lazy search checks collisions later).
   int valid_prefix(const double* states, int k, bool last_is_node, bool collision = true);
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
-  // Every state every resolution along path (K, n), exact collision checks.
+  // Every state every resolution along path (K, n), exact collision checks (with sphere models and sweeps():
+  // spans of states certified at once, the same report).
   PathCheck validate_path(const double* path, int K);
 
   // Batches of B configurations q (B, n) row-major: one Python call per callback term serves them all.

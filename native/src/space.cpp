@@ -588,7 +588,7 @@ struct Space::Impl {
     double radius = 0.0;
     long offset = 0;   // of its tail in the tails buffer (depth + 1 entries)
   };
-  std::vector<double> scratch, turn, second, order1;  // fill_tail's sums by depth
+  std::vector<double> scratch, turn, second;          // fill_tail's sums by depth
   std::vector<Eigen::Vector3d> moved;                 // fill_tail's first-order displacements (vertex, depth)
   const double* span_states = nullptr;                // the path's dense states (rows of n)
   long span_mid = 0;                                  // the current span's middle state
