@@ -14,7 +14,8 @@ counts as slower than every solved one; CPU includes the dense check of the retu
 baseline's is its program's plus that check, not the harness that starts it and passes paths), and the median coal collision checks, sphere tests (ours with
 ``--set spheres=true``), FK evaluations, samples drawn (ours: rows decoded by the CVAE; OMPL's: by its
 own sampler) and, ours, samples used (refined and checked when the search first used them, valid) of
-the solved runs; each
+the solved runs, with spheres also the certified sweep tests of the dense checks and the collision queries (sphere
+tests + sweep tests); each
 scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCENE.
 """
 
@@ -49,13 +50,17 @@ def summary(records: list[dict], methods: list[str], scene: str) -> list[str]:
         ops = {k: (f"{np.median([r['ops'][k] for r in solved]):,.0f}" if solved else "-")
                for k in ("collision_checks", "fk", "samples")}
         spheres = [r["extras"].get("sphere_checks", 0) for r in solved]
+        sweeps = [r["extras"].get("sweep_checks", 0) for r in solved]
+        queries = [a + b for a, b in zip(spheres, sweeps)]
         used = [r["extras"]["sampler"]["accepted"] for r in solved if "sampler" in r.get("extras", {})]
         native = [r["extras"]["native_cpu_s"] for r in solved if "native_cpu_s" in r.get("extras", {})]
         rows.append(f"| {scene} | {method} | {len(solved)}/{len(runs)} | "
                     f"{_median([r['cpu_s'] for r in solved], failed)} | "
                     f"{f'{np.median(native):.3g}' if native else '-'} | "
                     f"{_median([r['time_s'] for r in solved], failed)} | {ops['collision_checks']} | "
-                    f"{f'{np.median(spheres):,.0f}' if any(spheres) else '-'} | {ops['fk']} | {ops['samples']} | "
+                    f"{f'{np.median(spheres):,.0f}' if any(spheres) else '-'} | "
+                    f"{f'{np.median(sweeps):,.0f}' if any(sweeps) else '-'} | "
+                    f"{f'{np.median(queries):,.0f}' if any(sweeps) else '-'} | {ops['fk']} | {ops['samples']} | "
                     f"{f'{np.median(used):,.0f}' if used else '-'} |")
     return rows
 
@@ -83,9 +88,9 @@ def main() -> None:
         methods = [m for m in methods if m.split("=")[0] in args.methods]
     labels = [m.split("=")[0] for m in methods]
     lines = ["| scene | method | solved | median CPU (s) | of which C++ OMPL, solved (s) | median wall (s) "
-             "| coal collision checks, solved (median) | sphere tests | FK evaluations, solved (median) "
-             "| samples drawn, solved (median) | samples used (made valid) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| coal collision checks, solved (median) | sphere tests | sweep tests | collision queries (sphere + sweep "
+             "tests) | FK evaluations, solved (median) | samples drawn, solved (median) | samples used (made valid) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for scene in args.scenes:
         out = Path(args.out) / scene
         run_bench(Experiment(scene, time_limit=args.time, planner_settings=settings), methods, out, runs=args.runs, workers=args.workers,

@@ -30,6 +30,9 @@ struct Counters {
   long projection_steps = 0;  // projection iterations, summed over rows
   long collision_checks = 0;  // configurations checked with coal (exact meshes)
   long sphere_checks = 0;     // configurations checked with the sphere models first (coal only where they touch)
+  long sweep_checks = 0;      // certified sweep tests of spans of dense path states (validate_path, spheres set)
+  long hull_tests = 0;        // pair tests on convex outer shapes (the mid phase, per state and per sweep)
+  long mesh_tests = 0;        // pair tests with coal's exact test of the geometries (after the mid phase)
   std::array<long, 5> stopped{};  // motion checks that stopped short, by reason
   long callback_calls = 0;  // calls into Python constraint callbacks (residuals, Jacobians, inequalities)
   long callback_rows = 0;   // configurations those calls evaluated
@@ -107,6 +110,20 @@ class Space {
                    const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact = {});
   void clear_spheres();
   bool has_spheres() const;
+  // Certified sweeps (space.cpp, "Certified sweeps"): with sphere models set, validate_path tests whole spans of
+  // consecutive dense states at once and checks single states only where a span cannot be certified; the same
+  // PathCheck as state by state. On by default; off: state by state. sweeps() says whether they are used.
+  void set_sweeps(bool on);
+  bool sweeps() const;
+  std::string sweep_report() const;  // why sweeps are unavailable ("" when they are)
+  // The states (k, n) taken as consecutive dense states of a path: true when every state of the polyline through
+  // them is certified collision-free (one sweep test; counted). Needs sweeps().
+  bool sweep_free(const double* states, int k);
+  // (S,) bounds on how far each sphere centre moves from the middle state (k / 2) along the polyline through
+  // states (k, n) (what sweep_free inflates the spheres by, before relative motion is taken out).
+  std::vector<double> sweep_bounds(const double* states, int k);
+  // (S, 3) world centres of the spheres at q (n,).
+  RowMat sphere_centers(const double* q);
   std::string sphere_report() const;  // what the sphere check covers, for people
 
   int n() const;
@@ -134,7 +151,8 @@ class Space {
   // collision = false: the collision test is left out (a lazy search checks collisions later).
   int valid_prefix(const double* states, int k, bool last_is_node, bool collision = true);
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
-  // Every state every resolution along path (K, n), exact collision checks.
+  // Every state every resolution along path (K, n), exact collision checks (with sphere models and sweeps():
+  // spans of states certified at once, the same report).
   PathCheck validate_path(const double* path, int K);
 
   // Batches of B configurations q (B, n) row-major: one Python call per callback term serves them all.
@@ -154,6 +172,8 @@ class Space {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  // validate_path's dense states (M, n) and their segments, checked with certified sweeps
+  PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment);
 };
 
 // RRT-Connect settings (manifoldgen.planning.base.PlannerSettings) and the local planner's name.

@@ -44,6 +44,9 @@ nb::dict counts_of(const Space& s) {
   d["projection_steps"] = s.counts.projection_steps;
   d["collision_checks"] = s.counts.collision_checks;
   d["sphere_checks"] = s.counts.sphere_checks;
+  d["sweep_checks"] = s.counts.sweep_checks;
+  d["hull_tests"] = s.counts.hull_tests;
+  d["mesh_tests"] = s.counts.mesh_tests;
   d["callback_calls"] = s.counts.callback_calls;
   d["callback_rows"] = s.counts.callback_rows;
   d["stopped"] = stopped;
@@ -199,6 +202,37 @@ NB_MODULE(manifoldgen_core, m) {
           "joint"_a, "center"_a, "radius"_a, "geometry"_a, "exact"_a = std::vector<std::pair<int, int>>(),
           "Conservative sphere models: every collision check tests them first and runs coal only where they touch.")
       .def("clear_spheres", &Space::clear_spheres)
+      .def("set_sweeps", &Space::set_sweeps, "on"_a,
+           "Certified sweeps in validate_path (on by default; used only with sphere models): the same reports, "
+           "fewer collision checks.")
+      .def_prop_ro("sweeps", &Space::sweeps, "validate_path uses certified sweeps")
+      .def("sweep_report", &Space::sweep_report, "why certified sweeps are unavailable ('' when they are)")
+      .def(
+          "sweep_free",
+          [](Space& s, const In2& states) {
+            check_cols(states, s);
+            return s.sweep_free(states.data(), static_cast<int>(states.shape(0)));
+          },
+          "states"_a, "One sweep test of states (k, n) as consecutive path states: True when the polyline through "
+          "them is certified collision-free.")
+      .def(
+          "sweep_bounds",
+          [](Space& s, const In2& states) {
+            check_cols(states, s);
+            std::vector<double> b = s.sweep_bounds(states.data(), static_cast<int>(states.shape(0)));
+            const std::size_t S = b.size();
+            return owned(std::move(b), {S});
+          },
+          "states"_a, "(S,) bounds on each sphere centre's motion from the middle state (k // 2) along states (k, n).")
+      .def(
+          "sphere_centers",
+          [](Space& s, const In1& q) {
+            if (static_cast<int>(q.shape(0)) != s.n()) throw nb::value_error("q must have n entries");
+            const RowMat c = s.sphere_centers(q.data());
+            std::vector<double> out(c.data(), c.data() + c.size());
+            return owned(std::move(out), {static_cast<std::size_t>(c.rows()), 3});
+          },
+          "q"_a, "(S, 3) world centres of the spheres at q (n,).")
       .def_prop_ro("has_spheres", &Space::has_spheres)
       .def("sphere_report", &Space::sphere_report)
       .def_prop_ro("n", &Space::n)

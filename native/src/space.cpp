@@ -194,6 +194,7 @@ struct Space::Impl {
   // are close; the guess changes how fast GJK converges, not its verdict)
   std::vector<coal::CollisionRequest> outer_requests;
   bool placed_geometries = false;  // geom_data's placements are those of the latest collision kinematics
+  Counters* tally = nullptr;       // the Space's counters (hull and mesh tests are counted here)
 
   const Eigen::VectorXd& to_full(const double* q) {
     const int offset = floating ? 6 : 0;
@@ -424,6 +425,7 @@ struct Space::Impl {
     const coal::CollisionGeometry* oa = outer_of(static_cast<int>(pair.first));
     const coal::CollisionGeometry* ob = outer_of(static_cast<int>(pair.second));
     if (oa && ob) {
+      ++tally->hull_tests;
       coal::CollisionRequest& request = outer_requests[k];
       coal::CollisionResult result;
       coal::collide(oa, pinocchio::toCoalTransform3s(geom_data->oMg[pair.first]), ob,
@@ -431,6 +433,7 @@ struct Space::Impl {
       request.updateGuess(result);
       if (!result.isCollision()) return false;
     }
+    ++tally->mesh_tests;
     return pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(k));
   }
 
@@ -452,6 +455,13 @@ struct Space::Impl {
         if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
         place(t.a);
         if (!spheres_touch_shape(t.a, t.b, pose)) continue;
+      } else if (!spheres_of[t.a].empty() && !spheres_of[t.b].empty()) {
+        // a pair left to coal because its spheres often touch while the meshes are apart: where they do not
+        // touch, the pair is free all the same (the sphere-only verdict, spheres_hit, still sends it to coal)
+        if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
+        place(t.a);
+        place(t.b);
+        if (!spheres_touch(t.a, t.b)) continue;
       }
       if (t.kind != 2) flagged = true;
       if (pair_collides(t.pair)) return true;
@@ -460,8 +470,10 @@ struct Space::Impl {
   }
 
   // Collision kinematics at q, bounding balls placed; sphere centres placed lazily by place().
-  void place_kinematics(const double* q) {
-    pinocchio::forwardKinematics(model, cdata, to_full(q));
+  // jacobians: the joint Jacobians too (cdata.J, world frame), for the certified sweeps' rates.
+  void place_kinematics(const double* q, bool jacobians = false) {
+    if (jacobians) pinocchio::computeJointJacobians(model, cdata, to_full(q));
+    else pinocchio::forwardKinematics(model, cdata, to_full(q));
     std::fill(placed_spheres.begin(), placed_spheres.end(), false);
     placed_geometries = false;
     for (std::size_t g = 0; g < bound_joint.size(); ++g)
@@ -507,10 +519,356 @@ struct Space::Impl {
           pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
           placed_geometries = true;
         }
+        ++tally->mesh_tests;
         if (pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(t.pair))) return true;
       }
     }
     return false;
+  }
+
+  // ---------------------------------------------------------------- Certified sweeps
+  // A span: consecutive dense states x_i..x_j of a path (the polyline through them is the path itself). Its test
+  // inflates every sphere by a bound on how far it can move from the middle state x_m over the span; if nothing
+  // inflated touches, every configuration of the span is collision-free, so every state of it is.
+  //
+  // The bound (a "holder" is a ball B = {c + u : |u| <= r} fixed in joint j's frame: a sphere's centre, r = 0, or
+  // a ball holding a whole geometry). For a point x of B and an active coordinate k moving joint l (an ancestor
+  // of j or j itself), |dx/dq_k| <= rate_k at every configuration:
+  //  - revolute l (continuous too): dx/dq_k = a_l x (x - o_l), a_l the unit axis through l's origin o_l, so
+  //    |dx/dq_k| <= |x - o_l|. From l's frame to x the chain is l's rotation, then for each joint i after l down to
+  //    j the fixed placement P_i and i's motion X_i, then c + u; rotations keep lengths, so by the triangle
+  //    inequality |x - o_l| <= sum_i |translation(P_i X_i)| + |c| + r =: lever_l, with |translation(P_i X_i)| =
+  //    |P_i's translation| for a revolute i, that plus max |q_i| over its limits for a prismatic one, and the
+  //    constant |translation(P_i X_i(reference))| for a locked joint of any type. Configuration-independent.
+  //  - prismatic l: dx/dq_k = l's unit axis, rate 1.
+  //  - the floating base's x, y, z: rate 1; yaw, pitch, roll (R = Rz Ry Rx): dR/d(yaw) R^T = [z]x,
+  //    dR/d(pitch) R^T = [Rz y]x, dR/d(roll) R^T = [Rz Ry x]x, each an elementary rotation about a unit axis
+  //    through the base origin: rate lever_base as for a revolute joint.
+  // Along the polyline from x_m to a state s, q moves by straight pieces, so |x(s) - x(x_m)| <= integral |dx/dt|
+  // <= sum_k rate_k * TV_k(m..s), TV_k the total variation of coordinate k between the two states; with
+  // d_k = max(TV_k(i..m), TV_k(m..j)), D = sum_k rate_k d_k bounds the motion over the whole span.
+  // Two holders A, B (a pair of geometries): their distance does not change under a rigid motion of both, and
+  // every joint that supports both (the deepest common one, c, and its ancestors: "common") moves both rigidly.
+  // In c's frame only the other joints move them, so the distance changes by at most D_A' + D_B', the sums over
+  // non-common coordinates. Hence a sphere pair (i, j) stays apart over the span when
+  //   |w_i - w_j| > r_i + r_j + D_i' + D_j'   at the middle state,
+  // a sphere i and a primitive b when dist(w_i, b) > r_i + D_i' + D_b' (D_b: b's holding ball), and two convex
+  // hulls (exact pairs; each holds its geometry) when their distance exceeds the pair's security margin +
+  // HULL_MARGIN + D_A' + D_B' (coal's test with that margin: the per-state mid phase's slack). Since every
+  // sphere set and hull holds its geometry, no state of a certified span collides for coal.
+  // Tighter, per span: the rates above hold everywhere; at the span's middle state the exact speed of the ball's
+  // centre x per unit q_k is known (revolute: its distance rho_k from k's axis; the base's Euler angles: at most
+  // |x - o_base|), and in k's frame (the base's) x moves only through the deeper joints, by at most
+  // sum_{k' deeper} rate_k' d_k' over the span. So rate_k = min(lever_k, rho_k + r + sum_{k' deeper} lever_k' d_k')
+  // holds over the whole span as well.
+  // First order, tighter still where the joints' motions cancel (a constrained hand): with c_k(q) the velocity of
+  // x per unit q_k (a column of x's Jacobian) and delta(s) = q(s) - q(m),
+  //   x(s) - x(m) = J(m) delta(s) + integral (c_k(q(t)) - c_k(q(m))) dq_k(t),
+  // and |c_k(q(t)) - c_k(q(m))| <= E_k: c_k is, in k's frame, a x (x^k - o_k) (revolute; a prismatic joint's: a),
+  // which changes by at most B_k = sum_{k' deeper} lever_k' d_k', turned by the rotation of k's frame, at most
+  // Theta_k = sum of d over the rotating coordinates at k and above (rotations compose: angles add; the base's
+  // yaw, pitch, roll axes turn with yaw and pitch too: twice that for them); so E_k = lever_k Theta_k + B_k
+  // (prismatic: Theta_k; the base's x, y, z: 0). |J(m) delta(s)| is convex along each straight piece of the
+  // polyline: its largest value is at a vertex (the span's ends, the path's waypoints inside it). A point of the
+  // ball, x + u, moves by at most r sum_{rotating k} d_k more. Hence
+  //   D <= max_vertices |J(m) delta| + sum_k d_k E_k + r sum_{rotating k} d_k,
+  // over the non-common coordinates for a pair (in the common joint's frame, whose own rotation cancels in |.|);
+  // the smaller of this and the rate bound is used.
+  struct Reach {
+    int coord;     // active coordinate
+    double rate;   // lever (or 1): bound on |dx/dq_coord| anywhere
+    int depth;     // position of the joint it moves in the holder's joint's supports (0: the universe)
+    int joint;     // that joint
+    int kind;      // 0 revolute, 1 prismatic, 2 the base's yaw, pitch, roll, 3 the base's x, y, z
+  };
+  struct Holder {
+    std::vector<Reach> reach;
+    int joint = 0, depth = 1;                       // its joint and the joint's supports
+    Eigen::Vector3d center = Eigen::Vector3d::Zero();  // in the joint's frame
+    double radius = 0.0;
+    long offset = 0;   // of its tail in the tails buffer (depth + 1 entries)
+  };
+  std::vector<double> scratch, turn, second;          // fill_tail's sums by depth
+  std::vector<Eigen::Vector3d> moved;                 // fill_tail's first-order displacements (vertex, depth)
+  const double* span_states = nullptr;                // the path's dense states (rows of n)
+  long span_mid = 0;                                  // the current span's middle state
+  std::vector<long> span_vertices;                    // its states where the polyline may turn (ends, waypoints)
+  bool sweeps_on = true;
+  std::string sweep_unavailable;  // why no sweep ("" when available)
+  std::vector<Holder> sphere_holder, geometry_holder;
+  std::vector<double> sphere_tails, geometry_tails;  // per holder: tail[p + 1] = sum of rate * d over depth > p
+  std::vector<char> sphere_tails_ready;              // per geometry: its spheres' tails are those of this span
+  std::vector<int> pair_common;                      // per collision pair: depth of the deepest common joint
+  std::vector<double> step;                          // per joint: |translation(P_i X_i)| bound (see above)
+  std::vector<int> coord_of;                         // per joint: its active coordinate (-1 locked; base: 0)
+  std::vector<char> prismatic;                       // per joint
+  Vec span_d;                                        // (n,) d_k of the current span
+  std::vector<double> variation;                     // (M, n) cumulative |dq| along the path being checked
+
+  bool sweeps_ready() const { return sweeps_on && sweep_unavailable.empty() && !sphere_joint.empty(); }
+
+  // The per-joint data of the bound; sweep_unavailable says why not when an active joint is not revolute,
+  // prismatic or the floating base.
+  void prepare_sweeps() {
+    const int nj = static_cast<int>(model.njoints);
+    sweep_unavailable.clear();
+    coord_of.assign(nj, -1);
+    prismatic.assign(nj, false);
+    step.assign(nj, 0.0);
+    pinocchio::Data ref(model);
+    pinocchio::forwardKinematics(model, ref, full);  // locked joints at the reference
+    const int offset = floating ? 6 : 0;
+    for (int j = 1; j < nj; ++j) {
+      const auto& joint = model.joints[j];
+      const std::string kind = joint.shortname();
+      int coord = -1;
+      if (floating && joint.idx_q() == base_q) coord = 0;
+      for (std::size_t i = 0; i < active.size(); ++i)
+        if (active[i].idx_q == joint.idx_q()) coord = offset + static_cast<int>(i);
+      coord_of[j] = coord;
+      const bool revolute = kind.rfind("JointModelR", 0) == 0;
+      const bool slider = kind.rfind("JointModelP", 0) == 0 && kind != "JointModelPlanar";
+      const bool base = kind == "JointModelFreeFlyer";
+      if (coord < 0) {
+        step[j] = ref.liMi[j].translation().norm();
+      } else if (revolute || slider) {
+        prismatic[j] = slider;
+        step[j] = model.jointPlacements[j].translation().norm() +
+                  (slider ? std::max(std::abs(lower[coord]), std::abs(upper[coord])) : 0.0);
+        if (slider && !std::isfinite(step[j])) sweep_unavailable = "prismatic joint " + model.names[j] + " has infinite limits";
+      } else if (base && coord == 0 && floating) {
+        step[j] = model.jointPlacements[j].translation().norm();
+      } else {
+        sweep_unavailable = "joint " + model.names[j] + " (" + kind + ") is neither revolute, prismatic nor the base";
+      }
+    }
+  }
+
+  // The rates of a ball (centre c, radius r) fixed in joint j's frame.
+  Holder holder_of(int j, const Eigen::Vector3d& c, double r) const {
+    Holder h;
+    h.joint = j;
+    h.center = c;
+    h.radius = r;
+    const auto& chain = model.supports[j];
+    h.depth = static_cast<int>(chain.size());
+    for (int p = h.depth - 1; p >= 1; --p) {
+      const int l = static_cast<int>(chain[p]);
+      double lever = c.norm() + r;
+      for (int p2 = p + 1; p2 < h.depth; ++p2) lever += step[chain[p2]];
+      const int k = coord_of[l];
+      if (k < 0) continue;
+      if (floating && k == 0 && model.joints[l].idx_q() == base_q) {
+        for (int b = 0; b < 3; ++b) h.reach.push_back({b, 1.0, p, l, 3});
+        for (int b = 3; b < 6; ++b) h.reach.push_back({b, lever, p, l, 2});
+      } else {
+        h.reach.push_back({k, prismatic[l] ? 1.0 : lever, p, l, prismatic[l] ? 1 : 0});
+      }
+    }
+    return h;
+  }
+
+  // Holders of every sphere (centre) and of every geometry (a ball holding it: its spheres' bounding ball, else
+  // the ball around its local AABB), and the deepest common joint of every collision pair.
+  void build_holders() {
+    prepare_sweeps();
+    const std::size_t S = sphere_joint.size(), ng = geom.ngeoms;
+    sphere_holder.clear();
+    long offset = 0;
+    for (std::size_t s = 0; s < S; ++s) {
+      sphere_holder.push_back(holder_of(sphere_joint[s], Eigen::Vector3d(sphere_center.row(s).transpose()), 0.0));
+      sphere_holder.back().offset = offset;
+      offset += sphere_holder.back().depth + 1;
+    }
+    sphere_tails.assign(offset, 0.0);
+    geometry_holder.clear();
+    offset = 0;
+    for (std::size_t g = 0; g < ng; ++g) {
+      const pinocchio::GeometryObject& o = geom.geometryObjects[g];
+      const int j = static_cast<int>(o.parentJoint);
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      double r = 0.0;
+      if (!spheres_of[g].empty()) {
+        c = bound_center[g];
+        r = bound_radius[g];
+      } else if (j > 0 && o.geometry) {
+        o.geometry->computeLocalAABB();
+        c = o.placement.act(Eigen::Vector3d(o.geometry->aabb_center));
+        r = o.geometry->aabb_radius;
+        if (!std::isfinite(c.norm() + r)) sweep_unavailable = "geometry " + o.name + " is unbounded";
+      }
+      geometry_holder.push_back(holder_of(j, c, r));
+      geometry_holder.back().offset = offset;
+      offset += geometry_holder.back().depth + 1;
+    }
+    geometry_tails.assign(offset, 0.0);
+    sphere_tails_ready.assign(ng, false);
+    pair_common.clear();
+    for (const auto& pair : geom.collisionPairs) {
+      const auto& a = model.supports[geom.geometryObjects[pair.first].parentJoint];
+      const auto& b = model.supports[geom.geometryObjects[pair.second].parentJoint];
+      int p = 0;
+      while (p + 1 < static_cast<int>(std::min(a.size(), b.size())) && a[p + 1] == b[p + 1]) ++p;
+      pair_common.push_back(p);
+    }
+  }
+
+  // tail[p + 1] = sum over the holder's rates deeper than p of rate * d (p = -1 .. depth - 1), the rates
+  // tightened at the span's middle state (collision kinematics and joint Jacobians there: span_free).
+  void fill_tail(const Holder& h, double* tail) {
+    const int D = h.depth, V = static_cast<int>(span_vertices.size()), nn = n();
+    scratch.assign(D + 1, 0.0);  // scratch[p]: sum of lever * d over depth >= p
+    turn.assign(D + 1, 0.0);     // turn[p]: sum of d over the rotating coordinates at depth <= p
+    for (const Reach& e : h.reach) {
+      scratch[e.depth] += e.rate * span_d[e.coord];
+      if (e.kind == 0 || e.kind == 2) turn[e.depth] += span_d[e.coord];
+    }
+    for (int p = D - 1; p >= 0; --p) scratch[p] += scratch[p + 1];
+    for (int p = 1; p <= D; ++p) turn[p] += turn[p - 1];
+    std::fill(tail, tail + D + 1, 0.0);
+    second.assign(D + 1, 0.0);
+    moved.assign(static_cast<std::size_t>(V) * (D + 1), Eigen::Vector3d::Zero());
+    const Eigen::Vector3d x = cdata.oMi[h.joint].act(h.center);
+    const double* qm = span_states + span_mid * nn;
+    for (const Reach& e : h.reach) {
+      const double d = span_d[e.coord];
+      if (d == 0) continue;  // the coordinate does not move in the span
+      Eigen::Vector3d column;  // c_k at the middle state
+      double speed = 1.0, change = 0.0;  // |c_k| there; E_k
+      if (e.kind == 0 || e.kind == 1) {
+        const auto J = cdata.J.col(model.joints[e.joint].idx_v());  // world: v (at the origin), w
+        column = J.head<3>() + J.tail<3>().cross(x);
+        speed = column.norm();
+        change = e.kind == 0 ? e.rate * turn[e.depth] + scratch[e.depth + 1] : turn[e.depth];
+      } else if (e.kind == 3) {
+        column = Eigen::Vector3d::Unit(e.coord);
+      } else {
+        const Eigen::Vector3d axis = e.coord == 3 ? Eigen::Vector3d::UnitZ().eval()
+                                     : e.coord == 4 ? zyx(qm[3], 0.0, 0.0).col(1)
+                                                    : zyx(qm[3], qm[4], 0.0).col(0);
+        const Eigen::Vector3d arm = x - cdata.oMi[e.joint].translation();
+        column = axis.cross(arm);
+        speed = arm.norm();
+        change = 2.0 * e.rate * turn[e.depth] + scratch[e.depth + 1];
+      }
+      const double rate = e.kind == 0 || e.kind == 2 ? std::min(e.rate, speed + h.radius + scratch[e.depth + 1]) : e.rate;
+      tail[e.depth] += rate * d;  // contribution at index depth
+      second[e.depth] += d * (change + (e.kind == 0 || e.kind == 2 ? h.radius : 0.0));
+      for (int v = 0; v < V; ++v)
+        moved[static_cast<std::size_t>(v) * (D + 1) + e.depth] += column * (span_states[span_vertices[v] * nn + e.coord] - qm[e.coord]);
+    }
+    // suffix sums: index p holds the sums over depth >= p
+    for (int p = D - 1; p >= 0; --p) {
+      tail[p] += tail[p + 1];
+      second[p] += second[p + 1];
+      for (int v = 0; v < V; ++v) moved[static_cast<std::size_t>(v) * (D + 1) + p] += moved[static_cast<std::size_t>(v) * (D + 1) + p + 1];
+    }
+    for (int p = 0; p <= D; ++p) {
+      double first = 0.0;
+      for (int v = 0; v < V; ++v) first = std::max(first, moved[static_cast<std::size_t>(v) * (D + 1) + p].norm());
+      tail[p] = std::min(tail[p], first + second[p]);
+    }
+  }
+  double sphere_tail(int s, int common) const { return sphere_tails[sphere_holder[s].offset + common + 1]; }
+  double geometry_tail(int g, int common) const { return geometry_tails[geometry_holder[g].offset + common + 1]; }
+  void fill_sphere_tails(int g) {
+    if (sphere_tails_ready[g]) return;
+    sphere_tails_ready[g] = true;
+    for (int s : spheres_of[g]) fill_tail(sphere_holder[s], sphere_tails.data() + sphere_holder[s].offset);
+  }
+
+  // The span [i, j] of states (rows of n; var: their cumulative variation; turns: per state, whether the polyline
+  // may turn there, null: at every state), middle state m: d (n,), its vertices.
+  void span_variation(const double* states, const double* var, const char* turns, long i, long m, long j) {
+    const int nn = n();
+    for (int k = 0; k < nn; ++k)
+      span_d[k] = std::max(var[m * nn + k] - var[i * nn + k], var[j * nn + k] - var[m * nn + k]);
+    span_states = states;
+    span_mid = m;
+    span_vertices.assign(1, i);
+    for (long t = i + 1; t < j; ++t)
+      if (!turns || turns[t]) span_vertices.push_back(t);
+    if (j > i) span_vertices.push_back(j);
+    std::fill(sphere_tails_ready.begin(), sphere_tails_ready.end(), false);
+  }
+
+  // Whether every configuration of the span whose middle state is q is collision-free (span_variation done):
+  // per pair, as the per-state check, the spheres first, then the convex outer shapes; the pair that stopped the
+  // latest span first (neighbouring spans fail on the same pair).
+  bool span_free(const double* q) {
+    place_kinematics(q, true);
+    for (const Holder& h : geometry_holder) fill_tail(h, geometry_tails.data() + h.offset);
+    if (last_stop >= 0 && !pair_apart(tests[last_stop])) return false;
+    for (std::size_t k = 0; k < tests.size(); ++k)
+      if (static_cast<long>(k) != last_stop && !pair_apart(tests[k])) {
+        last_stop = static_cast<long>(k);
+        return false;
+      }
+    return true;
+  }
+  long last_stop = -1;  // the test that stopped the latest uncertified span
+
+  bool pair_apart(const PairTest& t) {
+    const int common = pair_common[t.pair];
+    if (t.kind == 0 && spheres_apart(t, common)) return true;
+    if (t.kind == 1 && sphere_primitive_apart(t, common)) return true;
+    // a pair left to coal whose geometries both have spheres (tight: spheres touching while the meshes are apart in
+    // many states): its grown spheres first all the same, a certificate as good, cheaper than the hulls' GJK
+    if (t.kind == 2 && !spheres_of[t.a].empty() && !spheres_of[t.b].empty() && spheres_apart(t, common)) return true;
+    return outers_apart(t.pair, common);
+  }
+
+  // The spheres of a pair (kind 0), each grown by its motion bound, do not touch.
+  bool spheres_apart(const PairTest& t, int common) {
+    const double grow = geometry_tail(t.a, common) + geometry_tail(t.b, common);
+    if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b] + grow) return true;
+    place(t.a);
+    place(t.b);
+    fill_sphere_tails(t.a);
+    fill_sphere_tails(t.b);
+    for (int i : spheres_of[t.a])
+      for (int j : spheres_of[t.b])
+        if ((world[i] - world[j]).norm() <=
+            sphere_radius[i] + sphere_radius[j] + sphere_tail(i, common) + sphere_tail(j, common))
+          return false;
+    return true;
+  }
+
+  // The spheres of t.a, grown, do not touch the primitive t.b grown by its own motion bound (kind 1).
+  bool sphere_primitive_apart(const PairTest& t, int common) {
+    const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
+    const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+    const double grow_b = geometry_tail(t.b, common);
+    if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)
+      return true;
+    place(t.a);
+    fill_sphere_tails(t.a);
+    for (int i : spheres_of[t.a])
+      if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i] + sphere_tail(i, common) + grow_b)
+        return false;
+    return true;
+  }
+
+  // The convex outer shapes of collision pair k are farther apart than its security margin + HULL_MARGIN + both
+  // geometries' motion bounds (false when a geometry has none).
+  bool outers_apart(std::size_t k, int common) {
+    const pinocchio::CollisionPair& pair = geom.collisionPairs[k];
+    const coal::CollisionGeometry* oa = outer_of(static_cast<int>(pair.first));
+    const coal::CollisionGeometry* ob = outer_of(static_cast<int>(pair.second));
+    if (!oa || !ob) return false;
+    if (!placed_geometries) {
+      pinocchio::updateGeometryPlacements(model, cdata, geom, *geom_data);
+      placed_geometries = true;
+    }
+    ++tally->hull_tests;
+    coal::CollisionRequest request = outer_requests[k];
+    request.security_margin +=
+        geometry_tail(static_cast<int>(pair.first), common) + geometry_tail(static_cast<int>(pair.second), common);
+    coal::CollisionResult result;
+    coal::collide(oa, pinocchio::toCoalTransform3s(geom_data->oMg[pair.first]), ob,
+                  pinocchio::toCoalTransform3s(geom_data->oMg[pair.second]), request, result);
+    outer_requests[k].updateGuess(result);
+    return !result.isCollision();
   }
 };
 
@@ -518,6 +876,7 @@ Space::Space(const std::string& model_file, const std::string& geometry_file, co
              const std::vector<Active>& active, const Vec& lower, const Vec& upper, double margin, double resolution)
     : impl_(new Impl) {
   Impl& p = *impl_;
+  p.tally = &counts;
   try {
     p.model.loadFromBinary(model_file);
     p.geom.loadFromBinary(geometry_file);
@@ -726,6 +1085,9 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
     p.outer_of(static_cast<int>(pair.first));
     p.outer_of(static_cast<int>(pair.second));
   }
+  p.span_d = Vec::Zero(p.n());
+  p.last_stop = -1;
+  p.build_holders();
 }
 
 void Space::clear_spheres() {
@@ -734,6 +1096,52 @@ void Space::clear_spheres() {
 }
 
 bool Space::has_spheres() const { return !impl_->sphere_joint.empty(); }
+
+void Space::set_sweeps(bool on) { impl_->sweeps_on = on; }
+bool Space::sweeps() const { return impl_->sweeps_ready(); }
+std::string Space::sweep_report() const {
+  return impl_->sphere_joint.empty() ? "no sphere models" : impl_->sweep_unavailable;
+}
+
+// Cumulative |dq| along states (k, n): var (k, n), row 0 zeros.
+static void cumulative_variation(const double* states, long k, int nn, std::vector<double>& var) {
+  var.assign(k * nn, 0.0);
+  for (long i = 1; i < k; ++i)
+    for (int c = 0; c < nn; ++c)
+      var[i * nn + c] = var[(i - 1) * nn + c] + std::abs(states[i * nn + c] - states[(i - 1) * nn + c]);
+}
+
+bool Space::sweep_free(const double* states, int k) {
+  Impl& p = *impl_;
+  if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
+  if (k < 1) throw std::invalid_argument("a span needs at least one state");
+  cumulative_variation(states, k, n(), p.variation);
+  p.span_variation(states, p.variation.data(), nullptr, 0, k / 2, k - 1);
+  ++counts.sweep_checks;
+  return p.span_free(states + static_cast<long>(k / 2) * n());
+}
+
+std::vector<double> Space::sweep_bounds(const double* states, int k) {
+  Impl& p = *impl_;
+  if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
+  if (k < 1) throw std::invalid_argument("a span needs at least one state");
+  cumulative_variation(states, k, n(), p.variation);
+  p.span_variation(states, p.variation.data(), nullptr, 0, k / 2, k - 1);
+  p.place_kinematics(states + static_cast<long>(k / 2) * n(), true);
+  std::vector<double> out;
+  for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.fill_sphere_tails(g);
+  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s) out.push_back(p.sphere_tail(static_cast<int>(s), -1));
+  return out;
+}
+
+RowMat Space::sphere_centers(const double* q) {
+  Impl& p = *impl_;
+  p.place_kinematics(q);
+  RowMat out(p.sphere_joint.size(), 3);
+  for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.place(g);
+  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s) out.row(s) = p.world[s].transpose();
+  return out;
+}
 
 std::string Space::sphere_report() const {
   int counts[3] = {0, 0, 0};
@@ -864,6 +1272,7 @@ PathCheck Space::validate_path(const double* path, int K) {
   const long M = static_cast<long>(segment.size()), chunk = 4096;  // chunk: rows per callback (batched())
   const int pp = impl_->p;
   std::vector<double> v, G;
+  if (impl_->sweeps_ready()) return sweep_path(states, segment);
   for (long i = 0; i < M; ++i) {
     const double* q = states.data() + i * nn;
     if (batched() && i % chunk == 0) {
@@ -890,6 +1299,89 @@ PathCheck Space::validate_path(const double* path, int K) {
       out.reason = c;
       out.segment = segment[i];
       out.states = i + 1;
+      return out;
+    }
+  }
+  out.states = M;
+  return out;
+}
+
+// validate_path with certified sweeps: chunk by chunk, the states' limits, constraint and inequalities in order up
+// to the first failure f (as state by state), then collisions before f by spans: a span [i, i + L) is tested at
+// once (Impl::span_free); certified, the next span starts after it with L doubled; not certified, L is halved
+// (the left part first); a single state gets the exact per-state check. States are thus cleared strictly left to
+// right, so the first colliding state found is the path's first, and the report equals the state-by-state one
+// (worst: over the states up to the first invalid one, as there).
+PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector<int>& segment) {
+  Impl& p = *impl_;
+  const int nn = n(), pp = p.p;
+  const long M = static_cast<long>(segment.size());
+  const long chunk = batched() ? 4096 : 128;  // states whose constraint tests run before their collision tests
+  PathCheck out{true, 0.0, -1, VALID, -1, 0};
+  cumulative_variation(states.data(), M, nn, p.variation);
+  std::vector<char> turns(M, false);  // the path's waypoints
+  for (long i = 0; i < M; ++i) turns[i] = i == 0 || i == M - 1 || segment[i] != segment[i - 1];
+  std::vector<double> v(chunk), G;
+  std::vector<char> limits_ok(chunk);
+  long L = 8;  // span length, carried from span to span
+  bool grow = true;  // whether a certified span doubles L: not right after a refusal (the length that passed is kept)
+  for (long s0 = 0; s0 < M; s0 += chunk) {
+    const long s1 = std::min(M, s0 + chunk);
+    const double* q0 = states.data() + s0 * nn;
+    if (batched()) {
+      violations(q0, s1 - s0, v.data());
+      G.resize((s1 - s0) * pp);
+      if (pp) inequalities(q0, s1 - s0, G.data());
+    }
+    long f = s1;  // first state failing a test other than collision
+    int reason = VALID;
+    for (long i = s0; i < s1 && f == s1; ++i) {
+      const double* q = states.data() + i * nn;
+      limits_ok[i - s0] = within_limits(q);
+      if (!limits_ok[i - s0]) reason = LIMITS;
+      else {
+        if (!batched()) v[i - s0] = violation(q);
+        if (v[i - s0] > 1.0) reason = CONSTRAINT;
+        else if (!inequalities_hold(q)) reason = INEQUALITY;
+        else if (pp && *std::max_element(G.begin() + (i - s0) * pp, G.begin() + (i - s0 + 1) * pp) > 0)
+          reason = INEQUALITY;
+      }
+      if (reason != VALID) f = i;
+    }
+    long hit = -1;  // first colliding state before f
+    for (long i = s0; i < f;) {
+      L = std::min(L, f - i);
+      if (L <= 1) {
+        if (!collision_free(states.data() + i * nn)) {
+          hit = i;
+          break;
+        }
+        ++i;
+        L = 2;
+        grow = false;
+        continue;
+      }
+      const long j = i + L - 1, m = (i + j) / 2;
+      p.span_variation(states.data(), p.variation.data(), turns.data(), i, m, j);
+      ++counts.sweep_checks;
+      if (p.span_free(states.data() + m * nn)) {
+        i += L;
+        if (grow) L *= 2;
+        grow = true;
+      } else {
+        L /= 2;
+        grow = false;
+      }
+    }
+    const long last = hit >= 0 ? hit : f < s1 ? f : s1 - 1;  // the last state checked
+    for (long i = s0; i <= last; ++i)
+      if (limits_ok[i - s0]) out.worst = std::max(out.worst, v[i - s0]);
+    if (hit >= 0 || f < s1) {
+      out.valid = false;
+      out.first_invalid = last;
+      out.reason = hit >= 0 ? static_cast<int>(COLLISION) : reason;
+      out.segment = segment[last];
+      out.states = last + 1;
       return out;
     }
   }

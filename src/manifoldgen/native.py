@@ -491,6 +491,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         after = core.counts()
         book(space, before, after)
         planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
+        planner.sweep_checks = after.get("sweep_checks", 0) - before.get("sweep_checks", 0)
         planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
     planner.rejected += out["rejected_paths"]

@@ -154,6 +154,7 @@ class NativeOmplPlanner:
         self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
         self.spheres = spheres and space.checker is not None
         self.dense_sphere_checks = 0  # sphere tests of the current solve's dense checks (spheres only)
+        self.dense_sweep_checks = 0  # certified sweep tests of those dense checks (spheres only)
         self.dense_cpu_s = 0.0  # CPU of the current solve's dense checks (this process)
         if self.spheres and self.core is not None:
             native.set_spheres(self.core, native.space_spheres(space))
@@ -165,7 +166,8 @@ class NativeOmplPlanner:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
         n = self.space.n
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
-        self.dense_sphere_checks, self.dense_cpu_s = 0, 0.0
+        self.dense_sphere_checks = self.dense_sweep_checks = 0
+        self.dense_cpu_s = 0.0
         with tempfile.TemporaryDirectory(prefix="ompl-native-") as folder:
             problem = export_problem(self.space, start, goal, Path(folder), ompl_space=self.ompl_space,
                                      resolution=self.resolution, seed=self.seed, time_limit=time_limit,
@@ -189,6 +191,7 @@ class NativeOmplPlanner:
                   "native_ops": {k: done[k] for k in ("fk", "jacobians", "inequalities", "collision_checks",
                                                       "samples")},
                   "sphere_checks": done["sphere_checks"] + self.dense_sphere_checks,
+                  "sweep_checks": self.dense_sweep_checks,
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "dense_cpu_s": self.dense_cpu_s,
                   "valid": solved, "worst_violation": worst, "reason": reason}
@@ -224,6 +227,7 @@ class NativeOmplPlanner:
         after = self.core.counts()
         native.book(self.space, before, after)
         self.dense_sphere_checks += after["sphere_checks"] - before["sphere_checks"]
+        self.dense_sweep_checks += after["sweep_checks"] - before["sweep_checks"]
         return bool(valid), float(worst), "" if valid else f"segment {segment}: {REASONS[reason - 1]}"
 
     @staticmethod

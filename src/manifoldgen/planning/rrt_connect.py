@@ -64,7 +64,7 @@ class RRTConnect(Planner):
                 self.sphere_fallback = spheres["fallback"]
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
-        self.sphere_checks = self.cut_edges = 0
+        self.sphere_checks = self.sweep_checks = self.cut_edges = 0
         self.callbacks = {"calls": 0, "rows": 0}  # the core's calls into a Python constraint
 
     def _direct(self, start, goal):
@@ -94,6 +94,7 @@ class RRTConnect(Planner):
         if self.core is None:
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
         return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
+                "sweep_checks": self.sweep_checks,
                 "cut_edges": self.cut_edges,
                 **({"callbacks": dict(self.callbacks)} if self.callbacks["calls"] else {}),
                 **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
