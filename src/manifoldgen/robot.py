@@ -222,7 +222,7 @@ class _Tree:
     columns: np.ndarray  # (S,)
     revolute: np.ndarray  # (S,) bool
     levels: tuple[tuple[slice, slice | np.ndarray], ...]  # per depth from 1: (its steps, their parents)
-    points: np.ndarray  # (S, 4) sum of mass * homogeneous body point in the step's frame (last entry: mass)
+    weights: np.ndarray  # (S * 16, 3): flattened world transforms (B, S * 16) @ weights = sum of mass * world point
     fixed: np.ndarray  # (3,) sum of mass * world point of the bodies no step moves
 
 
@@ -533,7 +533,7 @@ class Robot:
     @cached_property
     def _tree(self) -> _Tree:
         """The steps that move a body and their mass-weighted body points (see :class:`_Tree`)."""
-        points, fixed = {}, np.zeros(3)
+        points, fixed = {}, np.zeros(3)  # step -> sum of mass * homogeneous body point in its frame
         for jid, mass, lever in self._bodies:
             step, pending = self._anchors[jid]
             point = mass * (pending @ lever)
@@ -558,10 +558,13 @@ class Robot:
             contiguous = np.array_equal(parents, np.arange(parents[0], parents[0] + len(parents)))
             levels.append((slice(steps[0], steps[-1] + 1),
                            slice(parents[0], parents[0] + len(parents)) if contiguous else parents))
+        weights = np.zeros((len(order), 4, 4, 3))  # [step, i, j, i] = the step's weighted point's j-th entry
+        for i in range(3):
+            weights[:, i, :, i] = np.array([points.get(s, np.zeros(4)) for s in order]).reshape(len(order), 4)
         return _Tree(np.stack([self._steps[s].constants for s in order], axis=1) if order else np.zeros((3, 0, 4, 4)),
                      np.array([self._steps[s].column for s in order], int),
                      np.array([self._steps[s].revolute for s in order], bool), tuple(levels),
-                     np.array([points.get(s, np.zeros(4)) for s in order]).reshape(len(order), 4), fixed)
+                     weights.reshape(-1, 3), fixed)
 
     @property
     def mass(self) -> float:
@@ -739,7 +742,7 @@ def _tree_com(tree: _Tree, q: np.ndarray) -> np.ndarray:
     M = _step_transforms(tree.constants, tree.columns, tree.revolute, not tree.revolute.all(), q)
     for steps, parents in tree.levels:  # depth 0 is in the world already
         M[:, steps] = M[:, parents] @ M[:, steps]
-    return np.einsum("bsij,sj->bi", M[:, :, :3], tree.points) + tree.fixed
+    return M.reshape(len(q), -1) @ tree.weights + tree.fixed
 
 
 def _motion(m: _Motion, angle: np.ndarray) -> np.ndarray:
