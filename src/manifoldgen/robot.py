@@ -3,8 +3,11 @@
 Pinocchio loads the URDF (+ SRDF) and owns the full model; this module builds, once,
 a vectorised description of the tree restricted to a planning group (active joints),
 so that forward kinematics, frame Jacobians and the centre of mass run on whole
-batches ``q (B, n)`` in numpy. A floating base is six Euclidean coordinates
-``(x, y, z, yaw, pitch, roll)`` (ZYX Euler), mapped to pinocchio's free flyer.
+batches ``q (B, n)`` in numpy. Frame poses and the centre of mass take a faster form of
+it: each elementary motion is an affine function of the sine and cosine of its angle
+(constants precomputed), and a frame's pose is the pairwise product of its chain's steps.
+A floating base is six Euclidean coordinates ``(x, y, z, yaw, pitch, roll)`` (ZYX Euler),
+mapped to pinocchio's free flyer.
 """
 
 from __future__ import annotations
@@ -187,6 +190,42 @@ class _Link:
     motions: tuple[_Motion, ...]  # empty for a locked joint (its motion is in placement)
 
 
+@dataclass(frozen=True)
+class _Step:
+    """One elementary motion of the tree as an affine function of two numbers: its transform from the
+    previous step's frame (after that step's motion) is ``A + u B + v C``, with ``u = sin, v = 1 - cos`` of
+    the angle for a revolute motion and ``u`` = the displacement (``C = 0``) for a prismatic one."""
+
+    parent: int  # index of the previous step (-1: the world)
+    constants: np.ndarray  # (3, 4, 4) A (the fixed transforms before the motion), A @ E, A @ E @ E
+    column: int  # column in q
+    revolute: bool
+
+
+@dataclass(frozen=True)
+class _Chain:
+    """The steps from the world to one frame, padded with identities to a power of two (>= 1) steps:
+    the frame's transform is the ordered product of the steps', the frame's own placement folded into
+    the last one."""
+
+    constants: np.ndarray  # (3, P, 4, 4) A, B, C of each step
+    columns: np.ndarray  # (P,) column in q (0 for padding)
+    revolute: np.ndarray  # (P,) bool
+    prismatic: bool  # any prismatic step (else u = sin of every angle)
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """The steps that move the robot's bodies, by depth, and each step's mass-weighted body points."""
+
+    constants: np.ndarray  # (3, S, 4, 4)
+    columns: np.ndarray  # (S,)
+    revolute: np.ndarray  # (S,) bool
+    levels: tuple[tuple[slice, slice | np.ndarray], ...]  # per depth from 1: (its steps, their parents)
+    weights: np.ndarray  # (S * 16, 3): flattened world transforms (B, S * 16) @ weights = sum of mass * world point
+    fixed: np.ndarray  # (3,) sum of mass * world point of the bodies no step moves
+
+
 class Robot:
     """A robot model with a planning group of active joints; the others are locked.
 
@@ -212,6 +251,8 @@ class Robot:
         self.base_bounds = np.asarray(base_bounds, float)  # (2, 3) or (2, 6) floating-base low, high
         self.lower, self.upper = self._limits(base_bounds)
         self._links = self._build_links()
+        self._steps, self._anchors = self._build_steps()
+        self._chains: dict[str, _Chain | np.ndarray] = {}  # frame name -> its chain, or its constant (4, 4) pose
         self._jacobians: tuple[bytes, dict] = (b"", {})  # the latest q's frame Jacobians (see frame_jacobian)
 
     # ------------------------------------------------------------------ construction
@@ -297,6 +338,26 @@ class Robot:
                 placement, motions = data.liMi[jid].homogeneous, ()
             links[jid] = _Link(model.parents[jid], placement, motions)
         return links
+
+    def _build_steps(self) -> tuple[list[_Step], dict[int, tuple[int, np.ndarray]]]:
+        """The elementary motions of ``_links`` in tree order, and per joint id its anchor: (index of the last
+        step above it or -1, the fixed (4, 4) transform from that step's frame to the joint's)."""
+        steps, anchors = [], {0: (-1, np.eye(4))}
+        for jid, link in self._links.items():  # pinocchio numbers a parent before its children
+            step, pending = anchors[link.parent]
+            pending = pending @ link.placement
+            for m in link.motions:
+                E = np.zeros((4, 4))
+                if m.kind == "R":
+                    x, y, z = m.axis
+                    E[:3, :3] = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+                else:
+                    E[:3, 3] = m.axis
+                E2 = E @ E if m.kind == "R" else np.zeros((4, 4))
+                steps.append(_Step(step, np.stack([pending, pending @ E, pending @ E2]), m.index, m.kind == "R"))
+                step, pending = len(steps) - 1, np.eye(4)
+            anchors[jid] = (step, pending)
+        return steps, anchors
 
     # ------------------------------------------------------------------ basic facts
     @property
@@ -394,9 +455,36 @@ class Robot:
         if is_tensor(q):
             return self.torch_kinematics.frame_pose(q, frame)
         q = as_batch(q, self.n)
-        f = self.model.frames[self.frame_id(frame)]
-        T = self._world(q, [f.parentJoint])[f.parentJoint] @ f.placement.homogeneous
+        chain = self._chains.get(frame) if isinstance(frame, str) else None
+        if chain is None:
+            chain = self._chains[frame] = self._chain(self.frame_id(frame))
+        if isinstance(chain, np.ndarray):  # nothing in the planning group moves the frame
+            T = np.broadcast_to(chain, (len(q), 4, 4)).copy()
+        else:
+            T = _in_chunks(_chain_product, chain, q, chain.columns.size)
         return T[:, :3, 3], T[:, :3, :3]
+
+    def _chain(self, fid: int) -> _Chain | np.ndarray:
+        """The steps from the world to frame ``fid`` (see :class:`_Chain`), or its constant pose (4, 4)."""
+        f = self.model.frames[fid]
+        step, tail = self._anchors[f.parentJoint]
+        tail = tail @ f.placement.homogeneous
+        path = []
+        while step >= 0:
+            path.append(step)
+            step = self._steps[step].parent
+        if not path:
+            return tail
+        path = path[::-1]
+        size = 1 << (len(path) - 1).bit_length()
+        constants = np.zeros((3, size, 4, 4))
+        constants[0] = np.eye(4)
+        for i, index in enumerate(path):
+            constants[:, i] = self._steps[index].constants
+        constants[:, len(path) - 1] = constants[:, len(path) - 1] @ tail
+        columns = np.array([self._steps[i].column for i in path] + [0] * (size - len(path)))
+        revolute = np.array([self._steps[i].revolute for i in path] + [True] * (size - len(path)))
+        return _Chain(constants, columns, revolute, not revolute.all())
 
     def frame_jacobian(self, q: np.ndarray, frame: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position (B, 3), rotation (B, 3, 3) and world-aligned Jacobian (B, 6, n) of ``frame``.
@@ -442,6 +530,42 @@ class Robot:
         return [(j, self.model.inertias[j].mass, np.append(self.model.inertias[j].lever, 1.0))
                 for j in range(1, self.model.njoints) if self.model.inertias[j].mass > 0]
 
+    @cached_property
+    def _tree(self) -> _Tree:
+        """The steps that move a body and their mass-weighted body points (see :class:`_Tree`)."""
+        points, fixed = {}, np.zeros(3)  # step -> sum of mass * homogeneous body point in its frame
+        for jid, mass, lever in self._bodies:
+            step, pending = self._anchors[jid]
+            point = mass * (pending @ lever)
+            if step < 0:
+                fixed += point[:3]
+            else:
+                points[step] = points.get(step, 0.0) + point
+        needed, depth = set(), {}
+        for step in points:
+            while step >= 0 and step not in needed:
+                needed.add(step)
+                step = self._steps[step].parent
+        for step in sorted(needed):  # a parent step before its children
+            parent = self._steps[step].parent
+            depth[step] = 0 if parent < 0 else depth[parent] + 1
+        order = sorted(needed, key=lambda step: (depth[step], step))  # each depth's steps side by side
+        index = {step: i for i, step in enumerate(order)}
+        levels = []
+        for d in range(1, max(depth.values(), default=0) + 1):
+            steps = [index[step] for step in order if depth[step] == d]
+            parents = np.array([index[self._steps[order[i]].parent] for i in steps])
+            contiguous = np.array_equal(parents, np.arange(parents[0], parents[0] + len(parents)))
+            levels.append((slice(steps[0], steps[-1] + 1),
+                           slice(parents[0], parents[0] + len(parents)) if contiguous else parents))
+        weights = np.zeros((len(order), 4, 4, 3))  # [step, i, j, i] = the step's weighted point's j-th entry
+        for i in range(3):
+            weights[:, i, :, i] = np.array([points.get(s, np.zeros(4)) for s in order]).reshape(len(order), 4)
+        return _Tree(np.stack([self._steps[s].constants for s in order], axis=1) if order else np.zeros((3, 0, 4, 4)),
+                     np.array([self._steps[s].column for s in order], int),
+                     np.array([self._steps[s].revolute for s in order], bool), tuple(levels),
+                     weights.reshape(-1, 3), fixed)
+
     @property
     def mass(self) -> float:
         return float(sum(m for _, m, _ in self._bodies))
@@ -452,6 +576,8 @@ class Robot:
         if is_tensor(q):
             return self.torch_kinematics.com(q)
         q = as_batch(q, self.n)
+        if not jacobian:
+            return _in_chunks(_tree_com, self._tree, q, self._tree.columns.size) / self.mass
         world, met = self._world(q, [j for j, _, _ in self._bodies], axes=True)
         com, J = np.zeros((len(q), 3)), np.zeros((len(q), 3, self.n))
         for jid, mass, lever in self._bodies:
@@ -579,6 +705,44 @@ def _zyx_quaternion(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.
     cr, sr = np.cos(roll / 2), np.sin(roll / 2)
     return np.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
                      cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], axis=1)
+
+
+_CELLS = 2048  # rows x steps per evaluation of step products: larger batches go in chunks that stay in cache
+
+
+def _in_chunks(evaluate, steps, q: np.ndarray, count: int) -> np.ndarray:
+    """``evaluate(steps, q)`` on chunks of ``q`` (B, n) of at most ``_CELLS / count`` rows, concatenated."""
+    rows = max(1, _CELLS // max(count, 1))
+    if len(q) <= rows:
+        return evaluate(steps, q)
+    return np.concatenate([evaluate(steps, q[i:i + rows]) for i in range(0, len(q), rows)])
+
+
+def _step_transforms(constants: np.ndarray, columns: np.ndarray, revolute: np.ndarray, prismatic: bool,
+                     q: np.ndarray) -> np.ndarray:
+    """(B, S, 4, 4) transforms ``A + u B + v C`` of the steps with ``constants`` (3, S, 4, 4) at ``q`` (B, n)."""
+    angle = q[:, columns]
+    u = np.where(revolute, np.sin(angle), angle) if prismatic else np.sin(angle)
+    M = u[..., None, None] * constants[1]
+    M += constants[0]
+    M += (1 - np.cos(angle))[..., None, None] * constants[2]
+    return M
+
+
+def _chain_product(chain: _Chain, q: np.ndarray) -> np.ndarray:
+    """(B, 4, 4) world transform of a chain's frame: the steps' product, pairwise (log2 P batched products)."""
+    M = _step_transforms(chain.constants, chain.columns, chain.revolute, chain.prismatic, q)
+    while M.shape[1] > 1:
+        M = M[:, 0::2] @ M[:, 1::2]
+    return M[:, 0]
+
+
+def _tree_com(tree: _Tree, q: np.ndarray) -> np.ndarray:
+    """(B, 3) mass-weighted sum of the body points of ``tree`` at ``q`` (B, n), depth by depth."""
+    M = _step_transforms(tree.constants, tree.columns, tree.revolute, not tree.revolute.all(), q)
+    for steps, parents in tree.levels:  # depth 0 is in the world already
+        M[:, steps] = M[:, parents] @ M[:, steps]
+    return M.reshape(len(q), -1) @ tree.weights + tree.fixed
 
 
 def _motion(m: _Motion, angle: np.ndarray) -> np.ndarray:
