@@ -28,6 +28,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr double INF = std::numeric_limits<double>::infinity();
+using States = Eigen::Map<const RowMat>;  // a motion's states (k, n), viewed in place
 
 double dist2(const double* a, const double* b, int n) {
   double s = 0.0;
@@ -342,16 +343,21 @@ struct Local {
   }
   int n() const { return space.n(); }
 
-  RowMat segment_states(const double* a, const double* b) const {
+  // The states every resolution along a -> b, a excluded, b included (k, n): a view of a buffer reused by the
+  // next call (no allocation per motion once it has grown).
+  States segment_states(const double* a, const double* b) {
     Eigen::Map<const Vec> va(a, n()), vb(b, n());
     const int k = std::max(1, static_cast<int>(std::ceil((vb - va).norm() / resolution)));
-    RowMat out(k, n());
+    segment_buffer.resize(static_cast<std::size_t>(k) * n());
+    Eigen::Map<RowMat> out(segment_buffer.data(), k, n());
     for (int i = 1; i <= k; ++i) out.row(i - 1) = (va + (vb - va) * (static_cast<double>(i) / k)).transpose();
-    return out;
+    return States(segment_buffer.data(), k, n());
   }
+  std::vector<double> segment_buffer;
+  std::vector<std::pair<int, int>> span_buffer;
   // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
   // (the last valid row, a node).
-  int prefix(const RowMat& s, bool last_is_node) {
+  int prefix(const States& s, bool last_is_node) {
     const int k = static_cast<int>(s.rows());
     const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
     if (!lazy || count == 0 || space.collision_free(s.row(count - 1).data())) return count;
@@ -362,10 +368,11 @@ struct Local {
   // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
   // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
   // is found blocked after fewer checks than scanning from its start).
-  bool all_valid(const RowMat& s, int k, bool last_is_node) {
+  bool all_valid(const States& s, int k, bool last_is_node) {
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
     if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || collided();
-    std::vector<std::pair<int, int>> spans{{0, k - 1}};
+    std::vector<std::pair<int, int>>& spans = span_buffer;  // reused: no allocation per motion
+    spans.assign(1, {0, k - 1});
     for (std::size_t next = 0; next < spans.size(); ++next) {
       const auto [lo, hi] = spans[next];
       if (lo > hi) continue;
@@ -382,7 +389,7 @@ struct Local {
     return false;
   }
   bool whole(const double* a, const double* b) {
-    const RowMat s = segment_states(a, b);
+    const States s = segment_states(a, b);
     return all_valid(s, static_cast<int>(s.rows()), true);
   }
   RowMat none() const { return RowMat(0, n()); }
@@ -392,7 +399,7 @@ struct Local {
     const double distance = (vb - va).norm();
     const bool reach = distance <= max_distance;
     const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
-    const RowMat s = segment_states(a, end.data());
+    const States s = segment_states(a, end.data());
     const int count = prefix(s, reach);
     if (count == s.rows()) return {end.transpose(), reach};
     if (partial && count) return {s.row(count - 1), false};
@@ -465,7 +472,7 @@ struct Local {
       ++space.counts.stopped[c];
       return false;
     }
-    const RowMat s = segment_states(start, end);
+    const States s = segment_states(start, end);
     return all_valid(s, static_cast<int>(s.rows()) - 1, false);  // the end is checked
   }
 };
@@ -540,7 +547,7 @@ struct Search {
       Tree& tree = trees[k];
       if (tree.verified[child]) continue;
       const int from = tree.parent[child];
-      const RowMat states = local.segment_states(tree.row(from), tree.row(child));
+      const States states = local.segment_states(tree.row(from), tree.row(child));
       const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
       int free = 0;
       while (free < k_states && space.collision_free(states.row(free).data())) ++free;
