@@ -188,6 +188,8 @@ struct PlannerSettings {
   // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
   // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
   int refine = -1;
+  // draw_block > 0: the draw callback is asked for draw_block rows at a time, served to the search in order
+  int draw_block = 0;
 };
 
 struct PlanOutput {
@@ -202,5 +204,15 @@ using Draw = std::function<RowMat(int)>;
 
 PlanOutput rrt_connect(Space& space, const Vec& start, const Vec& goal, const Draw& draw,
                        const PlannerSettings& settings, double time_limit);
+
+// The search's nearest-neighbour index (a k-d tree, planner.cpp) over points (N, n), rows inserted in order,
+// asked for each query row (Q, n): the nearest row with alive[i] (ties: the lowest index; -1: none alive) and
+// whether an alive row lies within radius. For tests against brute force.
+struct NearestAnswers {
+  std::vector<int> nearest;
+  std::vector<char> within;
+};
+NearestAnswers nearest_queries(const RowMat& points, const std::vector<char>& alive, const RowMat& queries,
+                               double radius);
 
 }  // namespace mgcore

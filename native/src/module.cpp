@@ -319,15 +319,30 @@ NB_MODULE(manifoldgen_core, m) {
           "path"_a, "Dense check of path (K, n): (valid, worst, first invalid state, reason, segment, states).");
 
   m.def(
+      "nearest_queries",
+      [](const In2& points, const std::vector<bool>& alive, const In2& queries, double radius) {
+        const auto rows = [](const In2& a) {
+          return RowMat(Eigen::Map<const RowMat>(a.data(), static_cast<long>(a.shape(0)), static_cast<long>(a.shape(1))));
+        };
+        const mgcore::NearestAnswers a =
+            mgcore::nearest_queries(rows(points), std::vector<char>(alive.begin(), alive.end()), rows(queries), radius);
+        return nb::make_tuple(a.nearest, std::vector<bool>(a.within.begin(), a.within.end()));
+      },
+      "points"_a, "alive"_a, "queries"_a, "radius"_a,
+      "The search's nearest-neighbour index over points (N, n) (rows inserted in order), for each query (Q, n): "
+      "(nearest alive row, lowest index on ties, -1 if none; whether an alive row is within radius). For tests.");
+
+  m.def(
       "rrt_connect",
       [](Space& space, const In1& start, const In1& goal, nb::callable draw, double time_limit, double range,
          double resolution, double step, bool partial, int pool, int pool_batch, int candidates,
-         const std::string& local, int target_batch, bool lazy, int refine) {
+         const std::string& local, int target_batch, bool lazy, int refine, int draw_block) {
         mgcore::PlannerSettings st;
         st.range = range, st.resolution = resolution, st.step = step, st.partial = partial, st.pool = pool;
         st.pool_batch = pool_batch, st.candidates = candidates, st.local = local, st.target_batch = target_batch;
         st.lazy = lazy;
         st.refine = refine;
+        st.draw_block = draw_block;
         const int nn = space.n();
         mgcore::Draw fetch = [&](int count) {
           nb::object rows = draw(count);
@@ -351,10 +366,10 @@ NB_MODULE(manifoldgen_core, m) {
         return d;
       },
       "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "range"_a, "resolution"_a, "step"_a, "partial"_a,
-      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1,
+      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "draw_block"_a = 0,
       "RRT-Connect from start to goal (n,) in space; draw(count) -> (count, n) valid samples. A dict: path (K, n) "
       "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes. "
       "lazy: tree edges are checked for collision only on candidate paths. refine >= 0: draw gives raw candidates, "
       "each refined (refine projection iterations) and checked when the search first uses it (counts: refined, "
-      "accepted).");
+      "accepted). draw_block > 0: draw is called with draw_block rows at a time, served in order.");
 }

@@ -14,12 +14,13 @@
 #include "core.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cstdlib>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
-#include <unordered_map>
 
 namespace mgcore {
 
@@ -27,6 +28,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr double INF = std::numeric_limits<double>::infinity();
+using States = Eigen::Map<const RowMat>;  // a motion's states (k, n), viewed in place
 
 double dist2(const double* a, const double* b, int n) {
   double s = 0.0;
@@ -34,14 +36,163 @@ double dist2(const double* a, const double* b, int n) {
   return s;
 }
 
-// Configurations with parent links; each edge is a straight, checked segment.
+// Whether |a - b|^2 <= r2 (stops once past it).
+bool close(const double* a, const double* b, int n, double r2) {
+  double s = 0.0;
+  for (int i = 0; i < n; ++i) {
+    s += (a[i] - b[i]) * (a[i] - b[i]);
+    if (s > r2) return false;
+  }
+  return true;
+}
+
+// Cubic cells of side `side` over the first K = min(n, 3) coordinates, spatially hashed into a fixed
+// number of buckets of T (Teschner et al. 2003): the bucket of a cell holds everything in that cell
+// (and, rarely, in cells hashed alike; callers compare true distances, so those cost a comparison and
+// never change a result). No bounds, no rehashing; a lookup is an array index.
+template <class T>
+struct Cells {
+  static constexpr int BITS = 11;
+  using Cell = std::array<long, 3>;
+  int K;
+  double side;
+  std::vector<std::vector<T>> buckets;
+
+  Cells(int n, double side_) : K(std::min(n, 3)), side(side_), buckets(std::size_t{1} << BITS) {}
+  Cell cell(const double* x) const {
+    Cell c{0, 0, 0};
+    for (int d = 0; d < K; ++d) c[d] = static_cast<long>(std::floor(x[d] / side));
+    return c;
+  }
+  std::vector<T>& at(const Cell& c) {
+    const unsigned long h = static_cast<unsigned long>(c[0]) * 73856093UL ^ static_cast<unsigned long>(c[1]) * 19349663UL ^
+                            static_cast<unsigned long>(c[2]) * 83492791UL;
+    return buckets[h & ((std::size_t{1} << BITS) - 1)];
+  }
+  const std::vector<T>& at(const Cell& c) const { return const_cast<Cells*>(this)->at(c); }
+  // visit(cell) for the cells at Chebyshev distance s from c (s = 1: the 3^K - 1 around it), each once.
+  template <class F>
+  void shell(const Cell& c, long s, F&& visit) const {
+    const long span[3] = {s, K > 1 ? s : 0, K > 2 ? s : 0};
+    for (long i = -span[0]; i <= span[0]; ++i)
+      for (long j = -span[1]; j <= span[1]; ++j)
+        for (long k = -span[2]; k <= span[2]; ++k)
+          if (std::max({std::labs(i), std::labs(j), std::labs(k)}) == s) visit(Cell{c[0] + i, c[1] + j, c[2] + k});
+  }
+  // visit(cell) for c, then the cells around it (3^K cells: everything within `side` of a point of c).
+  template <class F>
+  void around(const Cell& c, F&& visit) const {
+    visit(c);
+    shell(c, 1, visit);
+  }
+};
+
+// An incremental k-d tree over rows of a row-major array (n columns) that its owner grows: leaves hold up
+// to LEAF row ids; a full leaf splits at the middle of its widest coordinate. Exact nearest-neighbour
+// queries: the near side first, the far side while the splitting plane is no farther than the best so far
+// (ties go to the lowest id, as a linear scan's).
+struct KdTree {
+  static constexpr int LEAF = 12;
+  struct Node {
+    int dim = -1;  // -1: a leaf
+    double split = 0.0;
+    int child[2] = {-1, -1};
+    std::vector<int> ids;
+  };
+  int n;
+  std::vector<Node> nodes{1};
+
+  explicit KdTree(int n_) : n(n_) {}
+  void insert(int id, const double* data) {
+    const double* x = data + static_cast<long>(id) * n;
+    int at = 0;
+    while (nodes[at].dim >= 0) at = nodes[at].child[x[nodes[at].dim] >= nodes[at].split];
+    nodes[at].ids.push_back(id);
+    if (static_cast<int>(nodes[at].ids.size()) > LEAF) divide(at, data);
+  }
+  void divide(int at, const double* data) {
+    int dim = -1;
+    double widest = 0.0, middle = 0.0;
+    for (int d = 0; d < n; ++d) {
+      double lo = INF, hi = -INF;
+      for (int id : nodes[at].ids) lo = std::min(lo, data[static_cast<long>(id) * n + d]), hi = std::max(hi, data[static_cast<long>(id) * n + d]);
+      if (hi - lo > widest) widest = hi - lo, dim = d, middle = lo + (hi - lo) / 2;
+    }
+    if (dim < 0) return;  // identical rows stay in one leaf
+    const int first = static_cast<int>(nodes.size());
+    nodes.resize(nodes.size() + 2);
+    Node& node = nodes[at];
+    node.dim = dim;
+    node.split = middle;
+    node.child[0] = first;
+    node.child[1] = first + 1;
+    for (int id : node.ids) nodes[first + (data[static_cast<long>(id) * n + dim] >= middle)].ids.push_back(id);
+    std::vector<int>().swap(node.ids);
+  }
+  // The nearest row to x (n,) among those with keep[id], as (id, squared distance); (-1, inf) when none.
+  std::pair<int, double> nearest(const double* x, const double* data, const std::vector<char>& keep) const {
+    std::pair<int, double> best{-1, INF};
+    offset.assign(n, 0.0);
+    search(0, 0.0, x, data, keep, best);
+    return best;
+  }
+
+  // Whether a row with keep[id] lies within squared distance r2 of x (n,): stops at the first found.
+  bool any_within(const double* x, double r2, const double* data, const std::vector<char>& keep) const {
+    offset.assign(n, 0.0);
+    return within(0, 0.0, x, r2, data, keep);
+  }
+
+ private:
+  mutable std::vector<double> offset;  // per coordinate: x's distance to the box of the node searched
+  bool within(int at, double bound, const double* x, double r2, const double* data, const std::vector<char>& keep) const {
+    const Node& node = nodes[at];
+    if (node.dim < 0) {
+      for (int id : node.ids)
+        if (keep[id] && close(data + static_cast<long>(id) * n, x, n, r2)) return true;
+      return false;
+    }
+    const double gap = x[node.dim] - node.split, before = offset[node.dim];
+    if (within(node.child[gap >= 0], bound, x, r2, data, keep)) return true;
+    const double far = bound - before * before + gap * gap;
+    if (far > r2) return false;
+    offset[node.dim] = gap;
+    const bool found = within(node.child[gap < 0], far, x, r2, data, keep);
+    offset[node.dim] = before;
+    return found;
+  }
+  // bound: the squared distance from x to the node's box (Arya and Mount's incremental distance).
+  void search(int at, double bound, const double* x, const double* data, const std::vector<char>& keep,
+              std::pair<int, double>& best) const {
+    const Node& node = nodes[at];
+    if (node.dim < 0) {
+      for (int id : node.ids) {
+        if (!keep[id]) continue;
+        const double d = dist2(data + static_cast<long>(id) * n, x, n);
+        if (d < best.second || (d == best.second && id < best.first)) best = {id, d};
+      }
+      return;
+    }
+    const double gap = x[node.dim] - node.split, before = offset[node.dim];
+    search(node.child[gap >= 0], bound, x, data, keep, best);
+    const double far = bound - before * before + gap * gap;
+    if (far > best.second) return;
+    offset[node.dim] = gap;
+    search(node.child[gap < 0], far, x, data, keep, best);
+    offset[node.dim] = before;
+  }
+};
+
+// Configurations with parent links; each edge is a straight, checked segment. Nearest-neighbour queries
+// are exact (a k-d tree over the nodes, dead ones skipped).
 struct Tree {
   int n;
   std::vector<double> q;
   std::vector<int> parent;
   std::vector<char> alive, verified;  // verified: the edge into the node was checked for collision
+  KdTree index;
 
-  Tree(const Vec& root) : n(static_cast<int>(root.size())) { add(-1, root.data(), true); }
+  explicit Tree(const Vec& root) : n(static_cast<int>(root.size())), index(n) { add(-1, root.data(), true); }
   int size() const { return static_cast<int>(parent.size()); }
   const double* row(int i) const { return q.data() + static_cast<long>(i) * n; }
   int add(int from, const double* x, bool checked) {
@@ -49,21 +200,16 @@ struct Tree {
     parent.push_back(from);
     alive.push_back(1);
     verified.push_back(checked);
+    index.insert(size() - 1, q.data());
     return size() - 1;
   }
   int add_chain(int from, const RowMat& waypoints, bool checked) {  // returns the last node
     for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data(), checked);
     return from;
   }
-  int nearest(const double* x) const {
-    int best = 0;
-    double bd = INF;
-    for (int i = 0; i < size(); ++i) {
-      if (!alive[i]) continue;
-      const double d = dist2(row(i), x, n);
-      if (d < bd) bd = d, best = i;
-    }
-    return best;
+  int nearest(const double* x) const {  // the first node when none is alive, as a linear scan
+    const int best = index.nearest(x, q.data(), alive).first;
+    return best < 0 ? 0 : best;
   }
   std::vector<int> branch(int i) const {  // root .. i
     std::vector<int> out{i};
@@ -81,65 +227,36 @@ struct Tree {
 // Samples drawn but not yet in a tree: the stepping stones (planning/base.py SamplePool). The Python pool
 // keeps each sample's distance to each tree; only whether it is within radius matters, so here each tree
 // has a list of the free samples within radius of one of its nodes (what the stepping-stone queries scan)
-// and the others in square buckets of side radius over the first two coordinates, as are its nodes: a new
-// node is compared with the samples of its bucket and the eight around it only, a new sample with the
-// nodes of those buckets (each comparison stops once past the radius). The same decisions as the Python pool, at
-// a fraction of the distance work.
+// and the others in cubic cells of side radius over the first three coordinates (Cells), as are its
+// synced nodes: a new node is compared with the samples of its cell and the 26 around it only, a new
+// sample with the nodes of those cells (each comparison stops once past the radius). The same decisions
+// as the Python pool, at a fraction of the distance work.
 struct Pool {
   using Entry = std::pair<int, long>;  // (slot, the head count when the slot was filled)
-  using Buckets = std::unordered_map<long, std::vector<int>>;
   int n, capacity = 16384;
   double radius, radius2;
   RowMat q;
   std::vector<char> free, raw;  // raw: a candidate not yet made a sample (lazy samples)
   std::vector<long> born;       // per slot: the head count when filled (entries of an older sample are stale)
   std::vector<Entry> inside[2];
-  std::unordered_map<long, std::vector<Entry>> outside[2];  // by bucket
-  Buckets nodes[2];                                          // each tree's synced nodes, by bucket
+  std::vector<Cells<Entry>> outside;  // per tree
+  std::vector<KdTree> nodes;         // each tree's synced nodes
   int synced[2] = {0, 0};
   long head = 0;
 
   Pool(int n_, double radius_, const std::vector<Tree>& trees)
-      : n(n_), radius(radius_), radius2(radius_ * radius_), q(16384, n_) {
+      : n(n_), radius(radius_), radius2(radius_ * radius_), q(16384, n_),
+        outside(2, Cells<Entry>(n_, radius_)), nodes(2, KdTree(n_)) {
     free.assign(capacity, 0);
     raw.assign(capacity, 0);
     born.assign(capacity, -1);
     for (int k = 0; k < 2; ++k) sync_nodes(k, trees[k]);
   }
-  static constexpr long SIDE = 1L << 20;  // bucket keys: first coordinate's cell x SIDE + second's
-  long bucket(const double* x) const {
-    const long a = static_cast<long>(std::floor(x[0] / radius));
-    return n > 1 ? a * SIDE + static_cast<long>(std::floor(x[1] / radius)) : a * SIDE;
-  }
-  // The bucket of x and those around it.
-  std::vector<long> around(const double* x) const {
-    const long b = bucket(x);
-    std::vector<long> out;
-    for (long i = -1; i <= 1; ++i)
-      for (long j = (n > 1 ? -1 : 0); j <= (n > 1 ? 1 : 0); ++j) out.push_back(b + i * SIDE + j);
-    return out;
-  }
-  static bool close(const double* a, const double* b, int n, double r2) {
-    double s = 0.0;
-    for (int i = 0; i < n; ++i) {
-      s += (a[i] - b[i]) * (a[i] - b[i]);
-      if (s > r2) return false;
-    }
-    return true;
-  }
   void sync_nodes(int k, const Tree& t) {
-    for (int i = synced[k]; i < t.size(); ++i) nodes[k][bucket(t.row(i))].push_back(i);
+    for (int i = synced[k]; i < t.size(); ++i) nodes[k].insert(i, t.q.data());
     synced[k] = t.size();
   }
-  bool near_node(const double* x, int k, const Tree& t) const {
-    for (long c : around(x)) {
-      const auto it = nodes[k].find(c);
-      if (it == nodes[k].end()) continue;
-      for (int i : it->second)
-        if (t.alive[i] && close(x, t.row(i), n, radius2)) return true;
-    }
-    return false;
-  }
+  bool near_node(const double* x, int k, const Tree& t) const { return nodes[k].any_within(x, radius2, t.q.data(), t.alive); }
   bool current(const Entry& e) const { return free[e.first] && born[e.first] == e.second; }
   void add(const double* x, const std::vector<Tree>& trees, bool unrefined = false) {
     const int slot = static_cast<int>(head % capacity);
@@ -149,7 +266,7 @@ struct Pool {
     born[slot] = head;
     for (int k = 0; k < 2; ++k) {
       if (near_node(x, k, trees[k])) inside[k].emplace_back(slot, head);
-      else outside[k][bucket(x)].emplace_back(slot, head);
+      else outside[k].at(outside[k].cell(x)).emplace_back(slot, head);
     }
     ++head;
   }
@@ -165,18 +282,17 @@ struct Pool {
     in.resize(kept);
     for (int i = synced[k]; i < t.size(); ++i) {
       if (!t.alive[i]) continue;
-      for (long c : around(t.row(i))) {
-        const auto it = outside[k].find(c);
-        if (it == outside[k].end()) continue;
-        std::vector<Entry>& out = it->second;
-        kept = 0;
+      const double* node = t.row(i);
+      outside[k].around(outside[k].cell(node), [&](const Cells<Entry>::Cell& c) {
+        std::vector<Entry>& out = outside[k].at(c);
+        std::size_t left = 0;
         for (const Entry& e : out) {
           if (!current(e)) continue;
-          if (close(q.row(e.first).data(), t.row(i), n, radius2)) in.push_back(e);
-          else out[kept++] = e;
+          if (close(q.row(e.first).data(), node, n, radius2)) in.push_back(e);
+          else out[left++] = e;
         }
-        out.resize(kept);
-      }
+        out.resize(left);
+      });
     }
     sync_nodes(k, t);
   }
@@ -184,20 +300,27 @@ struct Pool {
     refresh(k, t);
     return !inside[k].empty();
   }
+  // The slots of the `count` samples inside tree k nearest to target (nearest first, ties by slot), closer than `than`.
   std::vector<int> closest(int k, const Tree& t, const double* target, int count, double than) {
     refresh(k, t);
-    std::vector<std::pair<double, int>> near;
+    std::vector<std::pair<double, int>>& near = nearest_buffer;  // sorted, at most count
+    near.clear();
     const double limit = than * than;
     for (const Entry& e : inside[k]) {
       const double d = dist2(q.row(e.first).data(), target, n);
-      if (d < limit) near.emplace_back(d, e.first);
+      if (d >= limit) continue;
+      const std::pair<double, int> item{d, e.first};
+      if (static_cast<int>(near.size()) == count) {
+        if (count == 0 || !(item < near.back())) continue;
+        near.pop_back();
+      }
+      near.insert(std::upper_bound(near.begin(), near.end(), item), item);
     }
-    const std::size_t keep = std::min<std::size_t>(near.size(), count);
-    std::partial_sort(near.begin(), near.begin() + keep, near.end());
     std::vector<int> out;
-    for (std::size_t i = 0; i < keep; ++i) out.push_back(near[i].second);
+    for (const auto& item : near) out.push_back(item.second);
     return out;
   }
+  std::vector<std::pair<double, int>> nearest_buffer;
 };
 
 // The local planners of planning/local.py: interpolate, project, auto, direct.
@@ -220,16 +343,21 @@ struct Local {
   }
   int n() const { return space.n(); }
 
-  RowMat segment_states(const double* a, const double* b) const {
+  // The states every resolution along a -> b, a excluded, b included (k, n): a view of a buffer reused by the
+  // next call (no allocation per motion once it has grown).
+  States segment_states(const double* a, const double* b) {
     Eigen::Map<const Vec> va(a, n()), vb(b, n());
     const int k = std::max(1, static_cast<int>(std::ceil((vb - va).norm() / resolution)));
-    RowMat out(k, n());
+    segment_buffer.resize(static_cast<std::size_t>(k) * n());
+    Eigen::Map<RowMat> out(segment_buffer.data(), k, n());
     for (int i = 1; i <= k; ++i) out.row(i - 1) = (va + (vb - va) * (static_cast<double>(i) / k)).transpose();
-    return out;
+    return States(segment_buffer.data(), k, n());
   }
+  std::vector<double> segment_buffer;
+  std::vector<std::pair<int, int>> span_buffer;
   // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
   // (the last valid row, a node).
-  int prefix(const RowMat& s, bool last_is_node) {
+  int prefix(const States& s, bool last_is_node) {
     const int k = static_cast<int>(s.rows());
     const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
     if (!lazy || count == 0 || space.collision_free(s.row(count - 1).data())) return count;
@@ -240,10 +368,11 @@ struct Local {
   // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
   // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
   // is found blocked after fewer checks than scanning from its start).
-  bool all_valid(const RowMat& s, int k, bool last_is_node) {
+  bool all_valid(const States& s, int k, bool last_is_node) {
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
     if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || collided();
-    std::vector<std::pair<int, int>> spans{{0, k - 1}};
+    std::vector<std::pair<int, int>>& spans = span_buffer;  // reused: no allocation per motion
+    spans.assign(1, {0, k - 1});
     for (std::size_t next = 0; next < spans.size(); ++next) {
       const auto [lo, hi] = spans[next];
       if (lo > hi) continue;
@@ -260,7 +389,7 @@ struct Local {
     return false;
   }
   bool whole(const double* a, const double* b) {
-    const RowMat s = segment_states(a, b);
+    const States s = segment_states(a, b);
     return all_valid(s, static_cast<int>(s.rows()), true);
   }
   RowMat none() const { return RowMat(0, n()); }
@@ -270,7 +399,7 @@ struct Local {
     const double distance = (vb - va).norm();
     const bool reach = distance <= max_distance;
     const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
-    const RowMat s = segment_states(a, end.data());
+    const States s = segment_states(a, end.data());
     const int count = prefix(s, reach);
     if (count == s.rows()) return {end.transpose(), reach};
     if (partial && count) return {s.row(count - 1), false};
@@ -343,7 +472,7 @@ struct Local {
       ++space.counts.stopped[c];
       return false;
     }
-    const RowMat s = segment_states(start, end);
+    const States s = segment_states(start, end);
     return all_valid(s, static_cast<int>(s.rows()) - 1, false);  // the end is checked
   }
 };
@@ -366,11 +495,27 @@ struct Search {
 
   bool time_left() const { return Clock::now() < deadline; }
 
-  RowMat draw_many(int count) {
+  RowMat block;  // rows fetched from the callback (settings.draw_block at a time) and not yet served
+  int block_next = 0;
+
+  RowMat fetch(int count) {
     RowMat rows = draw(count);
     if (rows.rows() != count || rows.cols() != space.n())
       throw std::runtime_error("the sampler callback returned an array of the wrong shape");
+    return rows;
+  }
+  // The sampler's next `count` rows, in its order: served from blocks of draw_block rows when set (one
+  // call into Python per block; the same rows in the same order as one call per request).
+  RowMat draw_many(int count) {
     out.samples += count;
+    if (s.draw_block <= 0) return fetch(count);
+    RowMat rows(count, space.n());
+    for (int filled = 0; filled < count;) {
+      if (block_next == block.rows()) block = fetch(s.draw_block), block_next = 0;
+      const int take = std::min(count - filled, static_cast<int>(block.rows()) - block_next);
+      rows.middleRows(filled, take) = block.middleRows(block_next, take);
+      filled += take, block_next += take;
+    }
     return rows;
   }
   // A raw candidate made a sample in place (lazy samples): the sampler's refinement (refine iterations of
@@ -402,7 +547,7 @@ struct Search {
       Tree& tree = trees[k];
       if (tree.verified[child]) continue;
       const int from = tree.parent[child];
-      const RowMat states = local.segment_states(tree.row(from), tree.row(child));
+      const States states = local.segment_states(tree.row(from), tree.row(child));
       const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
       int free = 0;
       while (free < k_states && space.collision_free(states.row(free).data())) ++free;
@@ -558,6 +703,22 @@ PlanOutput rrt_connect(Space& space, const Vec& start, const Vec& goal, const Dr
   search.out.projections = search.local.projections;
   if (!search.out.path.rows()) search.out.path = RowMat(0, space.n());
   return search.out;
+}
+
+NearestAnswers nearest_queries(const RowMat& points, const std::vector<char>& alive, const RowMat& queries,
+                               double radius) {
+  const int n = static_cast<int>(points.cols());
+  if (queries.cols() != n || static_cast<long>(alive.size()) != points.rows())
+    throw std::runtime_error("points (N, n), alive (N,) and queries (Q, n) must agree");
+  KdTree index(n);
+  for (int i = 0; i < points.rows(); ++i) index.insert(i, points.data());
+  NearestAnswers out;
+  for (int r = 0; r < queries.rows(); ++r) {
+    const double* x = queries.row(r).data();
+    out.nearest.push_back(index.nearest(x, points.data(), alive).first);
+    out.within.push_back(index.any_within(x, radius * radius, points.data(), alive));
+  }
+  return out;
 }
 
 }  // namespace mgcore

@@ -61,7 +61,7 @@ from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, ma
 CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
-TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
+TARGET_BATCH = 32  # rows the search takes at a time for its targets (the pool pool_batch), served from draw blocks
 # lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
 # (the trees grow through the maze's walls), so off
 LAZY = False
@@ -452,17 +452,27 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
-def _raw_draw(planner):
-    """The search's callback for lazy samples: ``count`` -> (count, n) raw rows of the planner's sampler."""
+def _draw(sampler, raw: bool):
+    """The search's callback: ``count`` -> (count, n) rows of ``sampler``, raw (:meth:`~manifoldgen.sampling.Sampler.raw_many`,
+    lazy samples) or checked (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""
     from manifoldgen.planning.base import SamplerFailed
 
+    take = sampler.raw_many if raw else sampler.sample_many
+
     def draw(count: int) -> np.ndarray:
-        planner.samples += count
         try:
-            return planner.sampler.raw_many(count)
+            return take(count)
         except ManifoldgenError as exc:
             raise SamplerFailed(str(exc)) from exc
     return draw
+
+
+def _draw_block(sampler) -> int:
+    """Rows the search asks the sampler for at a time: its refill batch (one Python call per refill instead of
+    one per request of 32 or 256 rows; the rows and their order are the same, the sampler makes them a batch
+    at a time anyway); 0 (rows as requested) for a sampler without a batch."""
+    batch = getattr(sampler, "batch", 0)
+    return int(batch) if isinstance(batch, (int, np.integer)) and batch > 0 else 0
 
 
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
@@ -481,10 +491,10 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               _raw_draw(planner) if lazy else planner._draw_many,
-                               max(deadline - time.perf_counter(), 0.0), s.range, s.resolution, s.step, s.partial,
-                               s.pool, s.pool_batch, s.candidates, planner.local.name, TARGET_BATCH, LAZY,
-                               refine=int(sampler.lazy_refine) if lazy else -1)
+                               _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0), s.range,
+                               s.resolution, s.step, s.partial, s.pool, s.pool_batch, s.candidates, planner.local.name,
+                               TARGET_BATCH, LAZY, refine=int(sampler.lazy_refine) if lazy else -1,
+                               draw_block=_draw_block(sampler))
     finally:
         if swapped:
             sampler.space = space
@@ -494,6 +504,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         planner.sweep_checks = after.get("sweep_checks", 0) - before.get("sweep_checks", 0)
         planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
+    planner.samples += out["samples"]
     planner.rejected += out["rejected_paths"]
     planner.out_of_reach += out["out_of_reach"]
     planner.local.projections += out["projections"]
