@@ -475,7 +475,7 @@ struct Search {
 
   void start_pool() {
     if (!local.stones) return;
-    pool.reset(new Pool(space.n(), s.range, trees));
+    pool.reset(new Pool(space.n(), s.reach > 0 ? std::min(s.reach, s.range) : s.range, trees));
     for (int i = 0; i < s.pool; i += s.pool_batch) {
       if (Clock::now() > deadline) break;
       pool->add_rows(draw_many(s.pool_batch), trees, s.refine >= 0);
