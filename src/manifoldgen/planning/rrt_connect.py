@@ -30,9 +30,9 @@ class RRTConnectSettings(PlannerSettings):
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
     says which and why), the final dense check of a path stays exact; ``reach``: a pooled sample is a
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
-    straight motions to stones: in the maze fewer of them collide; measured on held-out seeds 90-189 with
-    the shipped CVAE and sphere checks, median CPU maze 83.5 ms at 0.6 (= range), 53.9 ms at 0.5, 46.3 ms
-    at 0.4; wall 12.8, 13.2, 14.0 ms)."""
+    straight motions to stones: in the maze fewer of them collide; shipped CVAE, sphere checks, held-out
+    seeds 90-189, median CPU wall / maze: 11.3 / 80.8 ms at 0.6 (= range), 12.5 / 53.1 ms at 0.5, 13.4 /
+    43.4 ms at 0.4; README "Compiled core")."""
 
     core: str = "auto"
     spheres: bool = False
