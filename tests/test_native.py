@@ -241,3 +241,34 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeyp
     result = eager.solve(wall.start, wall.goal, 20.0)
     assert result.solved and result.extras["sampler"]["refined"] >= result.samples_drawn
     assert 2 * lazy_jacobians < eager_space.counts()["jacobians"] - before["jacobians"]
+
+
+def test_reach_bounds_the_stepping_stones_in_both_searches(panda_task, wall):
+    """``reach``: a pooled sample is a stepping stone within min(reach, range) of a tree; the core takes the
+    setting (another search, its path valid state by state), the Python search's pool gets the same radius,
+    and a reach that is not a positive distance is refused in one line."""
+    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.planning.base import Tree
+    from manifoldgen.specs import make_sampler
+
+    def plan(core, reach, seed=2, solve=True):
+        space = ConstrainedSpace(panda_task.constraint, wall.condition, wall.checker(panda_task.robot))
+        planner = RRTConnect(space, make_sampler(f"cvae:{pretrained_model_dir()}", space, seed), seed=seed,
+                             settings=RRTConnectSettings(core=core, reach=reach))
+        return space, planner, planner.solve(wall.start, wall.goal, 20.0) if solve else None
+
+    space, short, a = plan("native", 0.3)
+    _, full, b = plan("native", 10.0)  # beyond range: range is the radius
+    assert short._stone_radius() == 0.3 and full._stone_radius() == full.settings.range == 0.6
+    assert a.solved and b.solved and a.extras["core"] == "native"
+    assert a.path.shape != b.path.shape or not np.allclose(a.path, b.path)  # the core searched with it
+    states = densify(a.path, space.settings.resolution)[0]
+    assert panda_task.constraint.violation(states, space.y).max() <= 1.0
+    assert panda_task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+    _, python, _ = plan("python", 0.3, solve=False)
+    python._start_pool([Tree(wall.start), Tree(wall.goal)], np.inf)
+    assert python.pool.radius == 0.3 and python.pool.free.sum() == python.settings.pool
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ManifoldgenError, match="reach must be a positive distance"):
+            RRTConnectSettings(reach=bad).check()

@@ -190,6 +190,9 @@ struct PlannerSettings {
   int refine = -1;
   // draw_block > 0: the draw callback is asked for draw_block rows at a time, served to the search in order
   int draw_block = 0;
+  // reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of one of its nodes
+  // (else range; RRTConnectSettings.reach)
+  double reach = 0.0;
 };
 
 struct PlanOutput {

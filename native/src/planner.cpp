@@ -354,7 +354,6 @@ struct Local {
     return States(segment_buffer.data(), k, n());
   }
   std::vector<double> segment_buffer;
-  std::vector<std::pair<int, int>> span_buffer;
   // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
   // (the last valid row, a node).
   int prefix(const States& s, bool last_is_node) {
@@ -367,22 +366,42 @@ struct Local {
   }
   // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
   // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
-  // is found blocked after fewer checks than scanning from its start).
-  bool all_valid(const States& s, int k, bool last_is_node) {
+  // is found blocked after fewer checks than scanning from its start); lazily, collisions only at the
+  // last state when it is a node. first_blocked: the states are visited in bisection order, each tested
+  // in the validity rule's order (limits, constraint, inequalities, collision): the same verdict after
+  // fewer residuals when a collision blocks the motion, but stop names the first failure found that way
+  // (the walks read stop to choose what to do next, so they keep the order above).
+  bool all_valid(const States& s, int k, bool last_is_node, bool first_blocked = false) {
+    if (first_blocked && !space.batched() && !lazy) {
+      const double inner = 1.0 - space.margin();
+      return bisect(k, [&](int i) { return space.code(s.row(i).data(), last_is_node && i == k - 1 ? 1.0 : inner, true, true); });
+    }
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
     if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || collided();
-    std::vector<std::pair<int, int>>& spans = span_buffer;  // reused: no allocation per motion
+    return bisect(k, [&](int i) { return space.collision_free(s.row(i).data()) ? VALID : COLLISION; });
+  }
+  // test(i) -> Reason of state i for i in [0, k), middle first, then the middles of the halves (breadth
+  // first); the first failure sets stop and ends it.
+  template <class Test>
+  bool bisect(int k, const Test& test) {
     spans.assign(1, {0, k - 1});
     for (std::size_t next = 0; next < spans.size(); ++next) {
       const auto [lo, hi] = spans[next];
       if (lo > hi) continue;
       const int mid = (lo + hi) / 2;
-      if (!space.collision_free(s.row(mid).data())) return collided();
-      spans.emplace_back(lo, mid - 1);
-      spans.emplace_back(mid + 1, hi);
+      const int c = test(mid);
+      if (c != VALID) {
+        space.stop = c;
+        ++space.counts.stopped[c];
+        return false;
+      }
+      spans.push_back({lo, mid - 1});
+      spans.push_back({mid + 1, hi});
     }
+    space.stop = VALID;
     return true;
   }
+  std::vector<std::array<int, 2>> spans;  // bisect's queue, kept between calls
   bool collided() {
     space.stop = COLLISION;
     ++space.counts.stopped[COLLISION];
@@ -464,16 +483,17 @@ struct Local {
 
   // Whether the straight segment start -> end (a pooled sample, not yet checked for collision) is valid
   // all along (planning/local.py first_valid, one candidate). The end is checked first: a colliding
-  // sample costs one check.
-  bool reaches(const double* start, const double* end) {
-    const int c = space.code(end, 1.0, true, true);
+  // sample costs one check. sample: the end passed the limits and the constraint already (a sample made
+  // just now), so only its collisions are left.
+  bool reaches(const double* start, const double* end, bool sample) {
+    const int c = sample ? (space.collision_free(end) ? VALID : COLLISION) : space.code(end, 1.0, true, true);
     if (c != VALID) {
       space.stop = c;
       ++space.counts.stopped[c];
       return false;
     }
     const States s = segment_states(start, end);
-    return all_valid(s, static_cast<int>(s.rows()) - 1, false);  // the end is checked
+    return all_valid(s, static_cast<int>(s.rows()) - 1, false, true);  // the end is checked
   }
 };
 
@@ -591,7 +611,7 @@ struct Search {
 
   void start_pool() {
     if (!local.stones) return;
-    pool.reset(new Pool(space.n(), s.range, trees));
+    pool.reset(new Pool(space.n(), s.reach > 0 ? std::min(s.reach, s.range) : s.range, trees));
     for (int i = 0; i < s.pool; i += s.pool_batch) {
       if (Clock::now() > deadline) break;
       pool->add_rows(draw_many(s.pool_batch), trees, s.refine >= 0);
@@ -614,10 +634,11 @@ struct Search {
     for (int slot : slots) {
       pool->free[slot] = 0;
       double* stone = pool->q.row(slot).data();
-      if (pool->raw[slot] && !make_sample(stone)) continue;
+      const bool made = pool->raw[slot];
+      if (made && !make_sample(stone)) continue;
       pool->raw[slot] = 0;
       const int node = tree.nearest(stone);
-      if (local.reaches(tree.row(node), stone)) return tree.add(node, stone, !local.lazy);
+      if (local.reaches(tree.row(node), stone, made)) return tree.add(node, stone, !local.lazy);
     }
     return -1;
   }

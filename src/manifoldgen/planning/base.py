@@ -191,11 +191,15 @@ class Planner(ABC):
         if not self.local.stones:
             self.pool = None
             return
-        self.pool = SamplePool(self._draw_many, trees, self.settings.range, self.settings.pool_batch)
+        self.pool = SamplePool(self._draw_many, trees, self._stone_radius(), self.settings.pool_batch)
         for _ in range(0, self.settings.pool, self.settings.pool_batch):
             if time.perf_counter() > deadline:
                 break
             self.pool.draw(self.settings.pool_batch)
+
+    def _stone_radius(self) -> float:
+        """How close to a tree's node a pooled sample must lie to be one of its stepping stones (rad)."""
+        return self.settings.range
 
     def _grow(self, k: int, target: np.ndarray, keep: bool = True) -> int | None:
         """Extend tree ``k`` toward ``target`` from its nearest node: the new node or None.

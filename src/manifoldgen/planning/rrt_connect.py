@@ -28,13 +28,20 @@ class RRTConnectSettings(PlannerSettings):
     ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an error when the core cannot
     run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
-    says which and why), the final dense check of a path stays exact."""
+    says which and why), the final dense check of a path stays exact; ``reach``: a pooled sample is a
+    stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
+    straight motions to stones: in the maze fewer of them collide; shipped CVAE, sphere checks, held-out
+    seeds 90-189, median CPU wall / maze: 11.3 / 80.8 ms at 0.6 (= range), 12.5 / 53.1 ms at 0.5, 13.4 /
+    43.4 ms at 0.4; README "Compiled core")."""
 
     core: str = "auto"
     spheres: bool = False
+    reach: float = 0.5
 
     def check(self) -> None:
         super().check()
+        if not self.reach > 0:
+            raise ManifoldgenError(f"reach must be a positive distance (rad), got {self.reach}; e.g. reach=0.5")
         if self.core not in native.CORES:
             raise ManifoldgenError(f"unknown core '{self.core}'; known: {', '.join(native.CORES)}")
 
@@ -66,6 +73,9 @@ class RRTConnect(Planner):
         self.native_nodes: list[int] = []
         self.sphere_checks = self.sweep_checks = self.cut_edges = 0
         self.callbacks = {"calls": 0, "rows": 0}  # the core's calls into a Python constraint
+
+    def _stone_radius(self) -> float:
+        return min(getattr(self.settings, "reach", self.settings.range), self.settings.range)
 
     def _direct(self, start, goal):
         return None if self.core is not None else super()._direct(start, goal)
