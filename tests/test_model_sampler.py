@@ -49,6 +49,21 @@ def test_model_sampler_refuses_another_robot(model_dir):
         ModelSampler(ConstrainedSpace(pr2.constraint, [0.8]), model)
 
 
+def test_a_model_is_refused_for_another_constraint_value_not_for_last_bits(model_dir, panda_task):
+    """Numbers of the constraint's spec computed from kinematics may differ in their last bits between versions."""
+    from manifoldgen.tasks import check_made_for
+    meta = load_model(model_dir).meta
+    spec = meta["constraint"]
+    key = next(k for k, v in spec.items() if isinstance(v, list) and v and isinstance(v[0], list))  # e.g. rotation
+    for scale, refused in ((1 + 1e-13, False), (1 + 1e-3, True)):
+        changed = {**meta, "constraint": {**spec, key: (np.array(spec[key]) * scale + 1e-14).tolist()}}
+        if refused:
+            with pytest.raises(ManifoldgenError, match=f"made for another task: constraint pose differs in {key}"):
+                check_made_for(changed, panda_task.constraint, "model")
+        else:
+            check_made_for(changed, panda_task.constraint, "model")
+
+
 def _pinocchio_valid(meta: dict, q: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Independent checker: pinocchio FK and log3 from the file's meta only."""
     urdf, _ = resolve_robot(meta["robot"])
