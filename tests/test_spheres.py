@@ -239,3 +239,29 @@ def test_the_cores_per_pair_broad_phase_keeps_every_verdict_on_talos():
     # those the spheres flagged went on to coal, the others did not
     assert after["sphere_checks"] - before["sphere_checks"] == np.sum((exact == 0) | collide) > 100
     assert after["collision_checks"] - before["collision_checks"] == np.sum(flagged == 4)
+
+
+def test_a_mesh_coal_cannot_hull_goes_to_coal_on_centauro():
+    """coal refuses the convex hull of centauro's pelvis mesh ("Too many neighbors"): the core's sphere model still
+    loads, the pelvis's pairs go from the spheres to coal, and every verdict is coal's (drinkcan's robot)."""
+    pytest.importorskip("manifoldgen_core")
+    from manifoldgen import native
+    from manifoldgen.scene import get_scene
+    from manifoldgen.space import ConstrainedSpace
+
+    task = get_task("drinkcan")
+    robot = task.robot
+    space = ConstrainedSpace(task.constraint, task.home_condition, get_scene(task, "drinkcan").checker(robot))
+    core = native.core_space(space)
+    geom = robot.collision_model
+    parts = [i for i, g in enumerate(geom.geometryObjects) if g.name.startswith(("pelvis", "torso", "arm1_"))]
+    model = spheres.fit_model(geom, parts)  # the other geometries stay exact: a partial model is allowed
+    rng = np.random.default_rng(5)
+    q = np.concatenate([robot.sample_uniform(100, rng),
+                        np.clip(task.home + rng.normal(0, 0.3, (100, robot.n)), robot.lower, robot.upper)])
+    limit = np.full(len(q), np.inf)  # collision alone decides
+    exact = core.codes(q, limit, True, True)
+    native.set_spheres(core, {"joint": model.joint, "center": model.center, "radius": model.radius,
+                              "geometry": model.geometry, "exact": []})
+    np.testing.assert_array_equal(core.codes(q, limit, True, True), exact)
+    assert 10 <= np.sum(exact == 4) < len(q)
