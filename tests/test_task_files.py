@@ -49,6 +49,20 @@ def test_a_task_file_loads_like_a_builtin(tmp_path):
     assert result.exit_code == 0 and "mine" in result.output and "0.3; 0.5" in result.output
 
 
+def test_a_task_files_planner_table_sets_defaults_that_set_overrides(tmp_path):
+    from manifoldgen.planning.query import run_query, task_settings
+
+    path = tmp_path / "mine.toml"
+    path.write_text(GOOD + "[planner]\nreach = 0.3\nrange = 1\n")
+    task = get_task(str(path))
+    assert task.planner == {"reach": 0.3, "range": 1.0} and task_from_spec(task.spec()).planner == task.planner
+    assert task_settings(task, "rrtconnect", {"range": 0.7}) == {"reach": 0.3, "range": 0.7}
+    assert task_settings(task, "rrt") == {"range": 1.0}  # RRT has no stepping stones
+    sphere = get_task("sphere")  # its [planner] reach is in metres, fitted to the unit sphere
+    result, meta = run_query(sphere, get_scene(sphere, "sphere"), "project", "rrtconnect", seed=0, time_limit=20)
+    assert result.solved and meta["planner_settings"]["reach"] == 0.2 and meta["task"]["planner"] == {"reach": 0.2}
+
+
 BAD = [
     ("colour = 3\n" + GOOD, "line 1: unknown key 'colour'"),
     (GOOD.replace('type = "pose"', 'type = "posse"'), "line 6: constraint 1: unknown constraint 'posse'; did you mean pose"),
@@ -62,6 +76,8 @@ BAD = [
     (GOOD + "colour = 1\n", "line 6: constraint 1: constraint 'pose': got an unexpected keyword argument 'colour'"),
     (GOOD.replace("name = ", "nam = "), "unknown key 'nam'"),
     ("robot = [", "not valid TOML"),
+    (GOOD + "[planner]\nreech = 0.2\n", "line 11: unknown planner setting 'reech'; known: "),
+    (GOOD + "[planner]\nreach = \"far\"\n", "line 11: planner setting reach must be a float"),
 ]
 
 

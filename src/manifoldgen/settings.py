@@ -32,11 +32,17 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
             values[key.strip()] = json.loads(text)
         except ValueError:
             values[key.strip()] = text
+    return check_settings(values, known, what)
+
+
+def check_settings(values: dict, known: dict, what: str) -> dict:
+    """``values`` checked against ``known`` (key -> default) and converted to the defaults' types."""
+    out = {}
     for key, value in values.items():
         if key not in known:
             raise ManifoldgenError(f"unknown {what} setting '{key}'; known: {', '.join(sorted(known))}")
-        values[key] = _fit(key, value, known[key], what)
-    return values
+        out[key] = _fit(key, value, known[key], what)
+    return out
 
 
 def _fit(key: str, value, default, what: str):

@@ -208,7 +208,7 @@ def build(experiment: Experiment, method: Method, seed: int):
         from manifoldgen.ompl_native import NativeOmplPlanner
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
                                     resolution=experiment.resolution, seed=seed,
-                                    spheres=bool(experiment.planner_settings.get("spheres", False)))
+                                    spheres=bool({**task.planner, **experiment.planner_settings}.get("spheres", False)))
     elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
@@ -218,7 +218,7 @@ def build(experiment: Experiment, method: Method, seed: int):
         from manifoldgen.planning import PLANNERS
         cls = PLANNERS.get(method.planner)
         known = {f.name for f in fields(cls.settings_type)}
-        values = {"resolution": experiment.resolution,
+        values = {"resolution": experiment.resolution, **{k: v for k, v in task.planner.items() if k in known},
                   **{k: v for k, v in experiment.planner_settings.items() if k in known}}
         planner = cls(space, sampler, local=method.local, seed=seed, settings=cls.settings_type(**values))
     return planner, scene, space

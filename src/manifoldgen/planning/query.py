@@ -50,7 +50,7 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     y = task.condition.check(scene.condition)[0]
     space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))
     solver = planner_type(space, make_sampler(sampler, space, seed), local=local, seed=seed,
-                          settings=planner_type.settings_type(**(settings or {})))
+                          settings=planner_type.settings_type(**task_settings(task, planner, settings)))
     result = solver.solve(scene.start, scene.goal, time_limit)
     if result.solved and smooth:
         result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
@@ -67,6 +67,12 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
             "validation": report.to_dict() if report else {"resolution": space.settings.resolution}}
     return result, meta
+
+
+def task_settings(task: Task, planner: str, settings: dict | None = None) -> dict:
+    """``planner``'s settings for ``task``: the task file's ``[planner]`` defaults it takes, then ``settings``."""
+    known = planner_settings(planner)
+    return {**{k: v for k, v in task.planner.items() if k in known}, **(settings or {})}
 
 
 def planner_settings(planner: str) -> dict:

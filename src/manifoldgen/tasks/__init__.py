@@ -32,7 +32,8 @@ TASK_KEYS = {"name": "task name", "description": "one line for `manifoldgen task
              "base_bounds": "[[x, y, z low], [x, y, z high]] of a floating base", "locked": "joint = value table",
              "home": "a configuration near the manifold (projected)", "home_condition": "the condition of home",
              "constraints": "[[constraints]] tables", "scenes": "name = scene file table",
-             "attached": "[attached] table: an object the robot holds (a tray), as a scene's held object"}
+             "attached": "[attached] table: an object the robot holds (a tray), as a scene's held object",
+             "planner": "[planner] table: our planners' default settings for this task (--set wins)"}
 HOME_SEEDS = 256  # uniform seeds projected when a task gives no home
 
 
@@ -50,6 +51,7 @@ class Task:
     scenes: dict[str, Path] = field(default_factory=dict)
     file: Path | None = None  # the task file it was read from
     attached: dict | None = None  # an object the robot holds in every scene (JSON-ready, see scene.Attached)
+    planner: dict = field(default_factory=dict)  # our planners' default settings for this task (key -> value)
 
     @property
     def condition(self) -> Condition:
@@ -64,7 +66,8 @@ class Task:
                 "base_bounds": r.base_bounds.tolist(), "locked": r.locked, "constraint": self.constraint.spec(),
                 "home": self.home.tolist(), "home_condition": self.home_condition.tolist(),
                 "task_file": None if self.file is None else str(self.file),
-                **({"attached": self.attached} if self.attached is not None else {})}
+                **({"attached": self.attached} if self.attached is not None else {}),
+                **({"planner": self.planner} if self.planner else {})}
 
     def meta(self) -> dict:
         """The ``meta`` fields every file made for this task carries (an outside checker needs only these)."""
@@ -96,6 +99,7 @@ def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
                    spec.get("description", ""), {})
     task.file = Path(spec["task_file"]) if spec.get("task_file") else None
     task.attached = spec.get("attached")
+    task.planner = dict(spec.get("planner") or {})
     return task
 
 
@@ -251,7 +255,24 @@ def load_task_file(path: str | Path) -> Task:
             task.attached = _held(task, data["attached"])
         except ManifoldgenError as exc:
             raise ManifoldgenError(f"{where('attached')}: {exc}") from None
+    if "planner" in data:
+        try:
+            task.planner = _planner_defaults(data["planner"])
+        except ManifoldgenError as exc:
+            raise ManifoldgenError(f"{where('planner')}: {exc}") from None
     return task
+
+
+def _planner_defaults(table) -> dict:
+    """The task file's ``[planner]`` table, each key a setting of one of our planners with a value of its type."""
+    from manifoldgen.planning import PLANNERS  # planning builds on tasks
+    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.settings import check_settings
+
+    if not isinstance(table, dict):
+        raise ManifoldgenError("'planner' must be a table of setting = value, e.g. reach = 0.2")
+    known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
+    return check_settings(table, known, "planner")
 
 
 def _held(task: Task, table) -> dict:
