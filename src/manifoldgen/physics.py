@@ -494,7 +494,7 @@ class _Simulation:
         """(wheels, 3): the world's -z in each wheel's parent link frame at the planned q (n,) (our Robot's kinematics,
         one pass for all wheels)."""
         frames = self._wheel_frames
-        world = self.robot._world(q[None], sorted({f.parentJoint for f in frames}))
+        world = self.robot.joint_poses(q[None], sorted({f.parentJoint for f in frames}))
         return np.array([-(world[f.parentJoint][0, :3, :3] @ f.placement.rotation)[2] for f in frames]).reshape(-1, 3)
 
     def _reset_wheels(self, q0: np.ndarray) -> None:

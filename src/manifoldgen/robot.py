@@ -431,6 +431,11 @@ class Robot:
             jid = self._links[jid].parent
         return chain[::-1]
 
+    def joint_poses(self, q: np.ndarray, joint_ids: list[int]) -> dict[int, np.ndarray]:
+        """World transforms (B, 4, 4) of the given pinocchio joints and their ancestors, by joint id (0: the world),
+        for configurations ``q (B, n)``."""
+        return self._world(q, joint_ids)
+
     def _world(self, q: np.ndarray, joint_ids: list[int], axes: bool = False):
         """World transforms (B, 4, 4) of the given joints (and their ancestors).
 

@@ -521,7 +521,7 @@ class SphereChecker:
 
     def joint_transforms(self, q: np.ndarray) -> np.ndarray:
         """(B, J, 4, 4) world transforms of the joints that carry spheres (``np.unique(joint)`` order)."""
-        world = self.robot._world(q, [int(j) for j in self._joints if j > 0])
+        world = self.robot.joint_poses(q, [int(j) for j in self._joints if j > 0])
         eye = np.broadcast_to(np.eye(4), (len(q), 4, 4))
         return np.stack([world.get(int(j), eye) for j in self._joints], 1)
 
