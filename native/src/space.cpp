@@ -180,6 +180,8 @@ struct Space::Impl {
   std::vector<Shape> shapes;  // per geometry
   // Python callbacks (Space::add_callback, set_inequalities)
   std::vector<Residuals> callbacks;
+  // The callback terms' rows of F (B, m) and, when J is not null, of J (B, m, n) at q (B, n).
+  void fill_callbacks(const double* q, long B, Counters& counts, double* F, double* J);
   Inequalities inequality;
   int p = 0;
   bool native_terms = false;  // some term is built in (forward kinematics needed): set by add
@@ -1413,19 +1415,27 @@ void Space::set_inequalities(int p, Inequalities inequalities) {
 int Space::p() const { return impl_->p; }
 bool Space::batched() const { return !impl_->callbacks.empty() || impl_->p > 0; }
 
-namespace {
-
-// Rows [offset, offset + rows) of F (B, m) (and of J (B, m, n)) from a callback's F (B, rows), J (B, rows, n).
-void scatter(const std::vector<double>& Fc, const std::vector<double>* Jc, long B, int rows, int offset, int m, int n,
-             double* F, double* J) {
-  for (long b = 0; b < B; ++b)
-    for (int r = 0; r < rows; ++r) {
-      F[b * m + offset + r] = Fc[b * rows + r];
-      if (J) std::copy_n(Jc->data() + (b * rows + r) * n, n, J + (b * m + offset + r) * n);
+void Space::Impl::fill_callbacks(const double* q, long B, Counters& counts, double* F, double* J) {
+  const int nn = n(), mm = m;
+  int offset = 0;
+  std::vector<double> Fc, Jc;
+  for (const Term& t : terms) {
+    const int rows = t.callback_rows;
+    if (t.kind == 5 && B > 0 && rows > 0) {
+      Fc.assign(B * rows, 0.0);
+      if (J) Jc.assign(B * rows * nn, 0.0);
+      ++counts.callback_calls;
+      counts.callback_rows += B;
+      callbacks[t.callback](q, B, Fc.data(), J ? Jc.data() : nullptr);
+      for (long b = 0; b < B; ++b)  // rows [offset, offset + rows) of each configuration's F and J
+        for (int r = 0; r < rows; ++r) {
+          F[b * mm + offset + r] = Fc[b * rows + r];
+          if (J) std::copy_n(Jc.data() + (b * rows + r) * nn, nn, J + (b * mm + offset + r) * nn);
+        }
     }
+    offset += t.rows();
+  }
 }
-
-}  // namespace
 
 void Space::residuals(const double* q, long B, double* F) {
   Impl& p = *impl_;
@@ -1436,18 +1446,7 @@ void Space::residuals(const double* q, long B, double* F) {
       pinocchio::forwardKinematics(p.model, p.data, p.to_full(q + b * nn));
       p.fill_residual(q + b * nn, F + b * mm);
     }
-  int offset = 0;
-  std::vector<double> Fc;
-  for (const Term& t : p.terms) {
-    if (t.kind == 5 && B > 0 && t.callback_rows > 0) {
-      Fc.assign(B * t.callback_rows, 0.0);
-      ++counts.callback_calls;
-      counts.callback_rows += B;
-      p.callbacks[t.callback](q, B, Fc.data(), nullptr);
-      scatter(Fc, nullptr, B, t.callback_rows, offset, mm, nn, F, nullptr);
-    }
-    offset += t.rows();
-  }
+  p.fill_callbacks(q, B, counts, F, nullptr);
 }
 
 void Space::jacobians(const double* q, long B, double* F, double* J) {
@@ -1459,19 +1458,7 @@ void Space::jacobians(const double* q, long B, double* F, double* J) {
       pinocchio::computeJointJacobians(p.model, p.data, p.to_full(q + b * nn));
       p.fill_jacobian(q + b * nn, F + b * mm, J + b * mm * nn);
     }
-  int offset = 0;
-  std::vector<double> Fc, Jc;
-  for (const Term& t : p.terms) {
-    if (t.kind == 5 && B > 0 && t.callback_rows > 0) {
-      Fc.assign(B * t.callback_rows, 0.0);
-      Jc.assign(B * t.callback_rows * nn, 0.0);
-      ++counts.callback_calls;
-      counts.callback_rows += B;
-      p.callbacks[t.callback](q, B, Fc.data(), Jc.data());
-      scatter(Fc, &Jc, B, t.callback_rows, offset, mm, nn, F, J);
-    }
-    offset += t.rows();
-  }
+  p.fill_callbacks(q, B, counts, F, J);
 }
 
 void Space::violations(const double* q, long B, double* v) {
