@@ -1,8 +1,7 @@
-"""The compiled search's nearest-neighbour index (a k-d tree) against brute force, and the draw blocks.
+"""The compiled search's nearest-neighbour index (a k-d tree) against brute force.
 
 The index must be exact, ties included (the lowest row wins, as a linear scan's), so that the search
-makes the same decisions as with linear scans; drawing the sampler's rows a block at a time must give
-the search the same rows in the same order (the same path for a seed).
+makes the same decisions as with linear scans.
 """
 
 from __future__ import annotations
@@ -47,27 +46,3 @@ def test_nearest_with_no_row_alive():
     nearest, within = core.nearest_queries(points, [False] * 40, points[:5], 10.0)
     assert list(nearest) == [-1] * 5 and not any(within)
 
-
-def test_draw_blocks_give_the_same_search(monkeypatch):
-    """Rows fetched a sampler batch at a time (the default) or per request: the same path, counts and samples."""
-    from manifoldgen import native
-    from manifoldgen.planning import RRTConnect
-    from manifoldgen.sampling import ProjectionSampler
-    from manifoldgen.scene import get_scene
-    from manifoldgen.space import ConstrainedSpace
-    from manifoldgen.tasks import get_task
-
-    task = get_task("sphere")
-    scene = get_scene(task, "sphere")
-    results = []
-    for block in (True, False):
-        if not block:
-            monkeypatch.setattr(native, "_draw_block", lambda sampler: 0)
-        space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-        result = RRTConnect(space, ProjectionSampler(space, seed=3), seed=3).solve(scene.start, scene.goal, 10.0)
-        assert result.solved and result.extras["core"] == "native"
-        assert space.validate_path(result.path).valid  # every state every resolution
-        results.append(result)
-    a, b = results
-    np.testing.assert_array_equal(a.path, b.path)
-    assert (a.iterations, a.samples_drawn, a.extras["nodes"]) == (b.iterations, b.samples_drawn, b.extras["nodes"])

@@ -188,8 +188,6 @@ struct PlannerSettings {
   // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
   // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
   int refine = -1;
-  // draw_block > 0: the draw callback is asked for draw_block rows at a time, served to the search in order
-  int draw_block = 0;
   // reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of one of its nodes
   // (else range; RRTConnectSettings.reach)
   double reach = 0.0;

@@ -336,13 +336,12 @@ NB_MODULE(manifoldgen_core, m) {
       "rrt_connect",
       [](Space& space, const In1& start, const In1& goal, nb::callable draw, double time_limit, double range,
          double resolution, double step, bool partial, int pool, int pool_batch, int candidates,
-         const std::string& local, int target_batch, bool lazy, int refine, int draw_block, double reach) {
+         const std::string& local, int target_batch, bool lazy, int refine, double reach) {
         mgcore::PlannerSettings st;
         st.range = range, st.resolution = resolution, st.step = step, st.partial = partial, st.pool = pool;
         st.pool_batch = pool_batch, st.candidates = candidates, st.local = local, st.target_batch = target_batch;
         st.lazy = lazy;
         st.refine = refine;
-        st.draw_block = draw_block;
         st.reach = reach;
         const int nn = space.n();
         mgcore::Draw fetch = [&](int count) {
@@ -367,12 +366,10 @@ NB_MODULE(manifoldgen_core, m) {
         return d;
       },
       "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "range"_a, "resolution"_a, "step"_a, "partial"_a,
-      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "draw_block"_a = 0,
-      "reach"_a = 0.0,
+      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "reach"_a = 0.0,
       "RRT-Connect from start to goal (n,) in space; draw(count) -> (count, n) valid samples. A dict: path (K, n) "
       "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes. "
       "lazy: tree edges are checked for collision only on candidate paths. refine >= 0: draw gives raw candidates, "
       "each refined (refine projection iterations) and checked when the search first uses it (counts: refined, "
-      "accepted). draw_block > 0: draw is called with draw_block rows at a time, served in order. "
-      "reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of its nodes (else range).");
+      "accepted). reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of its nodes (else range).");
 }

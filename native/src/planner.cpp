@@ -360,8 +360,7 @@ struct Local {
     const int k = static_cast<int>(s.rows());
     const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
     if (!lazy || count == 0 || space.collision_free(s.row(count - 1).data())) return count;
-    space.stop = COLLISION;
-    ++space.counts.stopped[COLLISION];
+    stopped(COLLISION);
     return 0;
   }
   // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
@@ -377,7 +376,7 @@ struct Local {
       return bisect(k, [&](int i) { return space.code(s.row(i).data(), last_is_node && i == k - 1 ? 1.0 : inner, true, true); });
     }
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
-    if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || collided();
+    if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || stopped(COLLISION);
     return bisect(k, [&](int i) { return space.collision_free(s.row(i).data()) ? VALID : COLLISION; });
   }
   // test(i) -> Reason of state i for i in [0, k), middle first, then the middles of the halves (breadth
@@ -390,11 +389,7 @@ struct Local {
       if (lo > hi) continue;
       const int mid = (lo + hi) / 2;
       const int c = test(mid);
-      if (c != VALID) {
-        space.stop = c;
-        ++space.counts.stopped[c];
-        return false;
-      }
+      if (c != VALID) return stopped(c);
       spans.push_back({lo, mid - 1});
       spans.push_back({mid + 1, hi});
     }
@@ -402,9 +397,10 @@ struct Local {
     return true;
   }
   std::vector<std::array<int, 2>> spans;  // bisect's queue, kept between calls
-  bool collided() {
-    space.stop = COLLISION;
-    ++space.counts.stopped[COLLISION];
+  // A motion stopped for `reason` (the space's stop and its count): false.
+  bool stopped(int reason) {
+    space.stop = reason;
+    ++space.counts.stopped[reason];
     return false;
   }
   bool whole(const double* a, const double* b) {
@@ -487,11 +483,7 @@ struct Local {
   // just now), so only its collisions are left.
   bool reaches(const double* start, const double* end, bool sample) {
     const int c = sample ? (space.collision_free(end) ? VALID : COLLISION) : space.code(end, 1.0, true, true);
-    if (c != VALID) {
-      space.stop = c;
-      ++space.counts.stopped[c];
-      return false;
-    }
+    if (c != VALID) return stopped(c);
     const States s = segment_states(start, end);
     return all_valid(s, static_cast<int>(s.rows()) - 1, false, true);  // the end is checked
   }
@@ -515,27 +507,11 @@ struct Search {
 
   bool time_left() const { return Clock::now() < deadline; }
 
-  RowMat block;  // rows fetched from the callback (settings.draw_block at a time) and not yet served
-  int block_next = 0;
-
-  RowMat fetch(int count) {
+  RowMat draw_many(int count) {
     RowMat rows = draw(count);
     if (rows.rows() != count || rows.cols() != space.n())
       throw std::runtime_error("the sampler callback returned an array of the wrong shape");
-    return rows;
-  }
-  // The sampler's next `count` rows, in its order: served from blocks of draw_block rows when set (one
-  // call into Python per block; the same rows in the same order as one call per request).
-  RowMat draw_many(int count) {
     out.samples += count;
-    if (s.draw_block <= 0) return fetch(count);
-    RowMat rows(count, space.n());
-    for (int filled = 0; filled < count;) {
-      if (block_next == block.rows()) block = fetch(s.draw_block), block_next = 0;
-      const int take = std::min(count - filled, static_cast<int>(block.rows()) - block_next);
-      rows.middleRows(filled, take) = block.middleRows(block_next, take);
-      filled += take, block_next += take;
-    }
     return rows;
   }
   // A raw candidate made a sample in place (lazy samples): the sampler's refinement (refine iterations of

@@ -61,7 +61,7 @@ from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, ma
 CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
-TARGET_BATCH = 32  # rows the search takes at a time for its targets (the pool pool_batch), served from draw blocks
+TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
 # lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
 # (the trees grow through the maze's walls), so off
 LAZY = False
@@ -467,14 +467,6 @@ def _draw(sampler, raw: bool):
     return draw
 
 
-def _draw_block(sampler) -> int:
-    """Rows the search asks the sampler for at a time: its refill batch (one Python call per refill instead of
-    one per request of 32 or 256 rows; the rows and their order are the same, the sampler makes them a batch
-    at a time anyway); 0 (rows as requested) for a sampler without a batch."""
-    batch = getattr(sampler, "batch", 0)
-    return int(batch) if isinstance(batch, (int, np.integer)) and batch > 0 else 0
-
-
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
@@ -494,14 +486,14 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
                                _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0), s.range,
                                s.resolution, s.step, s.partial, s.pool, s.pool_batch, s.candidates, planner.local.name,
                                TARGET_BATCH, LAZY, refine=int(sampler.lazy_refine) if lazy else -1,
-                               draw_block=_draw_block(sampler), reach=planner._stone_radius())
+                               reach=planner._stone_radius())
     finally:
         if swapped:
             sampler.space = space
         after = core.counts()
         book(space, before, after)
         planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
-        planner.sweep_checks = after.get("sweep_checks", 0) - before.get("sweep_checks", 0)
+        planner.sweep_checks = after["sweep_checks"] - before["sweep_checks"]
         planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
     planner.samples += out["samples"]
