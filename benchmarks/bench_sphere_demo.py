@@ -1,10 +1,10 @@
 """OMPL's sphere demo: our planner against the demo itself in C++ (Atlas, Projected, TangentBundle), same seeds.
 
-    python benchmarks/bench_sphere_demo.py [--runs 30] [--time 10] [--model DIR] [--set KEY=VALUE ...]
+    python benchmarks/bench_sphere_demo.py [--runs 30] [--seed 0] [--time 10] [--model DIR] [--set KEY=VALUE ...]
                                            [--out runs/sphere-demo] [--ompl-tolerance 1e-4]
 
 The problem is the task ``sphere`` with its scene ``sphere`` (a point on the unit sphere, the demo's
-three bands, south pole to north pole). Methods, interleaved per seed (run r uses seed r):
+three bands, south pole to north pole). Methods, interleaved per seed (run r uses seed SEED + r):
 
 - ``cvae``: our default planner (``rrtconnect``, its default local planner and settings, or those
   given with ``--set``) with the learned sampler: a CVAE trained on 10,000 rows of the task
@@ -105,6 +105,7 @@ def table(records: list[dict], labels: list[str]) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=30)
+    parser.add_argument("--seed", type=int, default=0, help="the first seed (held-out seeds for tuning)")
     parser.add_argument("--time", type=float, default=10.0)
     parser.add_argument("--model", type=Path, help="a CVAE for the task (default: trained into OUT/cvae)")
     parser.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
@@ -125,7 +126,8 @@ def main() -> None:
     settings = parse_settings(args.settings, None, planner_settings("rrtconnect"), "planner")
     model = args.model or ensure_model(args.out)
     tolerance = float(get_task("sphere").constraint.tolerance[0])
-    experiment = Experiment("sphere", task="sphere", robot="point", time_limit=args.time, planner_settings=settings)
+    experiment = Experiment("sphere", task="sphere", robot="point", time_limit=args.time, seed=args.seed,
+                            planner_settings=settings)
     ours = [Method.parse(f"cvae=rrtconnect@cvae:{model}"), Method.parse("project=rrtconnect@project")]
     labels = [m.label for m in ours] + list(SPACES)
     runs_file = args.out / "runs.jsonl"
@@ -133,7 +135,11 @@ def main() -> None:
               "check_tolerance": tolerance, "program": str(PROGRAM)}
     if runs_file.is_file() and not args.resume:
         raise SystemExit(f"{runs_file} exists; pass --resume to continue it or choose another --out")
-    (args.out / "config.json").write_text(json.dumps(config, indent=1) + "\n")
+    config_file = args.out / "config.json"
+    if runs_file.is_file() and config_file.is_file() and json.loads(config_file.read_text()) != json.loads(json.dumps(config)):
+        raise SystemExit(f"{args.out} was made with other arguments (see its config.json); resume with the same "
+                         "ones or choose another --out")
+    config_file.write_text(json.dumps(config, indent=1) + "\n")
     done = {(r["method"], r["run"]) for r in read_records(runs_file)}
     with progress_bar("sphere demo", args.runs * len(labels)) as bar:
         for run in range(args.runs):
@@ -142,8 +148,8 @@ def main() -> None:
                     bar.advance(1)
                     continue
                 if label in SPACES:
-                    record = {"method": label, "run": run, "seed": run,
-                              **run_native(SPACES[label], run, args, tolerance)}
+                    record = {"method": label, "run": run, "seed": args.seed + run,
+                              **run_native(SPACES[label], args.seed + run, args, tolerance)}
                 else:
                     record = run_once(experiment, next(m for m in ours if m.label == label), run)
                     record.pop("path", None)
@@ -153,7 +159,7 @@ def main() -> None:
                     os.fsync(f.fileno())
                 bar.advance(1)
     records = [r for r in read_records(runs_file) if r["run"] < args.runs]
-    print(f"OMPL's sphere demo: {args.runs} seeds per method, {args.time:g} s limit, methods interleaved per seed; "
+    print(f"OMPL's sphere demo: {args.runs} seeds per method (from {args.seed}), {args.time:g} s limit, methods interleaved per seed; "
           f"our planner settings {settings or 'default'}; OMPL tolerance {args.ompl_tolerance:g} on |F|, every path "
           f"checked every 0.005 m within {tolerance:g} m; runs in {runs_file}")
     print("\n".join(table(records, labels)))
