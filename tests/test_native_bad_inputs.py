@@ -87,7 +87,14 @@ def _planner(task, scene, kind, core, **options):
     return RRTConnect(space, make_sampler("project", space, 0), settings=RRTConnectSettings(core=core))
 
 
+def _into_the_wall(task, scene) -> np.ndarray:
+    """A configuration on the wall task's manifold, 30 % of the way from start to goal: the hand is in the wall."""
+    q = scene.start + 0.3 * (scene.goal - scene.start)
+    return ConstrainedSpace(task.constraint, scene.condition).project(q[None]).q[0]
+
+
 QUERY_CASES = {
+    "goal in collision": lambda t, s: (s.start, _into_the_wall(t, s), 1.0),
     "start of the wrong length": lambda t, s: (s.start[:-1], s.goal, 1.0),
     "NaN in the goal": lambda t, s: (s.start, NAN, 1.0),
     "start out of limits": lambda t, s: (t.robot.upper + 0.1, s.goal, 1.0),
@@ -108,6 +115,8 @@ def test_a_native_search_refuses_what_the_python_search_refuses(panda_task, case
         assert (planner.core is not None) == (core == "native")
         outcomes.append(_outcome(lambda: planner.solve(*QUERY_CASES[case](panda_task, scene))))
     assert outcomes[0][0] == "error" and outcomes[1] == outcomes[0], outcomes
+    if case == "goal in collision":
+        assert "goal configuration is in collision: panda_hand_0 with wall_left" in outcomes[0][1]
 
 
 BUILD_CASES = {

@@ -452,6 +452,18 @@ def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
         space.stopped[reason] += after["stopped"][reason] - before["stopped"][reason]
 
 
+def valid_query_state(space: ConstrainedSpace, core, q: np.ndarray) -> np.ndarray | None:
+    """A start or goal ``q (n,)`` as floats when the core finds it valid (limits, constraint, inequalities,
+    exact collisions; its counts booked on ``space``), else None: the space's own check then says what is wrong."""
+    q = np.asarray(q, dtype=float)
+    if q.shape != (space.n,) or not np.all(np.isfinite(q)):
+        return None
+    before = core.counts()
+    valid = core.codes(q[None], np.ones(1), True, True)[0] == 0
+    book(space, before, core.counts())
+    return q if valid else None
+
+
 def _draw(sampler, raw: bool):
     """The search's callback: ``count`` -> (count, n) rows of ``sampler``, raw (:meth:`~manifoldgen.sampling.Sampler.raw_many`,
     lazy samples) or checked (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""

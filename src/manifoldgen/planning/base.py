@@ -141,7 +141,7 @@ class Planner(ABC):
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
         if not np.isfinite(time_limit) or time_limit <= 0:
             raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
-        start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
+        start, goal = (self._query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         before = self.sampler.stats.to_dict()
         counts, projections = self.space.counts(), self.local.projections
         self.iterations = self.samples = self.rejected = self.out_of_reach = 0
@@ -176,6 +176,10 @@ class Planner(ABC):
 
     def _extras(self) -> dict:
         return {}
+
+    def _query_state(self, q: np.ndarray, what: str) -> np.ndarray:
+        """The start or goal ``q (n,)`` as floats, checked by the space's rule (a clear error when invalid)."""
+        return self.space.check_query_state(q, what)
 
     # ---------------------------------------------------------------- helpers
     def _direct(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:

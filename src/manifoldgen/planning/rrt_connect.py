@@ -80,6 +80,10 @@ class RRTConnect(Planner):
     def _direct(self, start, goal):
         return None if self.core is not None else super()._direct(start, goal)
 
+    def _query_state(self, q, what):
+        valid = None if self.core is None else native.valid_query_state(self.space, self.core, q)
+        return valid if valid is not None else super()._query_state(q, what)  # the space says what is wrong
+
     def _solve(self, start, goal, deadline):
         if self.core is not None:
             return native.plan_rrt_connect(self, self.core, start, goal, deadline)
