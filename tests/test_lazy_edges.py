@@ -68,3 +68,13 @@ def test_a_bad_stride_is_refused_in_one_line(panda_task):
         assert "\n" not in str(error.value)
     with pytest.raises(ManifoldgenError, match="lazy_stride must be a int"):  # a task file's [planner] table
         check_settings({"lazy_stride": "2"}, planner_settings("rrtconnect"), "planner")
+
+
+def test_edges_checked_only_on_candidate_paths_are_cut_and_reattached(panda_task, monkeypatch):
+    """native.LAZY (nodes only while searching) in the maze: hundreds of edges cut, some nodes given another
+    parent instead of leaving with their subtrees, and the search still ends with a path valid at every state."""
+    from manifoldgen import native
+    monkeypatch.setattr(native, "LAZY", True)
+    space, result = _solve(panda_task, "maze", 90, 2)
+    assert result.solved and result.extras["cut_edges"] > 100 and result.extras["reattached"] > 0
+    _assert_checked_state_by_state(panda_task, space, result.path)

@@ -604,24 +604,25 @@ struct Search {
     return true;
   }
 
-  // Give node `child` of tree k, whose edge was found colliding, a new parent: its nearest node within range
-  // outside its subtree (the old parent excepted), when the motion from there is valid (checked as the search
-  // checks motions now). Its subtree then stays in the search. Whether it did.
+  // Give node `child` of tree k, whose edge was found colliding, a new parent: its nearest older node within
+  // range (the old parent excepted; an older node is never in its subtree, and parents stay before their
+  // children, which Tree::kill relies on), when the motion from there is valid at every state. Its subtree
+  // then stays in the search. Whether it did.
   bool reattach(int k, int child) {
     Tree& tree = trees[k];
     std::vector<char>& keep = keep_buffer;
-    keep.assign(tree.alive.begin(), tree.alive.end());
-    std::vector<char> inside(tree.size(), 0);
-    inside[child] = 1;
-    for (int j = child; j < tree.size(); ++j) {  // parents come before their children
-      if (j > child && tree.parent[j] >= 0) inside[j] = inside[tree.parent[j]];
-      if (inside[j]) keep[j] = 0;
-    }
+    keep.assign(tree.alive.begin(), tree.alive.begin() + child);
+    keep.resize(tree.size(), 0);
     keep[tree.parent[child]] = 0;
     const auto [near, d2] = tree.index.nearest(tree.row(child), tree.q.data(), keep);
-    if (near < 0 || d2 > s.range * s.range || !local.whole(tree.row(near), tree.row(child))) return false;
+    if (near < 0 || d2 > s.range * s.range) return false;
+    const int stride = local.stride;
+    local.stride = 1;
+    const bool valid = local.whole(tree.row(near), tree.row(child));
+    local.stride = stride;
+    if (!valid) return false;
     tree.parent[child] = near;
-    tree.coarse[child] = local.made();
+    tree.coarse[child] = 0;
     return true;
   }
   std::vector<char> keep_buffer;
