@@ -183,8 +183,12 @@ struct PlannerSettings {
   int pool = 2048, pool_batch = 256, candidates = 8, target_batch = 32;
   std::string local = "auto";
   // lazy: tree edges are checked for collision only when they lie on a candidate path (nodes at once);
-  // an edge found colliding then is cut, keeping its collision-free part (see planner.cpp)
+  // an edge found colliding then is cut (see planner.cpp, Search::verify)
   bool lazy = false;
+  // lazy_stride: coarse-first edge checks (when not lazy): a motion's planning-resolution states are checked for
+  // collision every lazy_stride-th and at nodes while searching, the rest when the edge lies on a candidate path
+  // (1: every state at once)
+  int lazy_stride = 1;
   // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
   // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
   int refine = -1;
@@ -196,6 +200,8 @@ struct PlannerSettings {
 struct PlanOutput {
   RowMat path;  // (K, n); 0 rows: unsolved
   long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
+  long verified_states = 0;  // states of coarse edges checked for collision on candidate paths (Search::verify)
+  long reattached = 0;  // cut edges whose node found another parent (the rest left the search with their subtrees)
   long refined = 0, accepted = 0;  // raw candidates made samples when first used (refine >= 0), and of those valid
   std::vector<long> nodes;
 };

@@ -183,28 +183,31 @@ struct KdTree {
   }
 };
 
-// Configurations with parent links; each edge is a straight, checked segment. Nearest-neighbour queries
-// are exact (a k-d tree over the nodes, dead ones skipped).
+// Configurations with parent links; each edge is a straight segment, every node checked. Nearest-neighbour
+// queries are exact (a k-d tree over the nodes, dead ones skipped).
 struct Tree {
   int n;
   std::vector<double> q;
   std::vector<int> parent;
-  std::vector<char> alive, verified;  // verified: the edge into the node was checked for collision
+  std::vector<char> alive;
+  // per node, how the edge into it was checked for collision at its planning-resolution states i (Local::segment_states):
+  // 0 every state; s > 0 only where (i + 1) % s == 0 (coarse edges; Local::UNCHECKED: none), the rest left to Search::verify
+  std::vector<int> coarse;
   KdTree index;
 
-  explicit Tree(const Vec& root) : n(static_cast<int>(root.size())), index(n) { add(-1, root.data(), true); }
+  explicit Tree(const Vec& root) : n(static_cast<int>(root.size())), index(n) { add(-1, root.data(), 0); }
   int size() const { return static_cast<int>(parent.size()); }
   const double* row(int i) const { return q.data() + static_cast<long>(i) * n; }
-  int add(int from, const double* x, bool checked) {
+  int add(int from, const double* x, int checked_every) {
     q.insert(q.end(), x, x + n);
     parent.push_back(from);
     alive.push_back(1);
-    verified.push_back(checked);
+    coarse.push_back(checked_every);
     index.insert(size() - 1, q.data());
     return size() - 1;
   }
-  int add_chain(int from, const RowMat& waypoints, bool checked) {  // returns the last node
-    for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data(), checked);
+  int add_chain(int from, const RowMat& waypoints, int checked_every) {  // returns the last node
+    for (int k = 0; k < waypoints.rows(); ++k) from = add(from, waypoints.row(k).data(), checked_every);
     return from;
   }
   int nearest(const double* x) const {  // the first node when none is alive, as a linear scan
@@ -329,7 +332,13 @@ struct Local {
   double resolution, step;
   bool partial, stones, walks;
   int kind;  // 0 auto, 1 interpolate, 2 project, 3 direct
-  bool lazy = false;  // motions: collision checked at their end state only (the search verifies edges later)
+  // Coarse-first edge checks: a motion's states i (segment_states) are checked for collision only where
+  // (i + 1) % stride == 0 and at the state it ends at when that becomes a node (limits, constraint and
+  // inequalities at every state); Search::verify checks the others when the edge lies on a candidate path.
+  // 1: every state (eager); UNCHECKED: nodes only (PlannerSettings::lazy).
+  static constexpr int UNCHECKED = std::numeric_limits<int>::max();
+  int stride = 1;
+  bool loose = false;  // the latest straight motion kept a part whose own states are not those checked
   long projections = 0;
   static constexpr double precision = 0.01;
   static constexpr int max_iters = 20;
@@ -354,30 +363,56 @@ struct Local {
     return States(segment_buffer.data(), k, n());
   }
   std::vector<double> segment_buffer;
-  // Leading valid rows of a motion's states; lazily, collisions only at the state the motion ends at
-  // (the last valid row, a node).
+  int steps(const double* a, const double* b) const {  // segment_states' k
+    return std::max(1, static_cast<int>(std::ceil((Eigen::Map<const Vec>(b, n()) - Eigen::Map<const Vec>(a, n())).norm() / resolution)));
+  }
+  // Of a motion's k states (the last a node when node): whether state i is checked for collision
+  // (coarse()), how many are (sparse()) and which is the j-th of those (sparse_state()).
+  bool coarse(int i, int k, bool node) const { return (i + 1) % stride == 0 || (node && i == k - 1); }
+  int sparse(int k, bool node) const { return k / stride + (node && k % stride != 0); }
+  int sparse_state(int j, int k) const { return std::min((j + 1) * stride - 1, k - 1); }
+  // The edge record (Tree::coarse) of the motion just made.
+  int made() const { return stride == 1 ? 0 : loose ? UNCHECKED : stride; }
+
+  // Leading valid rows of a motion's states, in order. Coarse (stride > 1): limits and constraint at every
+  // state, then collisions at the coarse states and at the last valid row (the node the motion ends at); a
+  // collision keeps the rows up to the last coarse state found free.
   int prefix(const States& s, bool last_is_node) {
     const int k = static_cast<int>(s.rows());
-    const int count = space.valid_prefix(s.data(), k, last_is_node, !lazy);
-    if (!lazy || count == 0 || space.collision_free(s.row(count - 1).data())) return count;
-    stopped(COLLISION);
-    return 0;
+    if (stride == 1) return space.valid_prefix(s.data(), k, last_is_node, true);
+    const int count = space.valid_prefix(s.data(), k, last_is_node, false), first = space.stop;
+    int kept = 0;
+    for (int i = 0; i < count; ++i) {
+      if (!coarse(i, count, true)) continue;
+      if (!space.collision_free(s.row(i).data())) {
+        if (first != VALID) --space.counts.stopped[first];  // the motion stopped earlier, at this collision
+        stopped(COLLISION);
+        return kept;
+      }
+      kept = i + 1;
+    }
+    return count;
   }
   // Whether the first k states of a motion (the last of them a node when last_is_node) are all valid:
-  // limits and constraint in order, then collisions in bisection order (middle first: a blocked motion
-  // is found blocked after fewer checks than scanning from its start); lazily, collisions only at the
-  // last state when it is a node. first_blocked: the states are visited in bisection order, each tested
-  // in the validity rule's order (limits, constraint, inequalities, collision): the same verdict after
-  // fewer residuals when a collision blocks the motion, but stop names the first failure found that way
-  // (the walks read stop to choose what to do next, so they keep the order above).
+  // limits and constraint in order, then collisions (at the coarse states) in bisection order (middle
+  // first: a blocked motion is found blocked after fewer checks than scanning from its start).
+  // first_blocked: the coarse states are visited in bisection order, each tested in the validity rule's
+  // order (limits, constraint, inequalities, collision), then the others' limits and constraint: the same
+  // verdict after fewer residuals when a collision blocks the motion, but stop names the first failure
+  // found that way (the walks read stop to choose what to do next, so they keep the order above).
   bool all_valid(const States& s, int k, bool last_is_node, bool first_blocked = false) {
-    if (first_blocked && !space.batched() && !lazy) {
+    const int m = sparse(k, last_is_node);
+    if (first_blocked && !space.batched()) {
       const double inner = 1.0 - space.margin();
-      return bisect(k, [&](int i) { return space.code(s.row(i).data(), last_is_node && i == k - 1 ? 1.0 : inner, true, true); });
+      auto limit = [&](int i) { return last_is_node && i == k - 1 ? 1.0 : inner; };
+      if (!bisect(m, [&](int j) { const int i = sparse_state(j, k); return space.code(s.row(i).data(), limit(i), true, true); }))
+        return false;
+      return stride == 1 || bisect(k, [&](int i) {
+        return coarse(i, k, last_is_node) ? VALID : space.code(s.row(i).data(), limit(i), false, true);
+      });
     }
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
-    if (lazy) return !last_is_node || !k || space.collision_free(s.row(k - 1).data()) || stopped(COLLISION);
-    return bisect(k, [&](int i) { return space.collision_free(s.row(i).data()) ? VALID : COLLISION; });
+    return bisect(m, [&](int j) { return space.collision_free(s.row(sparse_state(j, k)).data()) ? VALID : COLLISION; });
   }
   // test(i) -> Reason of state i for i in [0, k), middle first, then the middles of the halves (breadth
   // first); the first failure sets stop and ends it.
@@ -416,12 +451,15 @@ struct Local {
     const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
     const States s = segment_states(a, end.data());
     const int count = prefix(s, reach);
+    loose = false;
     if (count == s.rows()) return {end.transpose(), reach};
-    if (partial && count) return {s.row(count - 1), false};
-    return {none(), false};
+    if (!partial || !count) return {none(), false};
+    loose = stride > 1 && steps(a, s.row(count - 1).data()) != count;  // the kept part spaced otherwise
+    return {s.row(count - 1), false};
   }
 
   std::pair<RowMat, bool> walk(const double* a, const double* b, double max_distance, bool creep = true) {
+    loose = false;
     const int nn = n();
     Eigen::Map<const Vec> vb(b, nn);
     std::vector<Vec> waypoints;
@@ -482,6 +520,7 @@ struct Local {
   // sample costs one check. sample: the end passed the limits and the constraint already (a sample made
   // just now), so only its collisions are left.
   bool reaches(const double* start, const double* end, bool sample) {
+    loose = false;
     const int c = sample ? (space.collision_free(end) ? VALID : COLLISION) : space.code(end, 1.0, true, true);
     if (c != VALID) return stopped(c);
     const States s = segment_states(start, end);
@@ -535,29 +574,58 @@ struct Search {
     }
   }
 
-  // Check the unverified edges of a candidate path for collision (planning resolution, in path order).
-  // A colliding edge is cut from its tree; its collision-free part before the first collision stays as
-  // a new node (as a blocked straight extension keeps its valid part). True when every edge passed.
+  // Check the coarse edges of a candidate path for collision at the planning-resolution states their
+  // search skipped (path order; each edge's in bisection order). A colliding edge is cut from its tree:
+  // its node gets another parent when it can (reattach), else it and its subtree leave the search; and the
+  // search checks every state of its motions from then on: an obstacle thinner than the coarse spacing
+  // would let the trees through it again and again (talos reach at stride 2, seeds 7 and 24: 32 and 24 cuts
+  // without this, 1 with it). True when every edge passed.
   bool verify(const std::vector<std::pair<int, int>>& edges) {
     for (const auto& [k, child] : edges) {
       Tree& tree = trees[k];
-      if (tree.verified[child]) continue;
-      const int from = tree.parent[child];
-      const States states = local.segment_states(tree.row(from), tree.row(child));
-      const int k_states = static_cast<int>(states.rows()) - 1;  // the child, a node, was checked
-      int free = 0;
-      while (free < k_states && space.collision_free(states.row(free).data())) ++free;
-      if (free == k_states) {
-        tree.verified[child] = 1;
+      const int every = tree.coarse[child];
+      if (!every) continue;
+      const States states = local.segment_states(tree.row(tree.parent[child]), tree.row(child));
+      const bool free = local.bisect(static_cast<int>(states.rows()) - 1, [&](int i) {  // the child, a node, was checked
+        if ((i + 1) % every == 0) return VALID;
+        ++out.verified_states;
+        return space.collision_free(states.row(i).data()) ? VALID : COLLISION;
+      });
+      if (free) {
+        tree.coarse[child] = 0;
         continue;
       }
       ++out.cut_edges;
-      tree.kill(child);
-      if (s.partial && free) tree.add(from, states.row(free - 1).data(), true);
+      if (local.stride != Local::UNCHECKED) local.stride = 1;
+      if (reattach(k, child)) ++out.reattached;
+      else tree.kill(child);
       return false;
     }
     return true;
   }
+
+  // Give node `child` of tree k, whose edge was found colliding, a new parent: its nearest older node within
+  // range (the old parent excepted; an older node is never in its subtree, and parents stay before their
+  // children, which Tree::kill relies on), when the motion from there is valid at every state. Its subtree
+  // then stays in the search. Whether it did.
+  bool reattach(int k, int child) {
+    Tree& tree = trees[k];
+    std::vector<char>& keep = keep_buffer;
+    keep.assign(tree.alive.begin(), tree.alive.begin() + child);
+    keep.resize(tree.size(), 0);
+    keep[tree.parent[child]] = 0;
+    const auto [near, d2] = tree.index.nearest(tree.row(child), tree.q.data(), keep);
+    if (near < 0 || d2 > s.range * s.range) return false;
+    const int stride = local.stride;
+    local.stride = 1;
+    const bool valid = local.whole(tree.row(near), tree.row(child));
+    local.stride = stride;
+    if (!valid) return false;
+    tree.parent[child] = near;
+    tree.coarse[child] = 0;
+    return true;
+  }
+  std::vector<char> keep_buffer;
 
   // A path (K, n) that passed the dense check, or 0 rows; a failing edge is cut from its tree.
   bool finish(const RowMat& waypoints, const std::vector<std::pair<int, int>>& edges) {
@@ -603,7 +671,7 @@ struct Search {
       ++out.out_of_reach;
       if (!local.walks) return -1;
       auto w = local.walk(tree.row(near), target, s.range);
-      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
+      return w.first.rows() ? tree.add_chain(near, w.first, local.made()) : -1;
     }
     // the first candidate reached in a straight line from its nearest node becomes a node (a raw one is
     // made a sample first); the tried ones leave the pool
@@ -614,7 +682,7 @@ struct Search {
       if (made && !make_sample(stone)) continue;
       pool->raw[slot] = 0;
       const int node = tree.nearest(stone);
-      if (local.reaches(tree.row(node), stone, made)) return tree.add(node, stone, !local.lazy);
+      if (local.reaches(tree.row(node), stone, made)) return tree.add(node, stone, local.made());
     }
     return -1;
   }
@@ -625,7 +693,7 @@ struct Search {
     const int near = tree.nearest(target.data());
     if (!pool || (target - Eigen::Map<const Vec>(tree.row(near), space.n())).norm() <= s.range) {
       auto w = local.steer(tree.row(near), target.data(), s.range);
-      return w.first.rows() ? tree.add_chain(near, w.first, !local.lazy) : -1;
+      return w.first.rows() ? tree.add_chain(near, w.first, local.made()) : -1;
     }
     pool->add(target.data(), trees);
     const int made = far(k, near, target.data());
@@ -645,7 +713,7 @@ struct Search {
       }
       auto w = local.steer(tree.row(node), target.data(), s.range);
       if (!w.first.rows()) return -1;
-      node = tree.add_chain(node, w.first, !local.lazy);
+      node = tree.add_chain(node, w.first, local.made());
       if (w.second) return node;
     }
     return -1;
@@ -670,8 +738,8 @@ struct Search {
   }
 
   void run(const Vec& start, const Vec& goal) {
-    if (direct(start, goal)) return;  // eager checks: a lazy direct walk would cross obstacles
-    local.lazy = s.lazy;
+    if (direct(start, goal)) return;  // eager checks: a coarse direct walk would cross obstacles
+    local.stride = s.lazy ? Local::UNCHECKED : s.lazy_stride;
     trees.emplace_back(start);
     trees.emplace_back(goal);
     start_pool();

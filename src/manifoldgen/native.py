@@ -62,8 +62,9 @@ CORES = ("auto", "python", "native")
 BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
 TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
-# lazy edge checks (native/src/planner.cpp, Search::verify): measured wall 31 -> 28 ms, maze 107 -> 304 ms
-# (the trees grow through the maze's walls), so off
+# lazy edge checks (native/src/planner.cpp, Search::verify; nodes only while searching): measured wall 31 -> 28 ms,
+# maze 107 -> 304 ms (the trees grow through the maze's walls), so off; the coarse-first checks of the planner
+# setting lazy_stride check every lazy_stride-th state while searching instead
 LAZY = False
 # lazy samples (planner.cpp): the sampler's raw rows go to the search, which refines and checks a row only
 # when it first uses it
@@ -498,7 +499,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
                                _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0), s.range,
                                s.resolution, s.step, s.partial, s.pool, s.pool_batch, s.candidates, planner.local.name,
                                TARGET_BATCH, LAZY, refine=int(sampler.lazy_refine) if lazy else -1,
-                               reach=planner._stone_radius())
+                               reach=planner._stone_radius(), lazy_stride=s.lazy_stride)
     finally:
         if swapped:
             sampler.space = space
@@ -514,6 +515,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     planner.local.projections += out["projections"]
     planner.native_nodes = list(out["nodes"])
     planner.cut_edges = out["cut_edges"]
+    planner.verified_states = out["verified_states"]
+    planner.reattached = out["reattached"]
     if lazy:
         sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
         sampler.stats.accepted += out["accepted"]

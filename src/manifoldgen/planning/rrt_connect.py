@@ -32,14 +32,23 @@ class RRTConnectSettings(PlannerSettings):
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
     straight motions to stones: in the maze fewer of them collide; shipped CVAE, sphere checks, held-out
     seeds 90-189, median CPU wall / maze: 11.3 / 80.8 ms at 0.6 (= range), 12.5 / 53.1 ms at 0.5, 13.4 /
-    43.4 ms at 0.4; README "Compiled core")."""
+    43.4 ms at 0.4; README "Compiled core"); ``lazy_stride``: coarse-first edge checks in the core's search: a
+    motion's planning-resolution states are checked for collision every ``lazy_stride``-th (and at the node it
+    ends at) while the trees grow, the others only when the edge lies on a candidate path (a colliding one is cut
+    from its tree), so every returned path is still checked at every planning-resolution state and then densely;
+    1 checks every state at once. The Python search checks every state at once whatever the setting (it is the
+    core's test oracle at ``lazy_stride=1``)."""
 
     core: str = "auto"
     spheres: bool = False
     reach: float = 0.5
+    lazy_stride: int = 2
 
     def check(self) -> None:
         super().check()
+        if isinstance(self.lazy_stride, bool) or not isinstance(self.lazy_stride, int) or self.lazy_stride < 1:
+            raise ManifoldgenError(f"lazy_stride must be a whole number >= 1 (1: every motion state checked for "
+                                   f"collision at once), got {self.lazy_stride!r}; e.g. lazy_stride=3")
         if not self.reach > 0:
             raise ManifoldgenError(f"reach must be a positive distance (rad), got {self.reach}; e.g. reach=0.5")
         if self.core not in native.CORES:
@@ -71,7 +80,7 @@ class RRTConnect(Planner):
                 self.sphere_fallback = spheres["fallback"]
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
-        self.sphere_checks = self.sweep_checks = self.cut_edges = 0
+        self.sphere_checks = self.sweep_checks = self.cut_edges = self.reattached = self.verified_states = 0
         self.callbacks = {"calls": 0, "rows": 0}  # the core's calls into a Python constraint
 
     def _stone_radius(self) -> float:
@@ -109,7 +118,7 @@ class RRTConnect(Planner):
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
         return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
                 "sweep_checks": self.sweep_checks,
-                "cut_edges": self.cut_edges,
+                "cut_edges": self.cut_edges, "reattached": self.reattached, "verified_states": self.verified_states,
                 **({"callbacks": dict(self.callbacks)} if self.callbacks["calls"] else {}),
                 **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
 
