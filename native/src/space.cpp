@@ -392,6 +392,11 @@ struct Space::Impl {
   void fill_inequality(const double* q, double* G) {
     if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
     else pinocchio::forwardKinematics(model, data, to_full(q));
+    inequality_rows(G);
+  }
+
+  // G (g,) from data's kinematics (and centre of mass when the polygon needs it).
+  void inequality_rows(double* G) {
     int row = 0;
     for (const Inequality& c : inequalities) {
       if (c.kind == 0) {
@@ -403,6 +408,32 @@ struct Space::Impl {
       }
       row += c.rows();
     }
+  }
+
+  // One state's equality violation (max |F_i| / tol_i; 0 without terms) and, when it is within limit, whether the
+  // built-in inequalities hold, from one forward kinematics (the centre of mass's pass when the polygon needs it;
+  // pinocchio's centerOfMass runs forwardKinematics first, so the residual is the same) where Space::violation and
+  // inequalities_hold make one each. Built-in terms only (not batched()); counts the evaluation as residual does.
+  std::vector<double> state_F, state_G;
+  double state_check(const double* q, double limit, bool& hold) {
+    hold = true;
+    if (m == 0 && g == 0) return 0.0;
+    if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
+    else pinocchio::forwardKinematics(model, data, to_full(q));
+    double worst = 0.0;
+    if (m > 0) {
+      ++tally->evaluations;
+      state_F.resize(m);
+      fill_residual(q, state_F.data());
+      for (int i = 0; i < m; ++i) worst = std::max(worst, std::abs(state_F[i]) / tolerance[i]);
+    }
+    if (worst <= limit && g > 0) {
+      state_G.resize(g);
+      inequality_rows(state_G.data());
+      for (double x : state_G)
+        if (x > 0) hold = false;
+    }
+    return worst;
   }
 
   // A geometry's convex outer shape (a mesh's hull with its triangles, for coal's hill-climbing support;
@@ -1282,8 +1313,14 @@ bool Space::spheres_free(const double* q) {
 
 int Space::code(const double* q, double limit, bool collision, bool exact) {
   if (!within_limits(q)) return LIMITS;
-  if (violation(q) > limit) return CONSTRAINT;
-  if (!inequalities_hold(q)) return INEQUALITY;
+  if (!batched()) {
+    bool hold;
+    if (impl_->state_check(q, limit, hold) > limit) return CONSTRAINT;
+    if (!hold) return INEQUALITY;
+  } else {
+    if (violation(q) > limit) return CONSTRAINT;
+    if (!inequalities_hold(q)) return INEQUALITY;
+  }
   if (impl_->p) {
     std::vector<double> G(impl_->p);
     inequalities(q, 1, G.data());
@@ -1360,10 +1397,11 @@ PathCheck Space::validate_path(const double* path, int K) {
     int c = VALID;
     if (!within_limits(q)) c = LIMITS;
     else {
-      const double vi = batched() ? v[i % chunk] : violation(q);
+      bool hold = true;
+      const double vi = batched() ? v[i % chunk] : impl_->state_check(q, 1.0, hold);
       out.worst = std::max(out.worst, vi);
       if (vi > 1.0) c = CONSTRAINT;
-      else if (!inequalities_hold(q)) c = INEQUALITY;
+      else if (!(batched() ? inequalities_hold(q) : hold)) c = INEQUALITY;
       else if (pp && *std::max_element(G.begin() + (i % chunk) * pp, G.begin() + (i % chunk + 1) * pp) > 0)
         c = INEQUALITY;
       else if (!collision_free(q)) c = COLLISION;
@@ -1415,9 +1453,10 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
       limits_ok[i - s0] = within_limits(q);
       if (!limits_ok[i - s0]) reason = LIMITS;
       else {
-        if (!batched()) v[i - s0] = violation(q);
+        bool hold = true;
+        if (!batched()) v[i - s0] = p.state_check(q, 1.0, hold);
         if (v[i - s0] > 1.0) reason = CONSTRAINT;
-        else if (!inequalities_hold(q)) reason = INEQUALITY;
+        else if (!(batched() ? inequalities_hold(q) : hold)) reason = INEQUALITY;
         else if (pp && *std::max_element(G.begin() + (i - s0) * pp, G.begin() + (i - s0 + 1) * pp) > 0)
           reason = INEQUALITY;
       }
