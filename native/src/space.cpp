@@ -110,6 +110,7 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
 struct Shape {
   int kind = -1;  // 0 box (half sides), 1 sphere (radius), 2 cylinder (radius, half length along z); -1 none
   Eigen::Vector3d size = Eigen::Vector3d::Zero();
+  double outer = 0.0;  // circumradius: the shape lies within this distance of its origin
 };
 
 // Distance from point p (in the shape's frame) to the shape (0 inside).
@@ -126,13 +127,16 @@ Shape shape_of(const pinocchio::GeometryObject& g) {
   if (auto box = std::dynamic_pointer_cast<coal::Box>(g.geometry)) {
     s.kind = 0;
     s.size = box->halfSide;
+    s.outer = s.size.norm();
   } else if (auto sphere = std::dynamic_pointer_cast<coal::Sphere>(g.geometry)) {
     s.kind = 1;
     s.size[0] = sphere->radius;
+    s.outer = s.size[0];
   } else if (auto cyl = std::dynamic_pointer_cast<coal::Cylinder>(g.geometry)) {
     s.kind = 2;
     s.size[0] = cyl->radius;
     s.size[1] = cyl->halfLength;
+    s.outer = std::hypot(s.size[0], s.size[1]);
   }
   return s;
 }
@@ -474,6 +478,26 @@ struct Space::Impl {
     return pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(k));
   }
 
+  // A primitive's world pose at the latest collision kinematics (computed once per state).
+  const pinocchio::SE3& pose_of(int b) {
+    if (!shape_placed[b]) {
+      const pinocchio::GeometryObject& g = geom.geometryObjects[b];
+      shape_pose[b] = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+      shape_placed[b] = true;
+    }
+    return shape_pose[b];
+  }
+  std::vector<pinocchio::SE3> shape_pose;  // per geometry (primitives)
+  std::vector<char> shape_placed;
+
+  // Whether the world point x lies farther than r from primitive b (at pose): farther than its circumradius + r
+  // from its origin (no transform), else by the exact distance.
+  bool beyond(int b, const pinocchio::SE3& pose, const Eigen::Vector3d& x, double r) const {
+    const double reach = shapes[b].outer + r;
+    if ((x - pose.translation()).squaredNorm() > reach * reach) return true;
+    return shape_distance(shapes[b], pose.actInv(x)) > r;
+  }
+
   // Exact collision test with the sphere models as a per-pair broad phase: a pair whose spheres touch
   // nothing is free; every other pair (spheres touching, exact pairs) gets pair_collides. flagged: some
   // pair's spheres touched (the sphere test alone would have called the state in collision).
@@ -487,9 +511,8 @@ struct Space::Impl {
         place(t.b);
         if (!spheres_touch(t.a, t.b)) continue;
       } else if (t.kind == 1) {
-        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
-        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        const pinocchio::SE3& pose = pose_of(t.b);
+        if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
         if (!spheres_touch_shape(t.a, t.b, pose)) continue;
       } else if (!spheres_of[t.a].empty() && !spheres_of[t.b].empty()) {
@@ -512,6 +535,7 @@ struct Space::Impl {
     if (jacobians) pinocchio::computeJointJacobians(model, cdata, to_full(q));
     else pinocchio::forwardKinematics(model, cdata, to_full(q));
     std::fill(placed_spheres.begin(), placed_spheres.end(), false);
+    std::fill(shape_placed.begin(), shape_placed.end(), false);
     placed_geometries = false;
     for (std::size_t g = 0; g < bound_joint.size(); ++g)
       if (bound_joint[g] >= 0) bound_world[g] = cdata.oMi[bound_joint[g]].act(bound_center[g]);
@@ -532,7 +556,7 @@ struct Space::Impl {
 
   bool spheres_touch_shape(int a, int b, const pinocchio::SE3& pose) const {
     for (int i : spheres_of[a])
-      if (shape_distance(shapes[b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
+      if (!beyond(b, pose, world[i], sphere_radius[i])) return true;
     return false;
   }
 
@@ -546,9 +570,8 @@ struct Space::Impl {
         place(t.b);
         if (spheres_touch(t.a, t.b)) return true;
       } else if (t.kind == 1) {
-        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
-        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        const pinocchio::SE3& pose = pose_of(t.b);
+        if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
         if (spheres_touch_shape(t.a, t.b, pose)) return true;
       } else {
@@ -926,31 +949,39 @@ struct Space::Impl {
     return outers_apart(t.pair, common);
   }
 
-  // The spheres of a pair (kind 0), each grown by its motion bound, do not touch.
+  // The spheres of a pair (kind 0), each grown by its motion bound, do not touch. A sphere of t.a whose grown ball
+  // clears the grown ball holding t.b clears each of t.b's grown spheres (that ball's bound covers every point of
+  // it): its row is skipped.
   bool spheres_apart(const PairTest& t, int common) {
-    const double grow = geometry_tail(t.a, common) + geometry_tail(t.b, common);
-    if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b] + grow) return true;
+    const Eigen::Vector3d& cb = bound_world[t.b];
+    const double rb = bound_radius[t.b] + geometry_tail(t.b, common);
+    if ((bound_world[t.a] - cb).norm() > bound_radius[t.a] + geometry_tail(t.a, common) + rb) return true;
     place(t.a);
     place(t.b);
-    for (int i : spheres_of[t.a])
-      for (int j : spheres_of[t.b])
-        if ((world[i] - world[j]).norm() <=
-            sphere_radius[i] + sphere_radius[j] + sphere_tail(i, common) + sphere_tail(j, common))
-          return false;
+    grown.clear();  // t.b's spheres' grown radii, when first needed
+    for (int i : spheres_of[t.a]) {
+      const double ri = sphere_radius[i] + sphere_tail(i, common);
+      if ((world[i] - cb).norm() > ri + rb) continue;
+      if (grown.empty())
+        for (int j : spheres_of[t.b]) grown.push_back(sphere_radius[j] + sphere_tail(j, common));
+      const double* rj = grown.data();
+      for (int j : spheres_of[t.b]) {
+        const double reach = ri + *rj++;
+        if ((world[i] - world[j]).squaredNorm() <= reach * reach) return false;
+      }
+    }
     return true;
   }
+  std::vector<double> grown;
 
   // The spheres of t.a, grown, do not touch the primitive t.b grown by its own motion bound (kind 1).
   bool sphere_primitive_apart(const PairTest& t, int common) {
-    const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-    const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+    const pinocchio::SE3& pose = pose_of(t.b);
     const double grow_b = geometry_tail(t.b, common);
-    if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)
-      return true;
+    if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)) return true;
     place(t.a);
     for (int i : spheres_of[t.a])
-      if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i] + sphere_tail(i, common) + grow_b)
-        return false;
+      if (!beyond(t.b, pose, world[i], sphere_radius[i] + sphere_tail(i, common) + grow_b)) return false;
     return true;
   }
 
@@ -1158,6 +1189,8 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
   }
   p.shapes.clear();
   for (const auto& g : p.geom.geometryObjects) p.shapes.push_back(shape_of(g));
+  p.shape_pose.assign(ng, pinocchio::SE3::Identity());
+  p.shape_placed.assign(ng, false);
   p.outer.assign(ng, nullptr);
   p.outer_ready.assign(ng, false);
   p.outer_requests.clear();
