@@ -86,7 +86,8 @@ Eigen::Matrix3d zyx(double yaw, double pitch, double roll) {
 // The convex hull of a mesh (with its triangles, for coal's hill-climbing support), built once per mesh content
 // and process: qhull costs about 1 ms a mesh, and every plan builds a new Space. Null when qhull fails or the
 // mesh cannot have a hull (fewer than 4 vertices, no triangles, a non-finite vertex: qhull would crash on it):
-// such a mesh's pairs go from the spheres straight to coal.
+// such a mesh's pairs go from the spheres straight to coal. (buildConvexHull's return value says whether the mesh
+// was convex itself, not whether the hull was built: a concave mesh's hull holds it all the same.)
 std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
   static std::mutex guard;
   static std::map<std::string, std::shared_ptr<coal::ConvexBase>> built;
@@ -99,7 +100,8 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
   if (found != built.end()) return found->second;
   std::shared_ptr<coal::ConvexBase> hull;
   try {  // coal refuses some meshes with an exception (e.g. "Too many neighbors": a vertex of over 255 edges)
-    if (mesh.buildConvexHull(true, "Qt")) hull = mesh.convex;
+    mesh.buildConvexHull(true, "Qt");
+    hull = mesh.convex;
   } catch (const std::exception&) {
   }
   built.emplace(std::move(key), hull);
