@@ -674,6 +674,8 @@ struct Space::Impl {
   // their d summed: rotating, rate 1, prismatic; turn: rotating d of l and its ancestors
   std::vector<Eigen::Vector3d> joint_a, joint_b;
   std::vector<double> joint_rot, joint_lin, joint_slide, joint_turn;
+  // and over l and its ancestors: rot, lin, step, step * rot summed (a holder's rate bound over every coordinate)
+  std::vector<double> up_rot, up_lin, up_step, up_step_rot;
   // per (joint j, depth p), summed when first asked for in a span: ChainSums and A_p, B_p per vertex
   std::vector<ChainSums> chain_sums;  // (njoints, max_depth + 1)
   std::vector<Eigen::Vector3d> chain_a, chain_b;  // (njoints, max_depth + 1, room)
@@ -773,6 +775,10 @@ struct Space::Impl {
     joint_lin.assign(nj, 0.0);
     joint_slide.assign(nj, 0.0);
     joint_turn.assign(nj, 0.0);
+    up_rot.assign(nj, 0.0);
+    up_lin.assign(nj, 0.0);
+    up_step.assign(nj, 0.0);
+    up_step_rot.assign(nj, 0.0);
     chain_sums.assign(nj * (max_depth + 1), ChainSums());
     room = 0;
     pair_common.clear();
@@ -839,8 +845,20 @@ struct Space::Impl {
       joint_rot[l] = rot;
       joint_lin[l] = lin;
       joint_slide[l] = slide;
-      joint_turn[l] = joint_turn[model.parents[l]] + rot;
+      const int up = static_cast<int>(model.parents[l]);
+      joint_turn[l] = joint_turn[up] + rot;
+      up_rot[l] = up_rot[up] + rot;
+      up_lin[l] = up_lin[up] + lin;
+      up_step[l] = up_step[up] + step[l];
+      up_step_rot[l] = up_step_rot[up] + up_step[l] * rot;
     }
+  }
+
+  // Holder h's rate bound over every coordinate, whatever the pair (>= its tail at any depth): rho sum_rot d +
+  // sum_rot L d + sum_lin d with L = up_step[j] - up_step[l]. A cheap first test: pairs it clears need no tails.
+  double rate_bound(const Holder& h) const {
+    const int j = h.joint;
+    return h.rho * up_rot[j] + up_step[j] * up_rot[j] - up_step_rot[j] + up_lin[j];
   }
 
   // The sums over joint j's supports at depth >= p for the current span (see ChainSums); A_p, B_p per vertex at
@@ -956,14 +974,18 @@ struct Space::Impl {
   // it): its row is skipped.
   bool spheres_apart(const PairTest& t, int common) {
     const Eigen::Vector3d& cb = bound_world[t.b];
+    const double apart = (bound_world[t.a] - cb).norm() - bound_radius[t.a] - bound_radius[t.b];
+    if (apart > rate_bound(geometry_holder[t.a]) + rate_bound(geometry_holder[t.b])) return true;
     const double rb = bound_radius[t.b] + geometry_tail(t.b, common);
-    if ((bound_world[t.a] - cb).norm() > bound_radius[t.a] + geometry_tail(t.a, common) + rb) return true;
+    if (apart > geometry_tail(t.a, common) + geometry_tail(t.b, common)) return true;
     place(t.a);
     place(t.b);
     grown.clear();  // t.b's spheres' grown radii, when first needed
     for (int i : spheres_of[t.a]) {
-      const double ri = sphere_radius[i] + sphere_tail(i, common);
-      if ((world[i] - cb).norm() > ri + rb) continue;
+      const double gap = (world[i] - cb).norm() - sphere_radius[i] - rb;
+      if (gap > rate_bound(sphere_holder[i])) continue;
+      const double tail = sphere_tail(i, common), ri = sphere_radius[i] + tail;
+      if (gap > tail) continue;
       if (grown.empty())
         for (int j : spheres_of[t.b]) grown.push_back(sphere_radius[j] + sphere_tail(j, common));
       const double* rj = grown.data();
@@ -979,6 +1001,9 @@ struct Space::Impl {
   // The spheres of t.a, grown, do not touch the primitive t.b grown by its own motion bound (kind 1).
   bool sphere_primitive_apart(const PairTest& t, int common) {
     const pinocchio::SE3& pose = pose_of(t.b);
+    if (beyond(t.b, pose, bound_world[t.a],
+               bound_radius[t.a] + rate_bound(geometry_holder[t.a]) + rate_bound(geometry_holder[t.b])))
+      return true;
     const double grow_b = geometry_tail(t.b, common);
     if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)) return true;
     place(t.a);
