@@ -852,6 +852,8 @@ struct Space::Impl {
       up_step[l] = up_step[up] + step[l];
       up_step_rot[l] = up_step_rot[up] + up_step[l] * rot;
     }
+    geometry_rate.resize(geometry_holder.size());
+    for (std::size_t g = 0; g < geometry_holder.size(); ++g) geometry_rate[g] = rate_bound(geometry_holder[g]);
   }
 
   // Holder h's rate bound over every coordinate, whatever the pair (>= its tail at any depth): rho sum_rot d +
@@ -860,6 +862,7 @@ struct Space::Impl {
     const int j = h.joint;
     return h.rho * up_rot[j] + up_step[j] * up_rot[j] - up_step_rot[j] + up_lin[j];
   }
+  std::vector<double> geometry_rate;  // per geometry: its holder's rate_bound in the current span
 
   // The sums over joint j's supports at depth >= p for the current span (see ChainSums); A_p, B_p per vertex at
   // chain_a, chain_b[(j (max_depth + 1) + p) room].
@@ -974,8 +977,9 @@ struct Space::Impl {
   // it): its row is skipped.
   bool spheres_apart(const PairTest& t, int common) {
     const Eigen::Vector3d& cb = bound_world[t.b];
+    const double far = bound_radius[t.a] + bound_radius[t.b] + geometry_rate[t.a] + geometry_rate[t.b];
+    if ((bound_world[t.a] - cb).squaredNorm() > far * far) return true;
     const double apart = (bound_world[t.a] - cb).norm() - bound_radius[t.a] - bound_radius[t.b];
-    if (apart > rate_bound(geometry_holder[t.a]) + rate_bound(geometry_holder[t.b])) return true;
     const double rb = bound_radius[t.b] + geometry_tail(t.b, common);
     if (apart > geometry_tail(t.a, common) + geometry_tail(t.b, common)) return true;
     place(t.a);
@@ -1002,7 +1006,7 @@ struct Space::Impl {
   bool sphere_primitive_apart(const PairTest& t, int common) {
     const pinocchio::SE3& pose = pose_of(t.b);
     if (beyond(t.b, pose, bound_world[t.a],
-               bound_radius[t.a] + rate_bound(geometry_holder[t.a]) + rate_bound(geometry_holder[t.b])))
+               bound_radius[t.a] + geometry_rate[t.a] + geometry_rate[t.b]))
       return true;
     const double grow_b = geometry_tail(t.b, common);
     if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)) return true;
@@ -1287,7 +1291,7 @@ bool Space::sweep_free(const double* states, int k) {
   return p.span_free(states + static_cast<long>(k / 2) * n());
 }
 
-std::vector<double> Space::sweep_bounds(const double* states, int k) {
+std::vector<double> Space::sweep_bounds(const double* states, int k, int common, bool rates) {
   Impl& p = *impl_;
   if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
   if (k < 1) throw std::invalid_argument("a span needs at least one state");
@@ -1296,7 +1300,10 @@ std::vector<double> Space::sweep_bounds(const double* states, int k) {
   p.begin_span(states + static_cast<long>(k / 2) * n());
   std::vector<double> out;
   for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.place(g);
-  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s) out.push_back(p.sphere_tail(static_cast<int>(s), -1));
+  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s)
+    out.push_back(rates ? p.rate_bound(p.sphere_holder[s])
+                  : common + 1 > p.sphere_holder[s].depth ? NAN
+                                                          : p.sphere_tail(static_cast<int>(s), std::max(common, -1)));
   return out;
 }
 
