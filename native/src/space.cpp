@@ -642,6 +642,9 @@ struct Space::Impl {
   // + r + the deeper joints' reach), was given up: it cost a norm per coordinate and holder and, on 10 planned
   // paths each of talos reach, panda wall and maze, PR2 dual-arm and drinkcan, changed the sweep tests of one
   // dual-arm path only, by 2.)
+  // First tests, sound for the same reasons: a holder's rate bound over every coordinate (prefix sums per joint, at
+  // least its bound at any depth) before its tails; a sphere whose grown ball clears the grown ball holding the other
+  // geometry clears each of that geometry's grown spheres (the holding ball's bound covers every point of it).
   struct Holder {
     int joint = 0, depth = 1;                          // its joint and the joint's supports
     Eigen::Vector3d center = Eigen::Vector3d::Zero();  // in the joint's frame
