@@ -640,8 +640,8 @@ struct Space::Impl {
   // s0 + s1 rho likewise (lin: prismatic and the base's x, y, z). Per holder that leaves |A_p + B_p x x| at each
   // vertex and a few products. (A tightening of the rates at the middle state, min(lever_k, its exact speed there
   // + r + the deeper joints' reach), was given up: it cost a norm per coordinate and holder and, on 10 planned
-  // paths each of talos reach, panda wall and maze, PR2 dual-arm and drinkcan, changed the sweep tests of one
-  // dual-arm path only, by 2.)
+  // paths each of talos reach, panda wall and maze, PR2 dual-arm and drinkcan, changed 2 sweep tests in all, on the
+  // dual-arm paths.)
   // First tests, sound for the same reasons: a holder's rate bound over every coordinate (prefix sums per joint, at
   // least its bound at any depth) before its tails; a sphere whose grown ball clears the grown ball holding the other
   // geometry clears each of that geometry's grown spheres (the holding ball's bound covers every point of it).
