@@ -103,6 +103,11 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
     mesh.buildConvexHull(true, "Qt");
     hull = mesh.convex;
   } catch (const std::exception&) {
+    try {  // the hull's facets as qhull merges them, not triangulated: fewer edges per vertex (centauro's pelvis)
+      mesh.buildConvexHull(false, "");
+      hull = mesh.convex;
+    } catch (const std::exception&) {
+    }
   }
   built.emplace(std::move(key), hull);
   return hull;
