@@ -20,7 +20,8 @@ TALOS_PARTS = ("leg_left_3", "leg_right_3", "leg_left_4", "leg_right_4", "torso_
 
 
 def _problem(kind: str):
-    """(robot, space, core with sphere models set, reference state, spread of random states) of a scene."""
+    """(robot, space, core with sphere models set, reference state, spread of random states, sphere joints (S,))
+    of a scene."""
     if kind == "talos":
         task = get_task("balance", "talos")
         scene = get_scene(task, "reach")
@@ -40,13 +41,14 @@ def _problem(kind: str):
         core = native.core_space(space)
         native.set_spheres(core, {"joint": model.joint, "center": model.center, "radius": model.radius,
                                   "geometry": model.geometry, "exact": [(parts[0], parts[1])]})
-        return task.robot, space, core, task.home, 0.06
+        return task.robot, space, core, task.home, 0.06, np.asarray(model.joint)
     task = get_task("pose", "panda")
     scene = get_scene(task, kind)
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     core = native.core_space(space)
-    native.set_spheres(core, native.space_spheres(space))
-    return task.robot, space, core, scene.start, 0.8
+    models = native.space_spheres(space)
+    native.set_spheres(core, models)
+    return task.robot, space, core, scene.start, 0.8, np.asarray(models["joint"])
 
 
 @pytest.fixture(scope="module", params=["maze", "wall", "talos"])
@@ -63,7 +65,7 @@ def _polylines(robot, reference, spread, count, rng, waypoints=4):
 def test_the_motion_bound_holds_on_random_spans(problem):
     """No sphere centre moves farther from its place at a span's middle state than its bound, at the dense states
     and between them (the bound covers the polyline through the states, waypoints included)."""
-    robot, _, core, reference, spread = problem
+    robot, _, core, reference, spread, _ = problem
     rng = np.random.default_rng(0)
     assert core.sweeps, core.sweep_report()
     worst = 0.0
@@ -82,10 +84,42 @@ def test_the_motion_bound_holds_on_random_spans(problem):
     assert worst > 0.3  # a bound, not a blanket: some sphere moves a good part of it
 
 
+def test_the_motion_bounds_hold_relative_to_every_support(problem):
+    """A pair's spheres are grown by their motion below the pair's deepest common joint: no sphere centre moves
+    farther, in the frame of any joint supporting it, than its bound at that joint's depth; and the rate bound the
+    sphere tests try first covers the motion in the world (brute force at and between the states of random spans)."""
+    robot, _, core, reference, spread, joints = problem
+    rng = np.random.default_rng(3)
+    supports = [list(robot.model.supports[j]) for j in range(robot.model.njoints)]
+    depth = max(len(supports[j]) for j in joints)
+    tested, worst = 0, 0.0
+    for path in _polylines(robot, reference, spread, 3, rng, waypoints=3):
+        states = densify(path, 0.005)[0]
+        for k in (3, 16):
+            start = int(rng.integers(0, len(states) - k))
+            span = np.ascontiguousarray(states[start:start + k])
+            fine = densify(span, 0.001)[0]
+            fine = np.vstack([span[k // 2], fine[:: max(1, len(fine) // 12)]])
+            centers = np.stack([core.sphere_centers(q) for q in fine])  # (Q, S, 3)
+            poses = robot.joint_poses(fine, sorted(set(joints.tolist())))
+            moved = np.linalg.norm(centers - centers[0], axis=2)
+            assert np.all(moved <= core.sweep_bounds(span, rates=True) + 1e-12)
+            for common in range(depth):
+                bound = core.sweep_bounds(span, common)
+                for s in np.flatnonzero(np.isfinite(bound)):
+                    frame = poses[supports[joints[s]][common]]  # (Q, 4, 4)
+                    local = np.einsum("qji,qj->qi", frame[:, :3, :3], centers[:, s] - frame[:, :3, 3])
+                    shift = np.linalg.norm(local - local[0], axis=1).max()
+                    assert shift <= bound[s] + 1e-12
+                    tested += 1
+                    worst = max(worst, shift / bound[s] if bound[s] > 0 else 0.0)
+    assert tested > 100 and worst > 0.3  # bounds, not blankets
+
+
 def test_a_certified_span_never_holds_a_colliding_state(problem):
     """Brute force on short spans: every span the sweep certifies is collision-free state by state for coal, and
     between states; spans that collide exist and are refused."""
-    robot, space, core, reference, spread = problem
+    robot, space, core, reference, spread, _ = problem
     rng = np.random.default_rng(1)
     certified = refused_colliding = 0
     for path in _polylines(robot, reference, spread, 10, rng, waypoints=3):
@@ -105,7 +139,7 @@ def test_a_certified_span_never_holds_a_colliding_state(problem):
 def test_sweeps_give_the_state_by_state_report(problem):
     """Random paths, valid and invalid (limits, collisions; with the real tolerance also the constraint): every
     field of validate_path's report equals the state-by-state one, for fewer per-state checks."""
-    robot, space, core, reference, spread = problem
+    robot, space, core, reference, spread, _ = problem
     rng = np.random.default_rng(2)
     tolerance = np.asarray(space.constraint.tolerance, float)
     paths = [p for scale in (40, 4, 1) for p in _polylines(robot, reference, spread / scale, 8, rng)]

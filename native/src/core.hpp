@@ -121,7 +121,10 @@ class Space {
   bool sweep_free(const double* states, int k);
   // (S,) bounds on how far each sphere centre moves from the middle state (k / 2) along the polyline through
   // states (k, n) (what sweep_free inflates the spheres by, before relative motion is taken out).
-  std::vector<double> sweep_bounds(const double* states, int k);
+  // common >= 0: in the frame of the sphere's joint's support at that depth, moved by the deeper joints only (a
+  // pair's relative motion; NaN where the chain is not that deep). rates: the rate bound over every coordinate
+  // that the sphere and primitive tests try first instead (common ignored).
+  std::vector<double> sweep_bounds(const double* states, int k, int common = -1, bool rates = false);
   // (S, 3) world centres of the spheres at q (n,).
   RowMat sphere_centers(const double* q);
   std::string sphere_report() const;  // what the sphere check covers, for people

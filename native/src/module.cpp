@@ -217,13 +217,16 @@ NB_MODULE(manifoldgen_core, m) {
           "them is certified collision-free.")
       .def(
           "sweep_bounds",
-          [](Space& s, const In2& states) {
+          [](Space& s, const In2& states, int common, bool rates) {
             check_cols(states, s);
-            std::vector<double> b = s.sweep_bounds(states.data(), static_cast<int>(states.shape(0)));
+            std::vector<double> b = s.sweep_bounds(states.data(), static_cast<int>(states.shape(0)), common, rates);
             const std::size_t S = b.size();
             return owned(std::move(b), {S});
           },
-          "states"_a, "(S,) bounds on each sphere centre's motion from the middle state (k // 2) along states (k, n).")
+          "states"_a, "common"_a = -1, "rates"_a = false,
+          "(S,) bounds on each sphere centre's motion from the middle state (k // 2) along states (k, n); common >= 0: "
+          "relative to the frame of its joint's support at that depth (NaN where the chain is shorter); rates: the "
+          "rate bound over every coordinate.")
       .def(
           "sphere_centers",
           [](Space& s, const In1& q) {

@@ -86,7 +86,8 @@ Eigen::Matrix3d zyx(double yaw, double pitch, double roll) {
 // The convex hull of a mesh (with its triangles, for coal's hill-climbing support), built once per mesh content
 // and process: qhull costs about 1 ms a mesh, and every plan builds a new Space. Null when qhull fails or the
 // mesh cannot have a hull (fewer than 4 vertices, no triangles, a non-finite vertex: qhull would crash on it):
-// such a mesh's pairs go from the spheres straight to coal.
+// such a mesh's pairs go from the spheres straight to coal. (buildConvexHull's return value says whether the mesh
+// was convex itself, not whether the hull was built: a concave mesh's hull holds it all the same.)
 std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
   static std::mutex guard;
   static std::map<std::string, std::shared_ptr<coal::ConvexBase>> built;
@@ -99,8 +100,14 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
   if (found != built.end()) return found->second;
   std::shared_ptr<coal::ConvexBase> hull;
   try {  // coal refuses some meshes with an exception (e.g. "Too many neighbors": a vertex of over 255 edges)
-    if (mesh.buildConvexHull(true, "Qt")) hull = mesh.convex;
+    mesh.buildConvexHull(true, "Qt");
+    hull = mesh.convex;
   } catch (const std::exception&) {
+    try {  // the hull's facets as qhull merges them, not triangulated: fewer edges per vertex (centauro's pelvis)
+      mesh.buildConvexHull(false, "");
+      hull = mesh.convex;
+    } catch (const std::exception&) {
+    }
   }
   built.emplace(std::move(key), hull);
   return hull;
@@ -110,6 +117,7 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
 struct Shape {
   int kind = -1;  // 0 box (half sides), 1 sphere (radius), 2 cylinder (radius, half length along z); -1 none
   Eigen::Vector3d size = Eigen::Vector3d::Zero();
+  double outer = 0.0;  // circumradius: the shape lies within this distance of its origin
 };
 
 // Distance from point p (in the shape's frame) to the shape (0 inside).
@@ -126,13 +134,16 @@ Shape shape_of(const pinocchio::GeometryObject& g) {
   if (auto box = std::dynamic_pointer_cast<coal::Box>(g.geometry)) {
     s.kind = 0;
     s.size = box->halfSide;
+    s.outer = s.size.norm();
   } else if (auto sphere = std::dynamic_pointer_cast<coal::Sphere>(g.geometry)) {
     s.kind = 1;
     s.size[0] = sphere->radius;
+    s.outer = s.size[0];
   } else if (auto cyl = std::dynamic_pointer_cast<coal::Cylinder>(g.geometry)) {
     s.kind = 2;
     s.size[0] = cyl->radius;
     s.size[1] = cyl->halfLength;
+    s.outer = std::hypot(s.size[0], s.size[1]);
   }
   return s;
 }
@@ -392,6 +403,11 @@ struct Space::Impl {
   void fill_inequality(const double* q, double* G) {
     if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
     else pinocchio::forwardKinematics(model, data, to_full(q));
+    inequality_rows(G);
+  }
+
+  // G (g,) from data's kinematics (and centre of mass when the polygon needs it).
+  void inequality_rows(double* G) {
     int row = 0;
     for (const Inequality& c : inequalities) {
       if (c.kind == 0) {
@@ -403,6 +419,32 @@ struct Space::Impl {
       }
       row += c.rows();
     }
+  }
+
+  // One state's equality violation (max |F_i| / tol_i; 0 without terms) and, when it is within limit, whether the
+  // built-in inequalities hold, from one forward kinematics (the centre of mass's pass when the polygon needs it;
+  // pinocchio's centerOfMass runs forwardKinematics first, so the residual is the same) where Space::violation and
+  // inequalities_hold make one each. Built-in terms only (not batched()); counts the evaluation as residual does.
+  std::vector<double> state_F, state_G;
+  double state_check(const double* q, double limit, bool& hold) {
+    hold = true;
+    if (m == 0 && g == 0) return 0.0;
+    if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
+    else pinocchio::forwardKinematics(model, data, to_full(q));
+    double worst = 0.0;
+    if (m > 0) {
+      ++tally->evaluations;
+      state_F.resize(m);
+      fill_residual(q, state_F.data());
+      for (int i = 0; i < m; ++i) worst = std::max(worst, std::abs(state_F[i]) / tolerance[i]);
+    }
+    if (worst <= limit && g > 0) {
+      state_G.resize(g);
+      inequality_rows(state_G.data());
+      for (double x : state_G)
+        if (x > 0) hold = false;
+    }
+    return worst;
   }
 
   // A geometry's convex outer shape (a mesh's hull with its triangles, for coal's hill-climbing support;
@@ -443,6 +485,26 @@ struct Space::Impl {
     return pinocchio::computeCollision(geom, *geom_data, static_cast<pinocchio::PairIndex>(k));
   }
 
+  // A primitive's world pose at the latest collision kinematics (computed once per state).
+  const pinocchio::SE3& pose_of(int b) {
+    if (!shape_placed[b]) {
+      const pinocchio::GeometryObject& g = geom.geometryObjects[b];
+      shape_pose[b] = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
+      shape_placed[b] = true;
+    }
+    return shape_pose[b];
+  }
+  std::vector<pinocchio::SE3> shape_pose;  // per geometry (primitives)
+  std::vector<char> shape_placed;
+
+  // Whether the world point x lies farther than r from primitive b (at pose): farther than its circumradius + r
+  // from its origin (no transform), else by the exact distance.
+  bool beyond(int b, const pinocchio::SE3& pose, const Eigen::Vector3d& x, double r) const {
+    const double reach = shapes[b].outer + r;
+    if ((x - pose.translation()).squaredNorm() > reach * reach) return true;
+    return shape_distance(shapes[b], pose.actInv(x)) > r;
+  }
+
   // Exact collision test with the sphere models as a per-pair broad phase: a pair whose spheres touch
   // nothing is free; every other pair (spheres touching, exact pairs) gets pair_collides. flagged: some
   // pair's spheres touched (the sphere test alone would have called the state in collision).
@@ -456,9 +518,8 @@ struct Space::Impl {
         place(t.b);
         if (!spheres_touch(t.a, t.b)) continue;
       } else if (t.kind == 1) {
-        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
-        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        const pinocchio::SE3& pose = pose_of(t.b);
+        if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
         if (!spheres_touch_shape(t.a, t.b, pose)) continue;
       } else if (!spheres_of[t.a].empty() && !spheres_of[t.b].empty()) {
@@ -481,6 +542,7 @@ struct Space::Impl {
     if (jacobians) pinocchio::computeJointJacobians(model, cdata, to_full(q));
     else pinocchio::forwardKinematics(model, cdata, to_full(q));
     std::fill(placed_spheres.begin(), placed_spheres.end(), false);
+    std::fill(shape_placed.begin(), shape_placed.end(), false);
     placed_geometries = false;
     for (std::size_t g = 0; g < bound_joint.size(); ++g)
       if (bound_joint[g] >= 0) bound_world[g] = cdata.oMi[bound_joint[g]].act(bound_center[g]);
@@ -501,7 +563,7 @@ struct Space::Impl {
 
   bool spheres_touch_shape(int a, int b, const pinocchio::SE3& pose) const {
     for (int i : spheres_of[a])
-      if (shape_distance(shapes[b], pose.actInv(world[i])) <= sphere_radius[i]) return true;
+      if (!beyond(b, pose, world[i], sphere_radius[i])) return true;
     return false;
   }
 
@@ -515,9 +577,8 @@ struct Space::Impl {
         place(t.b);
         if (spheres_touch(t.a, t.b)) return true;
       } else if (t.kind == 1) {
-        const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-        const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
-        if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a]) continue;
+        const pinocchio::SE3& pose = pose_of(t.b);
+        if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
         if (spheres_touch_shape(t.a, t.b, pose)) return true;
       } else {
@@ -562,11 +623,6 @@ struct Space::Impl {
   // hulls (exact pairs; each holds its geometry) when their distance exceeds the pair's security margin +
   // HULL_MARGIN + D_A' + D_B' (coal's test with that margin: the per-state mid phase's slack). Since every
   // sphere set and hull holds its geometry, no state of a certified span collides for coal.
-  // Tighter, per span: the rates above hold everywhere; at the span's middle state the exact speed of the ball's
-  // centre x per unit q_k is known (revolute: its distance rho_k from k's axis; the base's Euler angles: at most
-  // |x - o_base|), and in k's frame (the base's) x moves only through the deeper joints, by at most
-  // sum_{k' deeper} rate_k' d_k' over the span. So rate_k = min(lever_k, rho_k + r + sum_{k' deeper} lever_k' d_k')
-  // holds over the whole span as well.
   // First order, tighter still where the joints' motions cancel (a constrained hand): with c_k(q) the velocity of
   // x per unit q_k (a column of x's Jacobian) and delta(s) = q(s) - q(m),
   //   x(s) - x(m) = J(m) delta(s) + integral (c_k(q(t)) - c_k(q(m))) dq_k(t),
@@ -580,36 +636,58 @@ struct Space::Impl {
   //   D <= max_vertices |J(m) delta| + sum_k d_k E_k + r sum_{rotating k} d_k,
   // over the non-common coordinates for a pair (in the common joint's frame, whose own rotation cancels in |.|);
   // the smaller of this and the rate bound is used.
-  struct Reach {
-    int coord;     // active coordinate
-    double rate;   // lever (or 1): bound on |dx/dq_coord| anywhere
-    int depth;     // position of the joint it moves in the holder's joint's supports (0: the universe)
-    int joint;     // that joint
-    int kind;      // 0 revolute, 1 prismatic, 2 the base's yaw, pitch, roll, 3 the base's x, y, z
-  };
+  // Computed once per span and shared (chain()): every term is affine in what differs between holders. A column
+  // is c_k(x) = a_k + b_k x x (revolute or prismatic: k's world Jacobian column, linear part at the origin and
+  // angular part; the base's x, y, z: a unit vector; its yaw, pitch, roll: axis x (x - o_base)), so over the
+  // coordinates below depth p, J(m) delta = A_p + B_p x x with A_p, B_p sums over the joints of the chain, the
+  // same for every holder of that joint; and lever_k = rho + L_k (rho = |c| + r, L_k the joints' steps between k
+  // and the holder's joint), so the rate bound is rho sum_rot d + sum_rot L d + sum_lin d and sum_k d_k E_k is
+  // s0 + s1 rho likewise (lin: prismatic and the base's x, y, z). Per holder that leaves |A_p + B_p x x| at each
+  // vertex and a few products. (A tightening of the rates at the middle state, min(lever_k, its exact speed there
+  // + r + the deeper joints' reach), was given up: it cost a norm per coordinate and holder and, on 10 planned
+  // paths each of talos reach, panda wall and maze, PR2 dual-arm and drinkcan, changed 2 sweep tests in all, on the
+  // dual-arm paths.)
+  // First tests, sound for the same reasons: a holder's rate bound over every coordinate (prefix sums per joint, at
+  // least its bound at any depth) before its tails; a sphere whose grown ball clears the grown ball holding the other
+  // geometry clears each of that geometry's grown spheres (the holding ball's bound covers every point of it).
   struct Holder {
-    std::vector<Reach> reach;
-    int joint = 0, depth = 1;                       // its joint and the joint's supports
+    int joint = 0, depth = 1;                          // its joint and the joint's supports
     Eigen::Vector3d center = Eigen::Vector3d::Zero();  // in the joint's frame
-    double radius = 0.0;
-    long offset = 0;   // of its tail in the tails buffer (depth + 1 entries)
+    double radius = 0.0, rho = 0.0;                    // rho = |center| + radius
+    long offset = 0;                                   // of its tails in the tails buffers (depth + 1 entries)
   };
-  std::vector<double> scratch, turn, second;          // fill_tail's sums by depth
-  std::vector<Eigen::Vector3d> moved;                 // fill_tail's first-order displacements (vertex, depth)
+  // The latest span's sums over the coordinates of joint l and its ancestors' chain (chain(j, p): over j's
+  // supports at depth >= p): rot (d of rotating coordinates), lin (rate-1 coordinates' d plus L d of rotating
+  // ones: the rate bound is rho rot + lin), s0 + s1 rho = sum_k d_k E_k.
+  struct ChainSums {
+    double rot = 0.0, lin = 0.0, s0 = 0.0, s1 = 0.0;
+    long span = -1;  // the span they were summed for
+  };
   const double* span_states = nullptr;                // the path's dense states (rows of n)
   long span_mid = 0;                                  // the current span's middle state
   std::vector<long> span_vertices;                    // its states where the polyline may turn (ends, waypoints)
+  long span_id = 0;                                   // counts spans: cached sums and tails of older ones are stale
   bool sweeps_on = true;
   std::string sweep_unavailable;  // why no sweep ("" when available)
   std::vector<Holder> sphere_holder, geometry_holder;
-  std::vector<double> sphere_tails, geometry_tails;  // per holder: tail[p + 1] = sum of rate * d over depth > p
-  std::vector<char> sphere_tails_ready;              // per geometry: its spheres' tails are those of this span
+  std::vector<double> sphere_tails, geometry_tails;  // per holder: tail[p + 1] = its motion bound below depth p
+  std::vector<long> sphere_spans, geometry_spans;    // the span each tail was computed for
   std::vector<int> pair_common;                      // per collision pair: depth of the deepest common joint
   std::vector<double> step;                          // per joint: |translation(P_i X_i)| bound (see above)
   std::vector<int> coord_of;                         // per joint: its active coordinate (-1 locked; base: 0)
   std::vector<char> prismatic;                       // per joint
   Vec span_d;                                        // (n,) d_k of the current span
   std::vector<double> variation;                     // (M, n) cumulative |dq| along the path being checked
+  // per span, per joint l: its coordinates' (a_k, b_k) delta_v,k summed, per vertex v ((njoints, room));
+  // their d summed: rotating, rate 1, prismatic; turn: rotating d of l and its ancestors
+  std::vector<Eigen::Vector3d> joint_a, joint_b;
+  std::vector<double> joint_rot, joint_lin, joint_slide, joint_turn;
+  // and over l and its ancestors: rot, lin, step, step * rot summed (a holder's rate bound over every coordinate)
+  std::vector<double> up_rot, up_lin, up_step, up_step_rot;
+  // per (joint j, depth p), summed when first asked for in a span: ChainSums and A_p, B_p per vertex
+  std::vector<ChainSums> chain_sums;  // (njoints, max_depth + 1)
+  std::vector<Eigen::Vector3d> chain_a, chain_b;  // (njoints, max_depth + 1, room)
+  int max_depth = 1, room = 0;  // the longest chain of supports; vertices per span the buffers hold
 
   bool sweeps_ready() const { return sweeps_on && sweep_unavailable.empty() && !sphere_joint.empty(); }
 
@@ -650,27 +728,14 @@ struct Space::Impl {
     }
   }
 
-  // The rates of a ball (centre c, radius r) fixed in joint j's frame.
+  // A ball (centre c, radius r) fixed in joint j's frame.
   Holder holder_of(int j, const Eigen::Vector3d& c, double r) const {
     Holder h;
     h.joint = j;
+    h.depth = static_cast<int>(model.supports[j].size());
     h.center = c;
     h.radius = r;
-    const auto& chain = model.supports[j];
-    h.depth = static_cast<int>(chain.size());
-    for (int p = h.depth - 1; p >= 1; --p) {
-      const int l = static_cast<int>(chain[p]);
-      double lever = c.norm() + r;
-      for (int p2 = p + 1; p2 < h.depth; ++p2) lever += step[chain[p2]];
-      const int k = coord_of[l];
-      if (k < 0) continue;
-      if (floating && k == 0 && model.joints[l].idx_q() == base_q) {
-        for (int b = 0; b < 3; ++b) h.reach.push_back({b, 1.0, p, l, 3});
-        for (int b = 3; b < 6; ++b) h.reach.push_back({b, lever, p, l, 2});
-      } else {
-        h.reach.push_back({k, prismatic[l] ? 1.0 : lever, p, l, prismatic[l] ? 1 : 0});
-      }
-    }
+    h.rho = c.norm() + r;
     return h;
   }
 
@@ -687,6 +752,7 @@ struct Space::Impl {
       offset += sphere_holder.back().depth + 1;
     }
     sphere_tails.assign(offset, 0.0);
+    sphere_spans.assign(offset, -1);
     geometry_holder.clear();
     offset = 0;
     for (std::size_t g = 0; g < ng; ++g) {
@@ -708,7 +774,21 @@ struct Space::Impl {
       offset += geometry_holder.back().depth + 1;
     }
     geometry_tails.assign(offset, 0.0);
-    sphere_tails_ready.assign(ng, false);
+    geometry_spans.assign(offset, -1);
+    max_depth = 1;
+    for (std::size_t j = 0; j < model.supports.size(); ++j)
+      max_depth = std::max(max_depth, static_cast<int>(model.supports[j].size()));
+    const std::size_t nj = model.njoints;
+    joint_rot.assign(nj, 0.0);
+    joint_lin.assign(nj, 0.0);
+    joint_slide.assign(nj, 0.0);
+    joint_turn.assign(nj, 0.0);
+    up_rot.assign(nj, 0.0);
+    up_lin.assign(nj, 0.0);
+    up_step.assign(nj, 0.0);
+    up_step_rot.assign(nj, 0.0);
+    chain_sums.assign(nj * (max_depth + 1), ChainSums());
+    room = 0;
     pair_common.clear();
     for (const auto& pair : geom.collisionPairs) {
       const auto& a = model.supports[geom.geometryObjects[pair.first].parentJoint];
@@ -719,68 +799,146 @@ struct Space::Impl {
     }
   }
 
-  // tail[p + 1] = sum over the holder's rates deeper than p of rate * d (p = -1 .. depth - 1), the rates
-  // tightened at the span's middle state (collision kinematics and joint Jacobians there: span_free).
-  void fill_tail(const Holder& h, double* tail) {
-    const int D = h.depth, V = static_cast<int>(span_vertices.size()), nn = n();
-    scratch.assign(D + 1, 0.0);  // scratch[p]: sum of lever * d over depth >= p
-    turn.assign(D + 1, 0.0);     // turn[p]: sum of d over the rotating coordinates at depth <= p
-    for (const Reach& e : h.reach) {
-      scratch[e.depth] += e.rate * span_d[e.coord];
-      if (e.kind == 0 || e.kind == 2) turn[e.depth] += span_d[e.coord];
+  // The per-joint terms of the span whose middle state is q (span_variation done): collision kinematics and joint
+  // Jacobians there, joint_a, joint_b, joint_rot, joint_lin, joint_slide, joint_turn; older sums and tails stale.
+  void begin_span(const double* q) {
+    place_kinematics(q, true);
+    ++span_id;
+    const int nj = static_cast<int>(model.njoints), V = static_cast<int>(span_vertices.size()), nn = n();
+    if (V > room) {
+      room = std::max(V, 2 * room);
+      joint_a.assign(static_cast<std::size_t>(nj) * room, Eigen::Vector3d::Zero());
+      joint_b.assign(joint_a.size(), Eigen::Vector3d::Zero());
+      chain_a.assign(chain_sums.size() * room, Eigen::Vector3d::Zero());
+      chain_b.assign(chain_a.size(), Eigen::Vector3d::Zero());
     }
-    for (int p = D - 1; p >= 0; --p) scratch[p] += scratch[p + 1];
-    for (int p = 1; p <= D; ++p) turn[p] += turn[p - 1];
-    std::fill(tail, tail + D + 1, 0.0);
-    second.assign(D + 1, 0.0);
-    moved.assign(static_cast<std::size_t>(V) * (D + 1), Eigen::Vector3d::Zero());
-    const Eigen::Vector3d x = cdata.oMi[h.joint].act(h.center);
     const double* qm = span_states + span_mid * nn;
-    for (const Reach& e : h.reach) {
-      const double d = span_d[e.coord];
-      if (d == 0) continue;  // the coordinate does not move in the span
-      Eigen::Vector3d column;  // c_k at the middle state
-      double speed = 1.0, change = 0.0;  // |c_k| there; E_k
-      if (e.kind == 0 || e.kind == 1) {
-        const auto J = cdata.J.col(model.joints[e.joint].idx_v());  // world: v (at the origin), w
-        column = J.head<3>() + J.tail<3>().cross(x);
-        speed = column.norm();
-        change = e.kind == 0 ? e.rate * turn[e.depth] + scratch[e.depth + 1] : turn[e.depth];
-      } else if (e.kind == 3) {
-        column = Eigen::Vector3d::Unit(e.coord);
-      } else {
-        const Eigen::Vector3d axis = e.coord == 3 ? Eigen::Vector3d::UnitZ().eval()
-                                     : e.coord == 4 ? zyx(qm[3], 0.0, 0.0).col(1)
-                                                    : zyx(qm[3], qm[4], 0.0).col(0);
-        const Eigen::Vector3d arm = x - cdata.oMi[e.joint].translation();
-        column = axis.cross(arm);
-        speed = arm.norm();
-        change = 2.0 * e.rate * turn[e.depth] + scratch[e.depth + 1];
+    Eigen::Vector3d axes[3];  // the base's yaw, pitch, roll axes at the middle state (world)
+    if (floating) {
+      axes[0] = Eigen::Vector3d::UnitZ();
+      axes[1] = zyx(qm[3], 0.0, 0.0).col(1);
+      axes[2] = zyx(qm[3], qm[4], 0.0).col(0);
+    }
+    for (int l = 1; l < nj; ++l) {
+      Eigen::Vector3d* a = &joint_a[static_cast<std::size_t>(l) * room];
+      Eigen::Vector3d* b = &joint_b[static_cast<std::size_t>(l) * room];
+      double rot = 0.0, lin = 0.0, slide = 0.0;
+      const int k = coord_of[l];
+      for (int v = 0; v < V; ++v) a[v] = b[v] = Eigen::Vector3d::Zero();
+      if (k >= 0 && floating && k == 0) {  // the base: x, y, z, then yaw, pitch, roll about axes through o
+        const Eigen::Vector3d o = cdata.oMi[l].translation();
+        for (int c = 0; c < 6; ++c) {
+          const double d = span_d[c];
+          if (d == 0) continue;
+          if (c < 3) lin += d;
+          else rot += d;
+          const Eigen::Vector3d ca = c < 3 ? Eigen::Vector3d::Unit(c) : o.cross(axes[c - 3]);
+          for (int v = 0; v < V; ++v) {
+            const double delta = span_states[span_vertices[v] * nn + c] - qm[c];
+            a[v] += ca * delta;
+            if (c >= 3) b[v] += axes[c - 3] * delta;
+          }
+        }
+      } else if (k >= 0 && span_d[k] != 0) {  // world Jacobian column: linear part at the origin, angular part
+        const auto J = cdata.J.col(model.joints[l].idx_v());
+        const Eigen::Vector3d head = J.head<3>(), tail = J.tail<3>();
+        (prismatic[l] ? slide : rot) = span_d[k];
+        lin += slide;
+        for (int v = 0; v < V; ++v) {
+          const double delta = span_states[span_vertices[v] * nn + k] - qm[k];
+          a[v] = head * delta;
+          b[v] = tail * delta;
+        }
       }
-      const double rate = e.kind == 0 || e.kind == 2 ? std::min(e.rate, speed + h.radius + scratch[e.depth + 1]) : e.rate;
-      tail[e.depth] += rate * d;  // contribution at index depth
-      second[e.depth] += d * (change + (e.kind == 0 || e.kind == 2 ? h.radius : 0.0));
-      for (int v = 0; v < V; ++v)
-        moved[static_cast<std::size_t>(v) * (D + 1) + e.depth] += column * (span_states[span_vertices[v] * nn + e.coord] - qm[e.coord]);
+      joint_rot[l] = rot;
+      joint_lin[l] = lin;
+      joint_slide[l] = slide;
+      const int up = static_cast<int>(model.parents[l]);
+      joint_turn[l] = joint_turn[up] + rot;
+      up_rot[l] = up_rot[up] + rot;
+      up_lin[l] = up_lin[up] + lin;
+      up_step[l] = up_step[up] + step[l];
+      up_step_rot[l] = up_step_rot[up] + up_step[l] * rot;
     }
-    // suffix sums: index p holds the sums over depth >= p
-    for (int p = D - 1; p >= 0; --p) {
-      tail[p] += tail[p + 1];
-      second[p] += second[p + 1];
-      for (int v = 0; v < V; ++v) moved[static_cast<std::size_t>(v) * (D + 1) + p] += moved[static_cast<std::size_t>(v) * (D + 1) + p + 1];
-    }
-    for (int p = 0; p <= D; ++p) {
-      double first = 0.0;
-      for (int v = 0; v < V; ++v) first = std::max(first, moved[static_cast<std::size_t>(v) * (D + 1) + p].norm());
-      tail[p] = std::min(tail[p], first + second[p]);
-    }
+    geometry_rate.resize(geometry_holder.size());
+    for (std::size_t g = 0; g < geometry_holder.size(); ++g) geometry_rate[g] = rate_bound(geometry_holder[g]);
   }
-  double sphere_tail(int s, int common) const { return sphere_tails[sphere_holder[s].offset + common + 1]; }
-  double geometry_tail(int g, int common) const { return geometry_tails[geometry_holder[g].offset + common + 1]; }
-  void fill_sphere_tails(int g) {
-    if (sphere_tails_ready[g]) return;
-    sphere_tails_ready[g] = true;
-    for (int s : spheres_of[g]) fill_tail(sphere_holder[s], sphere_tails.data() + sphere_holder[s].offset);
+
+  // Holder h's rate bound over every coordinate, whatever the pair (>= its tail at any depth): rho sum_rot d +
+  // sum_rot L d + sum_lin d with L = up_step[j] - up_step[l]. A cheap first test: pairs it clears need no tails.
+  double rate_bound(const Holder& h) const {
+    const int j = h.joint;
+    return h.rho * up_rot[j] + up_step[j] * up_rot[j] - up_step_rot[j] + up_lin[j];
+  }
+  std::vector<double> geometry_rate;  // per geometry: its holder's rate_bound in the current span
+
+  // The sums over joint j's supports at depth >= p for the current span (see ChainSums); A_p, B_p per vertex at
+  // chain_a, chain_b[(j (max_depth + 1) + p) room].
+  const ChainSums& chain(int j, int p) {
+    const std::size_t key = static_cast<std::size_t>(j) * (max_depth + 1) + p;
+    ChainSums& c = chain_sums[key];
+    if (c.span == span_id) return c;
+    c = ChainSums();
+    c.span = span_id;
+    const int V = static_cast<int>(span_vertices.size());
+    Eigen::Vector3d* A = &chain_a[key * room];
+    Eigen::Vector3d* B = &chain_b[key * room];
+    for (int v = 0; v < V; ++v) A[v] = B[v] = Eigen::Vector3d::Zero();
+    const auto& supports = model.supports[j];
+    double L = 0.0;  // the steps between the joint at depth and j: its lever is rho + L
+    for (int depth = static_cast<int>(supports.size()) - 1; depth >= p; --depth) {
+      const int l = static_cast<int>(supports[depth]);
+      if (coord_of[l] >= 0) {
+        // E_k = tau lever_k Theta_k + the deeper coordinates' rate bound (tau: 2 for the base's angles; the
+        // prismatic's: Theta_k), Theta_k = joint_turn[l]
+        const double tau = floating && coord_of[l] == 0 ? 2.0 : 1.0, turn = joint_turn[l], rot = joint_rot[l];
+        c.s1 += rot * (tau * turn + c.rot);
+        c.s0 += rot * (tau * L * turn + c.lin) + joint_slide[l] * turn;
+        c.rot += rot;
+        c.lin += L * rot + joint_lin[l];
+        const Eigen::Vector3d* a = &joint_a[static_cast<std::size_t>(l) * room];
+        const Eigen::Vector3d* b = &joint_b[static_cast<std::size_t>(l) * room];
+        for (int v = 0; v < V; ++v) {
+          A[v] += a[v];
+          B[v] += b[v];
+        }
+      }
+      L += step[l];
+    }
+    return c;
+  }
+
+  // The motion bound of holder h (its centre at x at the middle state) over the span's coordinates below depth p:
+  // the smaller of the rate bound and the first-order one (see above).
+  double motion_bound(const Holder& h, const Eigen::Vector3d& x, int p) {
+    const ChainSums& c = chain(h.joint, p);
+    const std::size_t key = (static_cast<std::size_t>(h.joint) * (max_depth + 1) + p) * room;
+    double first = 0.0;
+    for (std::size_t v = 0; v < span_vertices.size(); ++v)
+      first = std::max(first, (chain_a[key + v] + chain_b[key + v].cross(x)).squaredNorm());
+    const double rates = h.rho * c.rot + c.lin;
+    return std::min(rates, std::sqrt(first) + c.s0 + c.s1 * h.rho + c.rot * h.radius);
+  }
+  // Sphere s's bound relative to a pair whose deepest common joint is at depth common (s placed: world[s]).
+  double sphere_tail(int s, int common) {
+    const Holder& h = sphere_holder[s];
+    const long at = h.offset + common + 1;
+    if (sphere_spans[at] != span_id) {
+      sphere_spans[at] = span_id;
+      sphere_tails[at] = motion_bound(h, world[s], common + 1);
+    }
+    return sphere_tails[at];
+  }
+  // The same for the ball holding geometry g.
+  double geometry_tail(int g, int common) {
+    const Holder& h = geometry_holder[g];
+    const long at = h.offset + common + 1;
+    if (geometry_spans[at] != span_id) {
+      geometry_spans[at] = span_id;
+      const Eigen::Vector3d x = spheres_of[g].empty() ? cdata.oMi[h.joint].act(h.center) : bound_world[g];
+      geometry_tails[at] = motion_bound(h, x, common + 1);
+    }
+    return geometry_tails[at];
   }
 
   // The span [i, j] of states (rows of n; var: their cumulative variation; turns: per state, whether the polyline
@@ -795,15 +953,13 @@ struct Space::Impl {
     for (long t = i + 1; t < j; ++t)
       if (!turns || turns[t]) span_vertices.push_back(t);
     if (j > i) span_vertices.push_back(j);
-    std::fill(sphere_tails_ready.begin(), sphere_tails_ready.end(), false);
   }
 
   // Whether every configuration of the span whose middle state is q is collision-free (span_variation done):
   // per pair, as the per-state check, the spheres first, then the convex outer shapes; the pair that stopped the
   // latest span first (neighbouring spans fail on the same pair).
   bool span_free(const double* q) {
-    place_kinematics(q, true);
-    for (const Holder& h : geometry_holder) fill_tail(h, geometry_tails.data() + h.offset);
+    begin_span(q);
     if (last_stop >= 0 && !pair_apart(tests[last_stop])) return false;
     for (std::size_t k = 0; k < tests.size(); ++k)
       if (static_cast<long>(k) != last_stop && !pair_apart(tests[k])) {
@@ -824,34 +980,47 @@ struct Space::Impl {
     return outers_apart(t.pair, common);
   }
 
-  // The spheres of a pair (kind 0), each grown by its motion bound, do not touch.
+  // The spheres of a pair (kind 0), each grown by its motion bound, do not touch. A sphere of t.a whose grown ball
+  // clears the grown ball holding t.b clears each of t.b's grown spheres (that ball's bound covers every point of
+  // it): its row is skipped.
   bool spheres_apart(const PairTest& t, int common) {
-    const double grow = geometry_tail(t.a, common) + geometry_tail(t.b, common);
-    if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b] + grow) return true;
+    const Eigen::Vector3d& cb = bound_world[t.b];
+    const double far = bound_radius[t.a] + bound_radius[t.b] + geometry_rate[t.a] + geometry_rate[t.b];
+    if ((bound_world[t.a] - cb).squaredNorm() > far * far) return true;
+    const double apart = (bound_world[t.a] - cb).norm() - bound_radius[t.a] - bound_radius[t.b];
+    const double rb = bound_radius[t.b] + geometry_tail(t.b, common);
+    if (apart > geometry_tail(t.a, common) + geometry_tail(t.b, common)) return true;
     place(t.a);
     place(t.b);
-    fill_sphere_tails(t.a);
-    fill_sphere_tails(t.b);
-    for (int i : spheres_of[t.a])
-      for (int j : spheres_of[t.b])
-        if ((world[i] - world[j]).norm() <=
-            sphere_radius[i] + sphere_radius[j] + sphere_tail(i, common) + sphere_tail(j, common))
-          return false;
+    grown.clear();  // t.b's spheres' grown radii, when first needed
+    for (int i : spheres_of[t.a]) {
+      const double gap = (world[i] - cb).norm() - sphere_radius[i] - rb;
+      if (gap > rate_bound(sphere_holder[i])) continue;
+      const double tail = sphere_tail(i, common), ri = sphere_radius[i] + tail;
+      if (gap > tail) continue;
+      if (grown.empty())
+        for (int j : spheres_of[t.b]) grown.push_back(sphere_radius[j] + sphere_tail(j, common));
+      const double* rj = grown.data();
+      for (int j : spheres_of[t.b]) {
+        const double reach = ri + *rj++;
+        if ((world[i] - world[j]).squaredNorm() <= reach * reach) return false;
+      }
+    }
     return true;
   }
+  std::vector<double> grown;
 
   // The spheres of t.a, grown, do not touch the primitive t.b grown by its own motion bound (kind 1).
   bool sphere_primitive_apart(const PairTest& t, int common) {
-    const pinocchio::GeometryObject& g = geom.geometryObjects[t.b];
-    const pinocchio::SE3 pose = g.parentJoint ? cdata.oMi[g.parentJoint] * g.placement : g.placement;
-    const double grow_b = geometry_tail(t.b, common);
-    if (shape_distance(shapes[t.b], pose.actInv(bound_world[t.a])) > bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)
+    const pinocchio::SE3& pose = pose_of(t.b);
+    if (beyond(t.b, pose, bound_world[t.a],
+               bound_radius[t.a] + geometry_rate[t.a] + geometry_rate[t.b]))
       return true;
+    const double grow_b = geometry_tail(t.b, common);
+    if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a] + geometry_tail(t.a, common) + grow_b)) return true;
     place(t.a);
-    fill_sphere_tails(t.a);
     for (int i : spheres_of[t.a])
-      if (shape_distance(shapes[t.b], pose.actInv(world[i])) <= sphere_radius[i] + sphere_tail(i, common) + grow_b)
-        return false;
+      if (!beyond(t.b, pose, world[i], sphere_radius[i] + sphere_tail(i, common) + grow_b)) return false;
     return true;
   }
 
@@ -1059,6 +1228,8 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
   }
   p.shapes.clear();
   for (const auto& g : p.geom.geometryObjects) p.shapes.push_back(shape_of(g));
+  p.shape_pose.assign(ng, pinocchio::SE3::Identity());
+  p.shape_placed.assign(ng, false);
   p.outer.assign(ng, nullptr);
   p.outer_ready.assign(ng, false);
   p.outer_requests.clear();
@@ -1066,6 +1237,7 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
     coal::CollisionRequest request(coal::NO_REQUEST, 1);
     request.security_margin = p.geom_data->collisionRequests[k].security_margin + HULL_MARGIN;
     request.gjk_initial_guess = coal::GJKInitialGuess::CachedGuess;
+    request.distance_upper_bound = 0.0;  // GJK stops once it proves the hulls farther apart than the margin
     p.outer_requests.push_back(request);
   }
   p.tests.clear();
@@ -1127,16 +1299,19 @@ bool Space::sweep_free(const double* states, int k) {
   return p.span_free(states + static_cast<long>(k / 2) * n());
 }
 
-std::vector<double> Space::sweep_bounds(const double* states, int k) {
+std::vector<double> Space::sweep_bounds(const double* states, int k, int common, bool rates) {
   Impl& p = *impl_;
   if (!p.sweeps_ready()) throw std::runtime_error("no certified sweeps: " + sweep_report());
   if (k < 1) throw std::invalid_argument("a span needs at least one state");
   cumulative_variation(states, k, n(), p.variation);
   p.span_variation(states, p.variation.data(), nullptr, 0, k / 2, k - 1);
-  p.place_kinematics(states + static_cast<long>(k / 2) * n(), true);
+  p.begin_span(states + static_cast<long>(k / 2) * n());
   std::vector<double> out;
-  for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.fill_sphere_tails(g);
-  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s) out.push_back(p.sphere_tail(static_cast<int>(s), -1));
+  for (int g = 0; g < static_cast<int>(p.spheres_of.size()); ++g) p.place(g);
+  for (std::size_t s = 0; s < p.sphere_joint.size(); ++s)
+    out.push_back(rates ? p.rate_bound(p.sphere_holder[s])
+                  : common + 1 > p.sphere_holder[s].depth ? NAN
+                                                          : p.sphere_tail(static_cast<int>(s), std::max(common, -1)));
   return out;
 }
 
@@ -1213,8 +1388,14 @@ bool Space::spheres_free(const double* q) {
 
 int Space::code(const double* q, double limit, bool collision, bool exact) {
   if (!within_limits(q)) return LIMITS;
-  if (violation(q) > limit) return CONSTRAINT;
-  if (!inequalities_hold(q)) return INEQUALITY;
+  if (!batched()) {
+    bool hold;
+    if (impl_->state_check(q, limit, hold) > limit) return CONSTRAINT;
+    if (!hold) return INEQUALITY;
+  } else {
+    if (violation(q) > limit) return CONSTRAINT;
+    if (!inequalities_hold(q)) return INEQUALITY;
+  }
   if (impl_->p) {
     std::vector<double> G(impl_->p);
     inequalities(q, 1, G.data());
@@ -1291,10 +1472,11 @@ PathCheck Space::validate_path(const double* path, int K) {
     int c = VALID;
     if (!within_limits(q)) c = LIMITS;
     else {
-      const double vi = batched() ? v[i % chunk] : violation(q);
+      bool hold = true;
+      const double vi = batched() ? v[i % chunk] : impl_->state_check(q, 1.0, hold);
       out.worst = std::max(out.worst, vi);
       if (vi > 1.0) c = CONSTRAINT;
-      else if (!inequalities_hold(q)) c = INEQUALITY;
+      else if (!(batched() ? inequalities_hold(q) : hold)) c = INEQUALITY;
       else if (pp && *std::max_element(G.begin() + (i % chunk) * pp, G.begin() + (i % chunk + 1) * pp) > 0)
         c = INEQUALITY;
       else if (!collision_free(q)) c = COLLISION;
@@ -1346,9 +1528,10 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
       limits_ok[i - s0] = within_limits(q);
       if (!limits_ok[i - s0]) reason = LIMITS;
       else {
-        if (!batched()) v[i - s0] = violation(q);
+        bool hold = true;
+        if (!batched()) v[i - s0] = p.state_check(q, 1.0, hold);
         if (v[i - s0] > 1.0) reason = CONSTRAINT;
-        else if (!inequalities_hold(q)) reason = INEQUALITY;
+        else if (!(batched() ? inequalities_hold(q) : hold)) reason = INEQUALITY;
         else if (pp && *std::max_element(G.begin() + (i - s0) * pp, G.begin() + (i - s0 + 1) * pp) > 0)
           reason = INEQUALITY;
       }
