@@ -486,8 +486,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     (``time.perf_counter`` seconds). With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core,
     which refines (``sampler.lazy_refine`` iterations) and checks each when it first uses it. Books
     iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
-    operation counts on the planner (``planner.callbacks``: calls into Python constraint callbacks and the
-    configurations they evaluated); the path (K, n) that passed the exact dense check, or None."""
+    operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
     s, space, sampler = planner.settings, planner.space, planner.sampler
     lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
     before = core.counts()
@@ -505,9 +504,6 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
             sampler.space = space
         after = core.counts()
         book(space, before, after)
-        planner.sphere_checks = after["sphere_checks"] - before["sphere_checks"]
-        planner.sweep_checks = after["sweep_checks"] - before["sweep_checks"]
-        planner.callbacks = {k: after[f"callback_{k}"] - before[f"callback_{k}"] for k in ("calls", "rows")}
     planner.iterations += out["iterations"]
     planner.samples += out["samples"]
     planner.rejected += out["rejected_paths"]

@@ -80,14 +80,19 @@ class RRTConnect(Planner):
                 self.sphere_fallback = spheres["fallback"]
             self.fallback = reason or ""
         self.native_nodes: list[int] = []
-        self.sphere_checks = self.sweep_checks = self.cut_edges = self.reattached = self.verified_states = 0
-        self.callbacks = {"calls": 0, "rows": 0}  # the core's calls into a Python constraint
+        self.cut_edges = self.reattached = self.verified_states = 0
+        self._core_counts = self.core.counts() if self.core is not None else {}  # when the latest query began
 
     def _stone_radius(self) -> float:
         return min(getattr(self.settings, "reach", self.settings.range), self.settings.range)
 
     def _direct(self, start, goal):
         return None if self.core is not None else super()._direct(start, goal)
+
+    def solve(self, start, goal, time_limit):
+        if self.core is not None:
+            self._core_counts = self.core.counts()  # the query's sphere and sweep tests, callbacks: from here on
+        return super().solve(start, goal, time_limit)
 
     def _query_state(self, q, what):
         valid = None if self.core is None else native.valid_query_state(self.space, self.core, q)
@@ -116,10 +121,13 @@ class RRTConnect(Planner):
     def _extras(self) -> dict:
         if self.core is None:
             return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
-        return {"core": "native", "nodes": list(self.native_nodes), "sphere_checks": self.sphere_checks,
-                "sweep_checks": self.sweep_checks,
+        now, then = self.core.counts(), self._core_counts
+        callbacks = {k: now[f"callback_{k}"] - then[f"callback_{k}"] for k in ("calls", "rows")}  # into a Python constraint
+        return {"core": "native", "nodes": list(self.native_nodes),
+                "sphere_checks": now["sphere_checks"] - then["sphere_checks"],
+                "sweep_checks": now["sweep_checks"] - then["sweep_checks"],
                 "cut_edges": self.cut_edges, "reattached": self.reattached, "verified_states": self.verified_states,
-                **({"callbacks": dict(self.callbacks)} if self.callbacks["calls"] else {}),
+                **({"callbacks": callbacks} if callbacks["calls"] else {}),
                 **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
 
     def _target(self) -> np.ndarray:
