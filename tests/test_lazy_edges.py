@@ -1,6 +1,8 @@
 """Coarse-first edge checks in the compiled core's search (RRTConnectSettings.lazy_stride): returned paths are
 checked at every planning-resolution state and densely, colliding edges found on candidate paths are cut,
-stride 1 checks every state at once, and a bad stride is refused in one line."""
+stride 1 checks every state at once, and a bad stride is refused in one line. Dense edges
+(RRTConnectSettings.dense_edges): every motion passes the path check when it is made, so no candidate path is
+rejected and no edge cut."""
 
 import numpy as np
 import pytest
@@ -11,7 +13,7 @@ from manifoldgen.space import ConstrainedSpace, densify
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
 
 
-def _solve(task, scene_name: str, seed: int, stride: int):
+def _solve(task, scene_name: str, seed: int, stride: int, dense_edges: bool = False):
     """(space, result) of the core's RRT-Connect with the shipped CVAE at lazy_stride ``stride``."""
     from manifoldgen.models import pretrained_model_dir
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
@@ -20,7 +22,7 @@ def _solve(task, scene_name: str, seed: int, stride: int):
     scene = get_scene(task, scene_name)
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     planner = RRTConnect(space, make_sampler(f"cvae:{pretrained_model_dir()}", space, seed), seed=seed,
-                         settings=RRTConnectSettings(core="native", lazy_stride=stride))
+                         settings=RRTConnectSettings(core="native", lazy_stride=stride, dense_edges=dense_edges))
     return space, planner.solve(scene.start, scene.goal, 20.0)
 
 
@@ -78,3 +80,24 @@ def test_edges_checked_only_on_candidate_paths_are_cut_and_reattached(panda_task
     space, result = _solve(panda_task, "maze", 90, 2)
     assert result.solved and result.extras["cut_edges"] > 100 and result.extras["reattached"] > 0
     _assert_checked_state_by_state(panda_task, space, result.path)
+
+
+@pytest.mark.parametrize("scene_name", ["maze", "wall"])
+def test_dense_edges_pass_the_path_check_as_they_are_made(panda_task, scene_name):
+    """Stride 4 with dense edges, where coarse checks alone grow the trees through the maze's walls (the test
+    above): every motion is path-checked when made, so no edge is cut, no candidate path rejected, and each edge
+    of the path returned passes the Python space's path check on its own, state by state."""
+    space, result = _solve(panda_task, scene_name, 90, 4, dense_edges=True)
+    assert result.solved and result.extras["core"] == "native"
+    assert result.extras["cut_edges"] == 0 and result.extras["rejected_paths"] == 0
+    assert result.extras["verified_states"] == 0
+    for a, b in zip(result.path[:-1], result.path[1:]):
+        assert space.validate_path(np.array([a, b])).valid
+    _assert_checked_state_by_state(panda_task, space, result.path)
+
+
+def test_a_bad_dense_edges_value_is_refused_in_one_line():
+    from manifoldgen.planning import RRTConnectSettings
+    with pytest.raises(ManifoldgenError, match="dense_edges must be true or false") as error:
+        RRTConnectSettings(dense_edges="yes").check()
+    assert "\n" not in str(error.value)

@@ -192,6 +192,10 @@ struct PlannerSettings {
   // collision every lazy_stride-th and at nodes while searching, the rest when the edge lies on a candidate path
   // (1: every state at once)
   int lazy_stride = 1;
+  // dense_edges: each motion passes the path check (Space::validate_path) when it is made, after a pre-check of
+  // its every lazy_stride-th planning-resolution state (all tests, bisection order); a candidate path is then
+  // made of checked edges and is never rejected (planner.cpp, Local::dense)
+  bool dense_edges = false;
   // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
   // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
   int refine = -1;

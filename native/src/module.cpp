@@ -339,13 +339,14 @@ NB_MODULE(manifoldgen_core, m) {
       "rrt_connect",
       [](Space& space, const In1& start, const In1& goal, nb::callable draw, double time_limit, double range,
          double resolution, double step, bool partial, int pool, int pool_batch, int candidates,
-         const std::string& local, int target_batch, bool lazy, int refine, double reach, int lazy_stride) {
+         const std::string& local, int target_batch, bool lazy, int refine, double reach, int lazy_stride, bool dense_edges) {
         mgcore::PlannerSettings st;
         st.range = range, st.resolution = resolution, st.step = step, st.partial = partial, st.pool = pool;
         st.pool_batch = pool_batch, st.candidates = candidates, st.local = local, st.target_batch = target_batch;
         st.lazy = lazy;
         if (lazy_stride < 1) throw std::invalid_argument("lazy_stride must be at least 1 (1: every state checked at once)");
         st.lazy_stride = lazy_stride;
+        st.dense_edges = dense_edges;
         st.refine = refine;
         st.reach = reach;
         const int nn = space.n();
@@ -373,12 +374,14 @@ NB_MODULE(manifoldgen_core, m) {
         return d;
       },
       "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "range"_a, "resolution"_a, "step"_a, "partial"_a,
-      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "reach"_a = 0.0, "lazy_stride"_a = 1,
+      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "reach"_a = 0.0, "lazy_stride"_a = 1, "dense_edges"_a = false,
       "RRT-Connect from start to goal (n,) in space; draw(count) -> (count, n) valid samples. A dict: path (K, n) "
       "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes. "
       "lazy: tree edges are checked for collision only on candidate paths. refine >= 0: draw gives raw candidates, "
       "each refined (refine projection iterations) and checked when the search first uses it (counts: refined, "
       "accepted). reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of its nodes (else range). "
       "lazy_stride > 1: motions are checked for collision at every lazy_stride-th state and at nodes while searching, the "
-      "rest on candidate paths (verified_states: those states checked; reattached: cut edges whose node got another parent).");
+      "rest on candidate paths (verified_states: those states checked; reattached: cut edges whose node got another parent). "
+      "dense_edges: each motion passes the path check when it is made (after a pre-check of every lazy_stride-th state), "
+      "so no candidate path is rejected.");
 }

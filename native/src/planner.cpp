@@ -191,7 +191,8 @@ struct Tree {
   std::vector<int> parent;
   std::vector<char> alive;
   // per node, how the edge into it was checked for collision at its planning-resolution states i (Local::segment_states):
-  // 0 every state; s > 0 only where (i + 1) % s == 0 (coarse edges; Local::UNCHECKED: none), the rest left to Search::verify
+  // 0 every state; s > 0 only where (i + 1) % s == 0 (coarse edges; Local::UNCHECKED: none), the rest left to Search::verify;
+  // Local::DENSE: by the path check (dense edges)
   std::vector<int> coarse;
   KdTree index;
 
@@ -338,6 +339,12 @@ struct Local {
   // 1: every state (eager); UNCHECKED: nodes only (PlannerSettings::lazy).
   static constexpr int UNCHECKED = std::numeric_limits<int>::max();
   int stride = 1;
+  // Dense edges (PlannerSettings::dense_edges): a motion is kept only when it passes the path check
+  // (Space::validate_path of its two ends: every dense state, certified sweeps), after a pre-check of its states
+  // i with (i + 1) % stride == 0 (every test, bisection order) that finds most blocked motions for a fraction of the
+  // dense states. Its edge record (Tree::coarse) is DENSE: a path of such edges needs no further check.
+  bool dense = false;
+  static constexpr int DENSE = -1;
   bool loose = false;  // the latest straight motion kept a part whose own states are not those checked
   long projections = 0;
   static constexpr double precision = 0.01;
@@ -372,7 +379,7 @@ struct Local {
   int sparse(int k, bool node) const { return k / stride + (node && k % stride != 0); }
   int sparse_state(int j, int k) const { return std::min((j + 1) * stride - 1, k - 1); }
   // The edge record (Tree::coarse) of the motion just made.
-  int made() const { return stride == 1 ? 0 : loose ? UNCHECKED : stride; }
+  int made() const { return dense ? DENSE : stride == 1 ? 0 : loose ? UNCHECKED : stride; }
 
   // Leading valid rows of a motion's states, in order. Coarse (stride > 1): limits and constraint at every
   // state, then collisions at the coarse states and at the last valid row (the node the motion ends at); a
@@ -439,8 +446,47 @@ struct Local {
     return false;
   }
   bool whole(const double* a, const double* b) {
+    if (dense) return dense_valid(a, b);
     const States s = segment_states(a, b);
     return all_valid(s, static_cast<int>(s.rows()), true);
+  }
+
+  // Dense edges: whether the motion a -> b (b a node) passes the pre-check, then the path check; sets stop.
+  bool dense_valid(const double* a, const double* b) {
+    const States s = segment_states(a, b);
+    const int k = static_cast<int>(s.rows());
+    const double inner = 1.0 - space.margin();
+    if (!bisect(k / stride, [&](int j) {
+          const int i = (j + 1) * stride - 1;
+          return space.code(s.row(i).data(), i == k - 1 ? 1.0 : inner, true, true);
+        }))
+      return false;
+    ends_buffer.resize(2 * static_cast<std::size_t>(n()));
+    std::copy(a, a + n(), ends_buffer.begin());
+    std::copy(b, b + n(), ends_buffer.begin() + n());
+    const PathCheck c = space.validate_path(ends_buffer.data(), 2);
+    if (!c.valid) return stopped(c.reason);
+    space.stop = VALID;
+    return true;
+  }
+  std::vector<double> ends_buffer;
+
+  // Dense edges, straight(): the motion a -> end, else (partial) its planning-resolution states up to the first that
+  // fails the pre-check in order when the part up to there passes the path check; stop: the whole motion's failure.
+  std::pair<RowMat, bool> dense_straight(const double* a, const Vec& end, bool reach) {
+    loose = false;
+    if (dense_valid(a, end.data())) return {end.transpose(), reach};
+    const int reason = space.stop;
+    if (!partial) return {none(), false};
+    const States s = segment_states(a, end.data());
+    const int k = static_cast<int>(s.rows());
+    const double inner = 1.0 - space.margin();
+    int kept = 0;
+    for (int i = stride - 1; i < k - 1 && space.code(s.row(i).data(), inner, true, true) == VALID; i += stride) kept = i + 1;
+    const Vec last = kept ? Vec(s.row(kept - 1).transpose()) : Vec();
+    const bool valid = kept && dense_valid(a, last.data());
+    space.stop = reason;
+    return valid ? std::make_pair(RowMat(last.transpose()), false) : std::make_pair(none(), false);
   }
   RowMat none() const { return RowMat(0, n()); }
 
@@ -449,6 +495,7 @@ struct Local {
     const double distance = (vb - va).norm();
     const bool reach = distance <= max_distance;
     const Vec end = reach ? Vec(vb) : Vec(va + (vb - va) * (max_distance / distance));
+    if (dense) return dense_straight(a, end, reach);
     const States s = segment_states(a, end.data());
     const int count = prefix(s, reach);
     loose = false;
@@ -523,6 +570,7 @@ struct Local {
     loose = false;
     const int c = sample ? (space.collision_free(end) ? VALID : COLLISION) : space.code(end, 1.0, true, true);
     if (c != VALID) return stopped(c);
+    if (dense) return dense_valid(start, end);
     const States s = segment_states(start, end);
     return all_valid(s, static_cast<int>(s.rows()) - 1, false, true);  // the end is checked
   }
@@ -584,7 +632,7 @@ struct Search {
     for (const auto& [k, child] : edges) {
       Tree& tree = trees[k];
       const int every = tree.coarse[child];
-      if (!every) continue;
+      if (every <= 0) continue;  // checked at every state (0) or by the path check (Local::DENSE)
       const States states = local.segment_states(tree.row(tree.parent[child]), tree.row(child));
       const bool free = local.bisect(static_cast<int>(states.rows()) - 1, [&](int i) {  // the child, a node, was checked
         if ((i + 1) % every == 0) return VALID;
@@ -630,6 +678,10 @@ struct Search {
   // A path (K, n) that passed the dense check, or 0 rows; a failing edge is cut from its tree.
   bool finish(const RowMat& waypoints, const std::vector<std::pair<int, int>>& edges) {
     if (!verify(edges)) return false;
+    if (std::all_of(edges.begin(), edges.end(), [&](const auto& e) { return trees[e.first].coarse[e.second] == Local::DENSE; })) {
+      out.path = waypoints;  // every edge passed the path check when it was made
+      return true;
+    }
     const PathCheck c = space.validate_path(waypoints.data(), static_cast<int>(waypoints.rows()));
     if (c.valid) {
       out.path = waypoints;
@@ -738,8 +790,12 @@ struct Search {
   }
 
   void run(const Vec& start, const Vec& goal) {
-    if (direct(start, goal)) return;  // eager checks: a coarse direct walk would cross obstacles
+    // the direct motion is checked at every state (a coarse direct walk would cross obstacles), or with dense edges
+    // at every lazy_stride-th (the path check follows); not in a tree, its progress is dropped when it fails
+    if (s.dense_edges) local.stride = s.lazy_stride;
+    if (direct(start, goal)) return;
     local.stride = s.lazy ? Local::UNCHECKED : s.lazy_stride;
+    local.dense = s.dense_edges;
     trees.emplace_back(start);
     trees.emplace_back(goal);
     start_pool();

@@ -498,7 +498,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
                                _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0), s.range,
                                s.resolution, s.step, s.partial, s.pool, s.pool_batch, s.candidates, planner.local.name,
                                TARGET_BATCH, LAZY, refine=int(sampler.lazy_refine) if lazy else -1,
-                               reach=planner._stone_radius(), lazy_stride=s.lazy_stride)
+                               reach=planner._stone_radius(), lazy_stride=s.lazy_stride,
+                               dense_edges=s.dense_edges)
     finally:
         if swapped:
             sampler.space = space

@@ -36,19 +36,26 @@ class RRTConnectSettings(PlannerSettings):
     motion's planning-resolution states are checked for collision every ``lazy_stride``-th (and at the node it
     ends at) while the trees grow, the others only when the edge lies on a candidate path (a colliding one is cut
     from its tree), so every returned path is still checked at every planning-resolution state and then densely;
-    1 checks every state at once. The Python search checks every state at once whatever the setting (it is the
-    core's test oracle at ``lazy_stride=1``)."""
+    1 checks every state at once; ``dense_edges``: the core's search keeps a motion only when it passes the final
+    path check (the space's dense check, ``ValidationSettings.resolution``) as it is made, after a pre-check of its
+    every ``lazy_stride``-th planning-resolution state (every test); a candidate path is then never rejected and
+    needs no check of its own (it pays where the trees are about the path and a path check of a motion costs little
+    more than its planning check: talos reach, README "Dense edges"). The Python search checks every state at once
+    whatever these settings (it is the core's test oracle at ``lazy_stride=1``, ``dense_edges=False``)."""
 
     core: str = "auto"
     spheres: bool = False
     reach: float = 0.5
     lazy_stride: int = 2
+    dense_edges: bool = False
 
     def check(self) -> None:
         super().check()
         if isinstance(self.lazy_stride, bool) or not isinstance(self.lazy_stride, int) or self.lazy_stride < 1:
             raise ManifoldgenError(f"lazy_stride must be a whole number >= 1 (1: every motion state checked for "
                                    f"collision at once), got {self.lazy_stride!r}; e.g. lazy_stride=3")
+        if not isinstance(self.dense_edges, bool):
+            raise ManifoldgenError(f"dense_edges must be true or false, got {self.dense_edges!r}; e.g. dense_edges=true")
         if not self.reach > 0:
             raise ManifoldgenError(f"reach must be a positive distance (rad), got {self.reach}; e.g. reach=0.5")
         if self.core not in native.CORES:
