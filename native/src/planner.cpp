@@ -340,9 +340,9 @@ struct Local {
   static constexpr int UNCHECKED = std::numeric_limits<int>::max();
   int stride = 1;
   // Dense edges (PlannerSettings::dense_edges): a motion is kept only when it passes the path check
-  // (Space::validate_path of its two ends: every dense state, certified sweeps), after a pre-check of its states
-  // i with (i + 1) % stride == 0 (every test, bisection order) that finds most blocked motions for a fraction of the
-  // dense states. Its edge record (Tree::coarse) is DENSE: a path of such edges needs no further check.
+  // (Space::validate_path of its two ends: every dense state, certified sweeps), after a pre-check of its coarse
+  // states (coarse_valid: every stride-th and its end; every test, bisection order) that finds most blocked motions
+  // for a fraction of the dense states. Its edge record (Tree::coarse) is DENSE: a path of such edges needs no further check.
   bool dense = false;
   static constexpr int DENSE = -1;
   bool loose = false;  // the latest straight motion kept a part whose own states are not those checked
@@ -408,18 +408,25 @@ struct Local {
   // verdict after fewer residuals when a collision blocks the motion, but stop names the first failure
   // found that way (the walks read stop to choose what to do next, so they keep the order above).
   bool all_valid(const States& s, int k, bool last_is_node, bool first_blocked = false) {
-    const int m = sparse(k, last_is_node);
     if (first_blocked && !space.batched()) {
+      if (!coarse_valid(s, k, last_is_node)) return false;
       const double inner = 1.0 - space.margin();
       auto limit = [&](int i) { return last_is_node && i == k - 1 ? 1.0 : inner; };
-      if (!bisect(m, [&](int j) { const int i = sparse_state(j, k); return space.code(s.row(i).data(), limit(i), true, true); }))
-        return false;
       return stride == 1 || bisect(k, [&](int i) {
         return coarse(i, k, last_is_node) ? VALID : space.code(s.row(i).data(), limit(i), false, true);
       });
     }
     if (space.valid_prefix(s.data(), k, last_is_node, false) != k) return false;
-    return bisect(m, [&](int j) { return space.collision_free(s.row(sparse_state(j, k)).data()) ? VALID : COLLISION; });
+    return bisect(sparse(k, last_is_node), [&](int j) { return space.collision_free(s.row(sparse_state(j, k)).data()) ? VALID : COLLISION; });
+  }
+  // Whether the coarse states of a motion's first k states pass every test (limits, constraint, inequalities,
+  // collision), in bisection order.
+  bool coarse_valid(const States& s, int k, bool last_is_node) {
+    const double inner = 1.0 - space.margin();
+    return bisect(sparse(k, last_is_node), [&](int j) {
+      const int i = sparse_state(j, k);
+      return space.code(s.row(i).data(), last_is_node && i == k - 1 ? 1.0 : inner, true, true);
+    });
   }
   // test(i) -> Reason of state i for i in [0, k), middle first, then the middles of the halves (breadth
   // first); the first failure sets stop and ends it.
@@ -454,13 +461,7 @@ struct Local {
   // Dense edges: whether the motion a -> b (b a node) passes the pre-check, then the path check; sets stop.
   bool dense_valid(const double* a, const double* b) {
     const States s = segment_states(a, b);
-    const int k = static_cast<int>(s.rows());
-    const double inner = 1.0 - space.margin();
-    if (!bisect(k / stride, [&](int j) {
-          const int i = (j + 1) * stride - 1;
-          return space.code(s.row(i).data(), i == k - 1 ? 1.0 : inner, true, true);
-        }))
-      return false;
+    if (!coarse_valid(s, static_cast<int>(s.rows()), true)) return false;
     ends_buffer.resize(2 * static_cast<std::size_t>(n()));
     std::copy(a, a + n(), ends_buffer.begin());
     std::copy(b, b + n(), ends_buffer.begin() + n());
