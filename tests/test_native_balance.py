@@ -11,6 +11,8 @@ from manifoldgen import native
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
 from manifoldgen.stability import path_stability
 
+from certified_paths import compare_certified, manifold_polylines
+
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
 
 PROBLEMS = {"talos": ("balance", "talos", "reach"), "centauro": ("balance", "centauro", "reach"),
@@ -214,3 +216,12 @@ def test_cpp_ompl_baseline_takes_whole_body_tasks(problem):
     assert task.constraint.violation(states, space.y).max() <= 1.0
     assert np.all(task.constraint.inequality(states, y) <= 0)
     assert task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+
+
+def test_certified_constraints_give_the_exact_report(problem):
+    """validate_path(certify=True) on the whole-body terms (feet poses, base height, the CoM polygon; drinkcan's
+    orientation and hemisphere): the state-by-state report (see certified_paths), for fewer evaluations."""
+    task, scene, space, core = problem
+    reasons, evaluations = compare_certified(core, manifold_polylines(space, core, scene.start, 0.4, 7))
+    assert 0 in reasons and reasons & {2, 3}  # valid paths, and constraint or inequality failures between waypoints
+    assert evaluations[True] < evaluations[False]

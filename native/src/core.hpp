@@ -155,8 +155,11 @@ class Space {
   int valid_prefix(const double* states, int k, bool last_is_node, bool collision = true);
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
   // Every state every resolution along path (K, n), exact collision checks (with sphere models and sweeps():
-  // spans of states certified at once, the same report).
-  PathCheck validate_path(const double* path, int K);
+  // spans of states certified at once, the same report). certify (built-in terms other than closed chains): a state
+  // the constraint's rates certify from the latest evaluated one passes without being evaluated (space.cpp,
+  // "Certified constraints"): the same verdict, first invalid state, reason, segment and state count; worst: over
+  // the states evaluated.
+  PathCheck validate_path(const double* path, int K, bool certify = false);
 
   // Batches of B configurations q (B, n) row-major: one Python call per callback term serves them all.
   void residuals(const double* q, long B, double* F);            // F (B, m); B evaluations
@@ -176,7 +179,7 @@ class Space {
   struct Impl;
   std::unique_ptr<Impl> impl_;
   // validate_path's dense states (M, n) and their segments, checked with certified sweeps
-  PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment);
+  PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment, bool certify);
 };
 
 // RRT-Connect settings (manifoldgen.planning.base.PlannerSettings) and the local planner's name.

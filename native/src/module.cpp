@@ -314,12 +314,15 @@ NB_MODULE(manifoldgen_core, m) {
           "Levenberg-Marquardt projection of q (B, n): (q, converged (uint8), iterations, residual).")
       .def(
           "validate_path",
-          [](Space& s, const In2& path) {
+          [](Space& s, const In2& path, bool certify) {
             check_cols(path, s);
-            const mgcore::PathCheck c = s.validate_path(path.data(), static_cast<int>(path.shape(0)));
+            const mgcore::PathCheck c = s.validate_path(path.data(), static_cast<int>(path.shape(0)), certify);
             return nb::make_tuple(c.valid, c.worst, c.first_invalid, c.reason, c.segment, c.states);
           },
-          "path"_a, "Dense check of path (K, n): (valid, worst, first invalid state, reason, segment, states).");
+          "path"_a, "certify"_a = false,
+          "Dense check of path (K, n): (valid, worst, first invalid state, reason, segment, states). certify: states "
+          "the constraint's rates certify from the latest evaluated one pass unevaluated (the same report; worst over "
+          "the evaluated states).");
 
   m.def(
       "nearest_queries",

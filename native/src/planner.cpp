@@ -465,7 +465,7 @@ struct Local {
     ends_buffer.resize(2 * static_cast<std::size_t>(n()));
     std::copy(a, a + n(), ends_buffer.begin());
     std::copy(b, b + n(), ends_buffer.begin() + n());
-    const PathCheck c = space.validate_path(ends_buffer.data(), 2);
+    const PathCheck c = space.validate_path(ends_buffer.data(), 2, true);
     if (!c.valid) return stopped(c.reason);
     space.stop = VALID;
     return true;
@@ -683,7 +683,7 @@ struct Search {
       out.path = waypoints;  // every edge passed the path check when it was made
       return true;
     }
-    const PathCheck c = space.validate_path(waypoints.data(), static_cast<int>(waypoints.rows()));
+    const PathCheck c = space.validate_path(waypoints.data(), static_cast<int>(waypoints.rows()), true);
     if (c.valid) {
       out.path = waypoints;
       return true;
@@ -700,7 +700,7 @@ struct Search {
     RowMat path(w.first.rows() + 1, space.n());
     path.row(0) = start.transpose();
     path.bottomRows(w.first.rows()) = w.first;
-    const PathCheck c = space.validate_path(path.data(), static_cast<int>(path.rows()));
+    const PathCheck c = space.validate_path(path.data(), static_cast<int>(path.rows()), true);
     out.rejected += !c.valid;
     if (c.valid) out.path = path;
     return c.valid;

@@ -201,6 +201,7 @@ struct Space::Impl {
   void add(const Term& t) {
     m += t.rows();
     terms.push_back(t);
+    rates_stale = true;
     native_terms = native_terms || t.kind != 5;
   }
   // per geometry: what a pair's mid phase tests before coal's exact test (a mesh's convex hull, built on
@@ -445,6 +446,114 @@ struct Space::Impl {
         if (x > 0) hold = false;
     }
     return worst;
+  }
+
+  // ---------------------------------------------------------------- Certified constraints
+  // validate_path(certify): a state is passed without evaluating it when rates bound how far each equality row and
+  // built-in inequality can have moved since the latest evaluated state e, and that is within its slack there.
+  // Every row r has a rate vector (n,) valid in every configuration: |F_r(q') - F_r(q)| <= rates_r . d, with d the
+  // coordinates' variation between q and q' along the path (Space::Impl::variation); the slack is tol_r - |F_r(e)|
+  // for an equality, -G_r(e) for an inequality. The rates are the sweeps' (Impl::rate_bound): a point fixed in joint
+  // j's frame moves at most lever_k per unit of a rotating coordinate k (lever_k: |the point| + the joints' steps
+  // between k and j) and 1 per unit of a sliding one (the base's x, y, z too); its frame turns at most 1 per unit of a
+  // rotating one (the base's yaw, pitch, roll too). Rows: a pose's positions and a sphere's distance: the point's
+  // rates; a pose's log3 rotation error: LOG_RATE times the turning rates while the error's angle stays <= 1 rad
+  // (|d log3| <= (a/2)/sin(a/2) |omega| at angle a), held by one more row per pose (rate: turning, slack: 1 - a(e));
+  // an orientation's rows basis_r . (R axis): |basis_r| |axis| times the turning rates; a linear row: |A_r|; the CoM
+  // polygon's rows: |normal_h| times the centre of mass's rates (the mass-weighted rates of the joints' inertia
+  // centres); a hemisphere's: |direction| |axis| times the turning rates. A closed chain, a Python callback or Python
+  // inequalities: no certificate (every state evaluated); nor a joint that is neither revolute, prismatic nor the base.
+  static constexpr double LOG_RATE = 0.5 / 0.479425538604203;  // (a/2)/sin(a/2) at a = 1 rad
+  RowMat rates;                        // (rows, n): m equality rows, g inequality rows, one angle row per pose
+  std::vector<int> angle_terms;        // the poses (term index) with orientation rows, in angle-row order
+  bool rates_stale = true, certifiable = false;
+  Vec slack;                           // (rows,) at the latest evaluated state
+  long evaluated = -1;                 // the latest evaluated state of the path being checked (-1: none yet)
+
+  // (n,) the speed bound of a point at c in joint j's frame (turning: of the frame's rotation) per unit speed of
+  // each coordinate, over every configuration.
+  Vec point_rates(int j, const Eigen::Vector3d& c, bool turning) const {
+    Vec r = Vec::Zero(n());
+    const auto& supports = model.supports[j];
+    double lever = c.norm();  // from the current joint's origin to the point, at most
+    for (int depth = static_cast<int>(supports.size()) - 1; depth >= 1; --depth) {
+      const int l = static_cast<int>(supports[depth]), k = coord_of[l];
+      if (k == 0 && floating) {
+        for (int a = 0; a < 3; ++a) r[a] = turning ? 0.0 : 1.0;
+        for (int a = 3; a < 6; ++a) r[a] = turning ? 1.0 : lever;
+      } else if (k >= 0) {
+        r[k] = prismatic[l] ? (turning ? 0.0 : 1.0) : (turning ? 1.0 : lever);
+      }
+      lever += step[l];
+    }
+    return r;
+  }
+  Vec frame_rates(pinocchio::FrameIndex f, bool turning) const {
+    const pinocchio::Frame& frame = model.frames[f];
+    return point_rates(static_cast<int>(frame.parentJoint), frame.placement.translation(), turning);
+  }
+
+  void build_rates() {
+    rates_stale = false;
+    prepare_sweeps();
+    certifiable = sweep_unavailable.empty() && !batched_terms();
+    angle_terms.clear();
+    if (!certifiable) return;
+    std::vector<Vec> rows, angles;
+    for (std::size_t i = 0; i < terms.size(); ++i) {
+      const Term& t = terms[i];
+      if (t.kind == 0) {
+        for (std::size_t k = 0; k < t.position_axes.size(); ++k) rows.push_back(frame_rates(t.frame, false));
+        for (std::size_t k = 0; k < t.orientation_axes.size(); ++k) rows.push_back(LOG_RATE * frame_rates(t.frame, true));
+        if (!t.orientation_axes.empty()) {
+          angle_terms.push_back(static_cast<int>(i));
+          angles.push_back(frame_rates(t.frame, true));
+        }
+      } else if (t.kind == 2) {
+        rows.push_back(frame_rates(t.frame, false));
+      } else if (t.kind == 3) {
+        for (int k = 0; k < 2; ++k) rows.push_back(t.basis.row(k).norm() * t.axis.norm() * frame_rates(t.frame, true));
+      } else if (t.kind == 4) {
+        for (int k = 0; k < t.A.rows(); ++k) rows.push_back(t.A.row(k).cwiseAbs().transpose());
+      } else {
+        certifiable = false;
+        return;
+      }
+    }
+    Vec com = Vec::Zero(n());
+    const double mass = pinocchio::computeTotalMass(model);
+    for (int j = 1; j < static_cast<int>(model.njoints) && mass > 0; ++j)
+      com += (model.inertias[j].mass() / mass) * point_rates(j, model.inertias[j].lever(), false);
+    for (const Inequality& c : inequalities)
+      for (int h = 0; h < c.rows(); ++h)
+        rows.push_back(c.kind == 0 ? Vec(c.normals.row(h).norm() * com)
+                                   : Vec(c.direction.norm() * c.axis.norm() * frame_rates(c.frame, true)));
+    rows.insert(rows.end(), angles.begin(), angles.end());
+    rates.resize(static_cast<long>(rows.size()), n());
+    for (std::size_t r = 0; r < rows.size(); ++r) rates.row(static_cast<long>(r)) = rows[r].transpose();
+  }
+  bool batched_terms() const { return !callbacks.empty() || p > 0; }
+
+  // After state_check(q, limit) passed at state i: the slack of each rate row there.
+  void note_evaluated(long i, double limit) {
+    evaluated = i;
+    slack.resize(rates.rows());
+    for (int r = 0; r < m; ++r) slack[r] = limit * tolerance[r] - std::abs(state_F[r]);
+    for (int r = 0; r < g; ++r) slack[m + r] = -state_G[r];
+    for (std::size_t a = 0; a < angle_terms.size(); ++a) {
+      const Term& t = terms[angle_terms[a]];
+      const Eigen::Matrix3d R = t.rotation.transpose() * data.oMf[t.frame].rotation();
+      slack[m + g + static_cast<long>(a)] = 1.0 - std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0));
+    }
+  }
+  // Whether state i of the path whose cumulative variation is var passes the equalities and built-in inequalities
+  // by the rates from the latest evaluated state (a margin of 1e-12 plus 1e-9 of the bound for rounding).
+  bool certified(const double* var, long i) const {
+    if (evaluated < 0 || !certifiable) return false;
+    const int nn = n();
+    const Eigen::Map<const Vec> now(var + i * nn, nn), then(var + evaluated * nn, nn);
+    const Vec bound = rates * (now - then);
+    return ((bound * (1.0 + 1e-9)).array() + 1e-12 <= slack.array()).all();
   }
 
   // A geometry's convex outer shape (a mesh's hull with its triangles, for coal's hill-climbing support;
@@ -743,6 +852,7 @@ struct Space::Impl {
   // the ball around its local AABB), and the deepest common joint of every collision pair.
   void build_holders() {
     prepare_sweeps();
+    rates_stale = true;
     const std::size_t S = sphere_joint.size(), ng = geom.ngeoms;
     sphere_holder.clear();
     long offset = 0;
@@ -1147,6 +1257,7 @@ void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
   p.g += c.rows();
   p.com_needed = true;
   p.inequalities.push_back(c);
+  p.rates_stale = true;
 }
 
 void Space::add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction) {
@@ -1158,6 +1269,7 @@ void Space::add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::
   c.direction = direction;
   p.g += c.rows();
   p.inequalities.push_back(c);
+  p.rates_stale = true;
 }
 
 int Space::g() const { return impl_->g; }
@@ -1435,7 +1547,7 @@ Projection Space::project(double* q, double tol, int max_iters, double damping, 
   return out;
 }
 
-PathCheck Space::validate_path(const double* path, int K) {
+PathCheck Space::validate_path(const double* path, int K, bool certify) {
   const int nn = n();
   const double res = impl_->resolution;
   if (K < 1) throw std::invalid_argument("a path needs at least one waypoint");
@@ -1459,7 +1571,12 @@ PathCheck Space::validate_path(const double* path, int K) {
   const long M = static_cast<long>(segment.size()), chunk = 4096;  // chunk: rows per callback (batched())
   const int pp = impl_->p;
   std::vector<double> v, G;
-  if (impl_->sweeps_ready()) return sweep_path(states, segment);
+  Impl& p = *impl_;
+  if (certify && p.rates_stale) p.build_rates();
+  certify = certify && p.certifiable;
+  p.evaluated = -1;
+  if (p.sweeps_ready()) return sweep_path(states, segment, certify);
+  if (certify) cumulative_variation(states.data(), M, nn, p.variation);
   for (long i = 0; i < M; ++i) {
     const double* q = states.data() + i * nn;
     if (batched() && i % chunk == 0) {
@@ -1473,7 +1590,13 @@ PathCheck Space::validate_path(const double* path, int K) {
     if (!within_limits(q)) c = LIMITS;
     else {
       bool hold = true;
-      const double vi = batched() ? v[i % chunk] : impl_->state_check(q, 1.0, hold);
+      double vi = 0.0;  // certified: passed by the rates, not evaluated
+      if (batched()) {
+        vi = v[i % chunk];
+      } else if (!certify || !p.certified(p.variation.data(), i)) {
+        vi = p.state_check(q, 1.0, hold);
+        if (certify && vi <= 1.0 && hold) p.note_evaluated(i, 1.0);
+      }
       out.worst = std::max(out.worst, vi);
       if (vi > 1.0) c = CONSTRAINT;
       else if (!(batched() ? inequalities_hold(q) : hold)) c = INEQUALITY;
@@ -1500,7 +1623,7 @@ PathCheck Space::validate_path(const double* path, int K) {
 // (the left part first); a single state gets the exact per-state check. States are thus cleared strictly left to
 // right, so the first colliding state found is the path's first, and the report equals the state-by-state one
 // (worst: over the states up to the first invalid one, as there).
-PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector<int>& segment) {
+PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector<int>& segment, bool certify) {
   Impl& p = *impl_;
   const int nn = n(), pp = p.p;
   const long M = static_cast<long>(segment.size());
@@ -1529,7 +1652,12 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
       if (!limits_ok[i - s0]) reason = LIMITS;
       else {
         bool hold = true;
-        if (!batched()) v[i - s0] = p.state_check(q, 1.0, hold);
+        if (certify && p.certified(p.variation.data(), i)) {
+          v[i - s0] = 0.0;  // passed by the rates, not evaluated
+        } else if (!batched()) {
+          v[i - s0] = p.state_check(q, 1.0, hold);
+          if (certify && v[i - s0] <= 1.0 && hold) p.note_evaluated(i, 1.0);
+        }
         if (v[i - s0] > 1.0) reason = CONSTRAINT;
         else if (!(batched() ? inequalities_hold(q) : hold)) reason = INEQUALITY;
         else if (pp && *std::max_element(G.begin() + (i - s0) * pp, G.begin() + (i - s0 + 1) * pp) > 0)
@@ -1593,6 +1721,7 @@ void Space::set_inequalities(int p, Inequalities inequalities) {
   if (p < 0) throw std::runtime_error("inequalities need p >= 0");
   impl_->p = p;
   impl_->inequality = std::move(inequalities);
+  impl_->rates_stale = true;
 }
 
 int Space::p() const { return impl_->p; }

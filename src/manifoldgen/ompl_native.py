@@ -23,7 +23,8 @@ per-component tolerance with the margin our planners keep for intermediate state
 Final check and retry: every exact OMPL solution (densified by OMPL's ``interpolate``) comes back
 over a pipe and is checked here by the space's rule, the same dense check (every
 ``ValidationSettings.resolution`` rad) every method gets, at the same speed as our planners get it: by the
-compiled core's ``validate_path`` when the core is built (its counts booked on the space), else by
+compiled core's ``validate_path`` with certified constraints when the core is built (its counts booked on the
+space), else by
 :meth:`~manifoldgen.space.ConstrainedSpace.validate_path`. A rejected path does not end the query:
 as our planners go on searching after a candidate fails the dense check, OMPL searches again
 (``SimpleSetup::clear``: a new tree, the atlas keeps its charts) until a path passes or the time
@@ -218,12 +219,13 @@ class NativeOmplPlanner:
             child.stdin.flush()
 
     def _dense_check(self, path: np.ndarray) -> tuple[bool, float, str]:
-        """The space's dense check of ``path (K, n)``: (valid, worst violation, reason)."""
+        """The space's dense check of ``path (K, n)``: (valid, worst violation, reason); in the core with certified
+        constraints, as our planner's (the same verdict; worst over the states it evaluated)."""
         if self.core is None:
             report = self.space.validate_path(path)
             return report.valid, report.worst_violation, report.reason
         before = self.core.counts()
-        valid, worst, _, reason, segment, _ = self.core.validate_path(np.ascontiguousarray(path, float))
+        valid, worst, _, reason, segment, _ = self.core.validate_path(np.ascontiguousarray(path, float), certify=True)
         after = self.core.counts()
         native.book(self.space, before, after)
         self.dense_sphere_checks += after["sphere_checks"] - before["sphere_checks"]

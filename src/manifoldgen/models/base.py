@@ -170,7 +170,8 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(y)}")
         out = np.empty((n, self.d), dtype=np.float64)
         yt = self.normalise_y(torch.from_numpy(y))
-        self.nets.eval()
+        if self.nets.training:
+            self.nets.eval()
         with torch.inference_mode():
             for start in range(0, n, CHUNK):
                 stop = min(n, start + CHUNK)
@@ -221,6 +222,7 @@ class ConditionalSampler(ABC):
         try:
             model._build()
             model.nets.load_state_dict(tensors, strict=True)
+            model.nets.eval()
         except (RuntimeError, ValueError, TypeError) as exc:
             first = str(exc).strip().splitlines()[0][:200]
             raise ManifoldgenError(f"{path}: weights do not match the architecture in {CONFIG_FILE} ({first}); "
