@@ -468,6 +468,7 @@ struct Space::Impl {
   std::vector<int> angle_terms;        // the poses (term index) with orientation rows, in angle-row order
   bool rates_stale = true, certifiable = false;
   Vec slack;                           // (rows,) at the latest evaluated state
+  Vec bound;                           // (rows,) certified()'s, kept to spare an allocation per state
   long evaluated = -1;                 // the latest evaluated state of the path being checked (-1: none yet)
 
   // (n,) the speed bound of a point at c in joint j's frame (turning: of the frame's rotation) per unit speed of
@@ -495,8 +496,8 @@ struct Space::Impl {
 
   void build_rates() {
     rates_stale = false;
-    prepare_sweeps();
-    certifiable = sweep_unavailable.empty() && !batched_terms();
+    if (coord_of.size() != model.njoints) prepare_sweeps();
+    certifiable = joints_unsupported.empty() && !batched();
     angle_terms.clear();
     if (!certifiable) return;
     std::vector<Vec> rows, angles;
@@ -532,7 +533,8 @@ struct Space::Impl {
     rates.resize(static_cast<long>(rows.size()), n());
     for (std::size_t r = 0; r < rows.size(); ++r) rates.row(static_cast<long>(r)) = rows[r].transpose();
   }
-  bool batched_terms() const { return !callbacks.empty() || p > 0; }
+  // Python callback terms or inequalities: rows are evaluated in batches (Space::batched)
+  bool batched() const { return !callbacks.empty() || p > 0; }
 
   // After state_check(q, limit) passed at state i: the slack of each rate row there.
   void note_evaluated(long i, double limit) {
@@ -548,11 +550,11 @@ struct Space::Impl {
   }
   // Whether state i of the path whose cumulative variation is var passes the equalities and built-in inequalities
   // by the rates from the latest evaluated state (a margin of 1e-12 plus 1e-9 of the bound for rounding).
-  bool certified(const double* var, long i) const {
+  bool certified(const double* var, long i) {
     if (evaluated < 0 || !certifiable) return false;
     const int nn = n();
     const Eigen::Map<const Vec> now(var + i * nn, nn), then(var + evaluated * nn, nn);
-    const Vec bound = rates * (now - then);
+    bound.noalias() = rates * (now - then);
     return ((bound * (1.0 + 1e-9)).array() + 1e-12 <= slack.array()).all();
   }
 
@@ -777,7 +779,8 @@ struct Space::Impl {
   std::vector<long> span_vertices;                    // its states where the polyline may turn (ends, waypoints)
   long span_id = 0;                                   // counts spans: cached sums and tails of older ones are stale
   bool sweeps_on = true;
-  std::string sweep_unavailable;  // why no sweep ("" when available)
+  std::string sweep_unavailable;   // why no sweep ("" when available)
+  std::string joints_unsupported;  // why no joint data for the bounds (prepare_sweeps; "" when there is)
   std::vector<Holder> sphere_holder, geometry_holder;
   std::vector<double> sphere_tails, geometry_tails;  // per holder: tail[p + 1] = its motion bound below depth p
   std::vector<long> sphere_spans, geometry_spans;    // the span each tail was computed for
@@ -800,11 +803,11 @@ struct Space::Impl {
 
   bool sweeps_ready() const { return sweeps_on && sweep_unavailable.empty() && !sphere_joint.empty(); }
 
-  // The per-joint data of the bound; sweep_unavailable says why not when an active joint is not revolute,
-  // prismatic or the floating base.
+  // The per-joint data of the bound (and of the constraint's rates); joints_unsupported says why not when an active
+  // joint is not revolute, prismatic or the floating base.
   void prepare_sweeps() {
     const int nj = static_cast<int>(model.njoints);
-    sweep_unavailable.clear();
+    joints_unsupported.clear();
     coord_of.assign(nj, -1);
     prismatic.assign(nj, false);
     step.assign(nj, 0.0);
@@ -828,11 +831,11 @@ struct Space::Impl {
         prismatic[j] = slider;
         step[j] = model.jointPlacements[j].translation().norm() +
                   (slider ? std::max(std::abs(lower[coord]), std::abs(upper[coord])) : 0.0);
-        if (slider && !std::isfinite(step[j])) sweep_unavailable = "prismatic joint " + model.names[j] + " has infinite limits";
+        if (slider && !std::isfinite(step[j])) joints_unsupported = "prismatic joint " + model.names[j] + " has infinite limits";
       } else if (base && coord == 0 && floating) {
         step[j] = model.jointPlacements[j].translation().norm();
       } else {
-        sweep_unavailable = "joint " + model.names[j] + " (" + kind + ") is neither revolute, prismatic nor the base";
+        joints_unsupported = "joint " + model.names[j] + " (" + kind + ") is neither revolute, prismatic nor the base";
       }
     }
   }
@@ -852,6 +855,7 @@ struct Space::Impl {
   // the ball around its local AABB), and the deepest common joint of every collision pair.
   void build_holders() {
     prepare_sweeps();
+    sweep_unavailable = joints_unsupported;
     rates_stale = true;
     const std::size_t S = sphere_joint.size(), ng = geom.ngeoms;
     sphere_holder.clear();
@@ -1725,7 +1729,7 @@ void Space::set_inequalities(int p, Inequalities inequalities) {
 }
 
 int Space::p() const { return impl_->p; }
-bool Space::batched() const { return !impl_->callbacks.empty() || impl_->p > 0; }
+bool Space::batched() const { return impl_->batched(); }
 
 void Space::Impl::fill_callbacks(const double* q, long B, Counters& counts, double* F, double* J) {
   const int nn = n(), mm = m;
