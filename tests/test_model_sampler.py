@@ -33,6 +33,7 @@ def test_model_sampler_returns_only_valid_samples(model_dir, panda_task):
     checker = CollisionChecker(panda_task.robot)
     space = ConstrainedSpace(panda_task.constraint, [0.4], checker)
     sampler = ModelSampler(space, model, refine=5, batch=128, seed=1)
+    assert sampler.decoder is not None  # the CVAE's decoder runs in the compiled core
     q = sampler.sample_many(40)
     assert q.shape == (40, 7)
     assert panda_task.constraint.satisfied(q, [0.4]).all()

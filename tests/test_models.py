@@ -83,6 +83,38 @@ def test_model_contract(name, trained, tiny, task):
         torch.testing.assert_close(twin.state_tensors()[key], value, rtol=0, atol=0)
 
 
+@pytest.mark.parametrize("name", MODELS.names())
+def test_native_decoder_is_the_models_network(name, trained):
+    """The core's copy of the sampling network decodes latent rows as torch does (float32 rounding apart),
+    draws them from the model's law, and is deterministic for a seed; a flow has none (torch samples it)."""
+    model = trained[name][0]
+    decoder = model.native_decoder()
+    if name == "flow":
+        assert decoder is None
+        return
+    z = decoder.latent_rows(20_000, 5)
+    assert z.shape == (20_000, model.config["latent"]) and z.dtype == np.float32
+    if model._sampling_net()[1] == "uniform":
+        assert np.abs(z).max() <= 1.0
+        np.testing.assert_allclose(z.std(0), 3 ** -0.5, atol=0.01)
+    else:
+        np.testing.assert_allclose(z.std(0), 1.0, atol=0.02)
+        assert abs(np.mean(np.abs(z) > 3) - 0.0027) < 0.001  # the normal's tails: P(|z| > 3) = 0.0027
+    np.testing.assert_allclose(z.mean(0), 0.0, atol=0.02)
+    y = np.array([0.4])
+    with torch.inference_mode():
+        net = model._sampling_net()[0]
+        yn = model.normalise_y(torch.tensor(y, dtype=torch.float32)).expand(2000, 1)
+        expected = (net(torch.cat([torch.from_numpy(z[:2000]), yn], 1)) * model._q_std + model._q_mean).double().numpy()
+    expected = np.clip(expected, model.norm["lower"], model.norm["upper"])
+    np.testing.assert_allclose(decoder.decode(z[:2000], y), expected, rtol=0, atol=2e-5)
+    q = decoder.sample(y, 300, 11)
+    np.testing.assert_array_equal(q, decoder.decode(decoder.latent_rows(300, 11), y))
+    assert np.abs(decoder.sample(y, 300, 12) - q).max() > 1e-3
+    with pytest.raises(ValueError, match="latent rows must have"):
+        decoder.decode(np.zeros((2, 99), np.float32), y)
+
+
 def test_penalty_is_constraint_residual(task):
     """The training penalty is sum (F_i / tol_i)^2 of the constraint's own residual, on float32 tensors."""
     rng = np.random.default_rng(0)
@@ -140,6 +172,9 @@ def test_pretrained_model_ships_and_samples(task):
     model = load_model(pretrained_model_dir())
     assert model.name == "cvae" and model.meta["robot"] == "panda"
     q = model.sample([0.45], 2000, torch.Generator().manual_seed(0))
-    assert task.constraint.satisfied(q, [0.45]).mean() > 0.5
+    rate = task.constraint.satisfied(q, [0.45]).mean()
+    assert rate > 0.5
+    native = model.native_decoder().sample(np.array([0.45]), 2000, 0)  # the planners' sampler runs this copy
+    assert abs(task.constraint.satisfied(native, [0.45]).mean() - rate) < 0.05
     with pytest.raises(ManifoldgenError, match="no pretrained model"):
         pretrained_model_dir("nope")

@@ -324,6 +324,52 @@ NB_MODULE(manifoldgen_core, m) {
           "the constraint's rates certify from the latest evaluated one pass unevaluated (the same report; worst over "
           "the evaluated states).");
 
+  using Decoder = mgcore::Decoder;
+  using InF2 = nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+  using InF1 = nb::ndarray<const float, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+  const auto rows_of = [](const Decoder::MatF& x) {
+    std::vector<float> data(x.data(), x.data() + x.size());
+    return owned(std::move(data), {static_cast<std::size_t>(x.rows()), static_cast<std::size_t>(x.cols())});
+  };
+  const auto configurations_of = [](const RowMat& q) {
+    std::vector<double> data(q.data(), q.data() + q.size());
+    return owned(std::move(data), {static_cast<std::size_t>(q.rows()), static_cast<std::size_t>(q.cols())});
+  };
+  nb::class_<Decoder>(m, "Decoder")
+      .def(
+          "__init__",
+          [](Decoder* self, const std::vector<InF2>& weights, const std::vector<InF1>& biases, int latent, bool uniform,
+             const In1& q_mean, const In1& q_std, const In1& y_mean, const In1& y_std, const In1& lower, const In1& upper) {
+            std::vector<Decoder::MatF> w;
+            std::vector<Decoder::VecF> b;
+            for (const InF2& a : weights)
+              w.emplace_back(Eigen::Map<const Decoder::MatF>(a.data(), static_cast<long>(a.shape(0)), static_cast<long>(a.shape(1))));
+            for (const InF1& a : biases) b.emplace_back(Eigen::Map<const Decoder::VecF>(a.data(), static_cast<long>(a.shape(0))));
+            new (self) Decoder(std::move(w), std::move(b), latent, uniform, vec_of(q_mean), vec_of(q_std), vec_of(y_mean),
+                               vec_of(y_std), vec_of(lower), vec_of(upper));
+          },
+          "weights"_a, "biases"_a, "latent"_a, "uniform"_a, "q_mean"_a, "q_std"_a, "y_mean"_a, "y_std"_a, "lower"_a, "upper"_a,
+          "A sampling network: float32 weights (out, in) and biases (out,) of Linear layers with SiLU between them, the "
+          "latent size, uniform (U(-1, 1) latent rows, else N(0, I)), the model's normalisation and joint limits.")
+      .def_prop_ro("latent", &Decoder::latent)
+      .def(
+          "latent_rows", [=](const Decoder& d, long count, std::uint64_t seed) { return rows_of(d.latent_rows(count, seed)); },
+          "count"_a, "seed"_a, "(count, latent) float32 latent rows drawn from seed.")
+      .def(
+          "decode",
+          [=](const Decoder& d, const InF2& z, const In1& y) {
+            return configurations_of(d.decode(
+                Eigen::Map<const Decoder::MatF>(z.data(), static_cast<long>(z.shape(0)), static_cast<long>(z.shape(1))),
+                vec_of(y)));
+          },
+          "z"_a, "y"_a, "(B, d) configurations decoded from latent rows z (B, latent) float32 at condition y (k,).")
+      .def(
+          "sample",
+          [=](const Decoder& d, const In1& y, long count, std::uint64_t seed) {
+            return configurations_of(d.sample(vec_of(y), count, seed));
+          },
+          "y"_a, "count"_a, "seed"_a, "(count, d) configurations at condition y (k,): decode(latent_rows(count, seed), y).");
+
   m.def(
       "nearest_queries",
       [](const In2& points, const std::vector<bool>& alive, const In2& queries, double radius) {

@@ -153,7 +153,8 @@ class DatasetSampler(Sampler):
 class ModelSampler(Sampler):
     """Algorithm 1 with a learned model: batches of model samples at the space's condition,
     refined by at most ``refine`` projection (Levenberg-Marquardt) iterations, checked before
-    they are returned."""
+    they are returned. The model's network runs in the compiled core where it can
+    (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
 
     def __init__(self, space: ConstrainedSpace, model, *, refine: int = REFINE, batch: int = 1024,
                  seed: int | np.random.Generator = 0, max_batches: int = 10_000):
@@ -165,13 +166,16 @@ class ModelSampler(Sampler):
         import torch
 
         self.model, self.refine = model, int(refine)
-        self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
+        self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
+        self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
 
     @property
     def lazy_refine(self) -> int:
         return self.refine
 
     def raw(self, count):
+        if self.decoder:
+            return self.decoder.sample(self.space.y, count, int(self.rng.integers(0, 2**63 - 1)))
         return self.model.sample(self.space.y, count, self.generator)
 
     def candidates(self, count):

@@ -86,6 +86,11 @@ class ConditionalSampler(ABC):
     def _generate(self, y: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
         """Normalised conditions (B, k) -> normalised configurations (B, d) (differentiable)."""
 
+    def _sampling_net(self) -> tuple[torch.nn.Sequential, str] | None:
+        """The network :meth:`_generate` runs on ``[z, y]`` and its latent law (``"normal"``: N(0, I),
+        ``"uniform"``: U(-1, 1)), for :meth:`native_decoder`; None: :meth:`_generate` is something else."""
+        return None
+
     @abstractmethod
     def _optimizers(self) -> list[torch.optim.Optimizer]:
         """The optimisers, in a fixed order (their state is checkpointed)."""
@@ -178,6 +183,25 @@ class ConditionalSampler(ABC):
                 yc = yt.expand(stop - start, self.k) if len(yt) == 1 else yt[start:stop]
                 out[start:stop] = (self._generate(yc, generator) * self._q_std + self._q_mean).numpy()
         return np.clip(out, self.norm["lower"], self.norm["upper"], out=out)
+
+    def native_decoder(self):
+        """The sampling network copied into the compiled core (``manifoldgen_core.Decoder``: ``sample(y (k,),
+        count, seed) -> (count, d)``, the same law as :meth:`sample`, float32 as torch, its own random stream),
+        or None where the core is not built or the network is not Linear layers with SiLU between them."""
+        from manifoldgen.native import core_module
+
+        net, core = self._sampling_net(), core_module()
+        if net is None or core is None or not self.nets:
+            return None
+        layers, law = net
+        kinds, linear = [type(layer) for layer in layers], list(layers)[::2]
+        if len(kinds) % 2 == 0 or set(kinds[::2]) != {torch.nn.Linear} or set(kinds[1::2]) - {torch.nn.SiLU}:
+            return None
+        weights = [layer.weight.detach().float().contiguous().numpy() for layer in linear]
+        biases = [layer.bias.detach().float().contiguous().numpy() for layer in linear]
+        return core.Decoder(weights, biases, int(self.config["latent"]), law == "uniform",
+                            *(np.asarray(self.norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
+                                                                            "lower", "upper")))
 
     def state_tensors(self) -> dict[str, torch.Tensor]:
         return {k: v.detach().contiguous().clone() for k, v in self.nets.state_dict().items()}

@@ -33,12 +33,17 @@ class _GAN(ConditionalSampler):
         self.nets["generator"] = mlp(c["latent"] + self.k, c["hidden"], self.d)
         self.nets["critic"] = mlp(self.d + self.k, c["critic_hidden"], 1, torch.nn.LeakyReLU)
 
+    latent_law: str  # "normal" or "uniform", as _noise draws (see ConditionalSampler._sampling_net)
+
     @abstractmethod
     def _noise(self, count: int, generator: torch.Generator | None) -> torch.Tensor:
         """Latent noise (count, latent)."""
 
     def _generate(self, y, generator):
         return self.nets["generator"](torch.cat([self._noise(len(y), generator), y], dim=1))
+
+    def _sampling_net(self):
+        return self.nets["generator"], self.latent_law
 
     def _critic(self, q: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         return self.nets["critic"](torch.cat([q, y], dim=1)).squeeze(1)
@@ -88,6 +93,7 @@ class CGAN(_GAN):
     """The paper's conditional GAN (eq. 3): binary cross-entropy, z ~ U(-1, 1)."""
 
     name = "cgan"
+    latent_law = "uniform"
     defaults = {"latent": 8, "hidden": [128, 128], "critic_hidden": [128, 128], "lr": 2e-4, "beta1": 0.5,
                 "batch": 256, "critic_steps": 1, "epochs": 40, "patience": 15, "residual_weight": 0.5}
 

@@ -31,6 +31,9 @@ class CVAE(SingleLossSampler):
     def _generate(self, y, generator):
         return self._decode(torch.randn(len(y), self.config["latent"], generator=generator), y)
 
+    def _sampling_net(self):
+        return self.nets["decoder"], "normal"
+
     def _optimizers(self):
         return [torch.optim.Adam(self.nets.parameters(), lr=self.config["lr"])]
 

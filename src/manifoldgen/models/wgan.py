@@ -11,6 +11,7 @@ class WGANGP(_GAN):
     """Wasserstein GAN with gradient penalty (Gulrajani et al. 2017), z ~ N(0, I)."""
 
     name = "wgan"
+    latent_law = "normal"
     defaults = {"latent": 8, "hidden": [128, 128], "critic_hidden": [128, 128], "lr": 2e-4, "beta1": 0.5,
                 "batch": 256, "critic_steps": 3, "gp": 1.0, "epochs": 40, "patience": 15,
                 "residual_weight": 0.1}

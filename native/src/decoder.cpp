@@ -1,0 +1,104 @@
+// The sampling network of a learned sampler in the core (core.hpp, Decoder): a decode is a few small
+// matrix products, where torch spends most of a 64-row call in dispatch and allocation.
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "core.hpp"
+
+namespace mgcore {
+
+namespace {
+
+// xoshiro256** (Blackman and Vigna), its state filled by splitmix64 from one seed: the same rows on every platform.
+class Random {
+ public:
+  explicit Random(std::uint64_t seed) {
+    for (auto& word : s_) {
+      seed += 0x9E3779B97F4A7C15ULL;
+      std::uint64_t z = seed;
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+      word = z ^ (z >> 31);
+    }
+  }
+  std::uint64_t next() {
+    const std::uint64_t result = rotl(s_[1] * 5, 7) * 9, t = s_[1] << 17;
+    s_[2] ^= s_[0], s_[3] ^= s_[1], s_[1] ^= s_[2], s_[0] ^= s_[3], s_[2] ^= t, s_[3] = rotl(s_[3], 45);
+    return result;
+  }
+  double open01() { return (static_cast<double>(next() >> 11) + 0.5) * 0x1.0p-53; }  // in (0, 1)
+
+ private:
+  static std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+  std::uint64_t s_[4];
+};
+
+void require(bool ok, const std::string& message) {
+  if (!ok) throw std::invalid_argument("decoder: " + message);
+}
+
+}  // namespace
+
+Decoder::Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
+                 const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper)
+    : weights_(std::move(weights)), biases_(std::move(biases)), latent_(latent), uniform_(uniform),
+      q_mean_(q_mean.cast<float>()), q_std_(q_std.cast<float>()), y_mean_(y_mean.cast<float>()),
+      y_std_(y_std.cast<float>()), lower_(lower), upper_(upper) {
+  require(!weights_.empty() && weights_.size() == biases_.size(), "give one bias per weight matrix, at least one layer");
+  require(latent > 0, "the latent size must be positive");
+  require(y_std.size() == y_mean.size() && q_std.size() == q_mean.size() && lower.size() == q_mean.size() &&
+              upper.size() == q_mean.size(),
+          "normalisation vectors and limits must match the condition and configuration sizes");
+  long width = latent + y_mean.size();
+  for (std::size_t i = 0; i < weights_.size(); ++i) {
+    require(weights_[i].cols() == width && biases_[i].size() == weights_[i].rows(),
+            "layer " + std::to_string(i) + " takes " + std::to_string(weights_[i].cols()) + " inputs, the layer before gives " +
+                std::to_string(width));
+    width = weights_[i].rows();
+  }
+  require(width == q_mean.size(), "the last layer gives " + std::to_string(width) + " outputs for " +
+                                      std::to_string(q_mean.size()) + " joints");
+}
+
+Decoder::MatF Decoder::latent_rows(long count, std::uint64_t seed) const {
+  require(count >= 0, "the number of rows must be >= 0");
+  MatF z(count, latent_);
+  Random random(seed);
+  float* out = z.data();
+  const long size = z.size();
+  if (uniform_) {
+    for (long i = 0; i < size; ++i) out[i] = static_cast<float>(2.0 * random.open01() - 1.0);
+    return z;
+  }
+  for (long i = 0; i < size; i += 2) {  // Box-Muller: two normals from two uniforms
+    const double radius = std::sqrt(-2.0 * std::log(random.open01())), angle = 2.0 * M_PI * random.open01();
+    out[i] = static_cast<float>(radius * std::cos(angle));
+    if (i + 1 < size) out[i + 1] = static_cast<float>(radius * std::sin(angle));
+  }
+  return z;
+}
+
+RowMat Decoder::decode(const MatF& z, const Vec& y) const {
+  require(z.cols() == latent_, "latent rows must have " + std::to_string(latent_) + " columns");
+  require(y.size() == y_mean_.size(), "the condition must have " + std::to_string(y_mean_.size()) + " values");
+  const long B = z.rows(), k = y_mean_.size();
+  MatF x(B, latent_ + k);
+  x.leftCols(latent_) = z;
+  const Eigen::RowVectorXf yn = ((y.cast<float>() - y_mean_).array() / y_std_.array()).matrix().transpose();
+  x.rightCols(k) = yn.replicate(B, 1);
+  for (std::size_t i = 0; i < weights_.size(); ++i) {
+    MatF h(B, weights_[i].rows());
+    h.noalias() = x * weights_[i].transpose();
+    h.rowwise() += biases_[i].transpose();
+    if (i + 1 < weights_.size()) h = h.array() / (1.0f + (-h.array()).exp());  // SiLU
+    x.swap(h);
+  }
+  const Eigen::RowVectorXf mean = q_mean_.transpose(), std = q_std_.transpose();
+  x = (x.array().rowwise() * std.array()).rowwise() + mean.array();
+  RowMat q = x.cast<double>();
+  for (long r = 0; r < B; ++r) q.row(r) = q.row(r).cwiseMax(lower_.transpose()).cwiseMin(upper_.transpose());
+  return q;
+}
+
+}  // namespace mgcore
