@@ -1,10 +1,13 @@
 // The sampling network of a learned sampler in the core (core.hpp, Decoder): a decode is a few small
-// matrix products, where torch spends most of a 64-row call in dispatch and allocation.
+// matrix products (mlp_kernel.cpp), where torch spends most of a 64-row call in dispatch and allocation.
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
 #include "core.hpp"
+
+extern "C" void mg_mlp_forward(int layers, const int* widths, const float* const* weights, const float* const* biases,
+                               long B, const float* x, float* out);  // mlp_kernel.cpp
 
 namespace mgcore {
 
@@ -87,13 +90,16 @@ RowMat Decoder::decode(const MatF& z, const Vec& y) const {
   x.leftCols(latent_) = z;
   const Eigen::RowVectorXf yn = ((y.cast<float>() - y_mean_).array() / y_std_.array()).matrix().transpose();
   x.rightCols(k) = yn.replicate(B, 1);
+  std::vector<int> widths{static_cast<int>(x.cols())};
+  std::vector<const float*> w, b;
   for (std::size_t i = 0; i < weights_.size(); ++i) {
-    MatF h(B, weights_[i].rows());
-    h.noalias() = x * weights_[i].transpose();
-    h.rowwise() += biases_[i].transpose();
-    if (i + 1 < weights_.size()) h = h.array() / (1.0f + (-h.array()).exp());  // SiLU
-    x.swap(h);
+    widths.push_back(static_cast<int>(weights_[i].rows()));
+    w.push_back(weights_[i].data());
+    b.push_back(biases_[i].data());
   }
+  MatF out(B, widths.back());
+  mg_mlp_forward(static_cast<int>(weights_.size()), widths.data(), w.data(), b.data(), B, x.data(), out.data());
+  x.swap(out);
   const Eigen::RowVectorXf mean = q_mean_.transpose(), std = q_std_.transpose();
   x = (x.array().rowwise() * std.array()).rowwise() + mean.array();
   RowMat q = x.cast<double>();

@@ -150,18 +150,11 @@ class DatasetSampler(Sampler):
         return self.rows[self.rng.integers(0, len(self.rows), size=count)]
 
 
-# Largest batch the core's decoder makes (ModelSampler). CPU per row, the CVAE's 4 -> 128 -> 128 -> 7 network, one
-# thread, warm (ad hoc, two runs): core 2.0-3.1 µs at 32-1024 rows (Eigen, SSE2: the module is built for any x86-64);
-# torch 4.4-7.9 µs at 32-64 rows (dispatch; more on a planning query's cold caches), about even at 128, 1.1-1.8 at 256
-# and 0.7-1.3 at 1024 (its AVX-512 kernels).
-NATIVE_DECODE_ROWS = 128
-
-
 class ModelSampler(Sampler):
     """Algorithm 1 with a learned model: batches of model samples at the space's condition,
     refined by at most ``refine`` projection (Levenberg-Marquardt) iterations, checked before
-    they are returned. With ``batch`` <= :data:`NATIVE_DECODE_ROWS` the model's network runs in the compiled core
-    where it can (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
+    they are returned. The model's network runs in the compiled core where it can
+    (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
 
     def __init__(self, space: ConstrainedSpace, model, *, refine: int = REFINE, batch: int = 1024,
                  seed: int | np.random.Generator = 0, max_batches: int = 10_000):
@@ -173,8 +166,7 @@ class ModelSampler(Sampler):
         import torch
 
         self.model, self.refine = model, int(refine)
-        # the model's network in the core for small batches, where torch's per-call dispatch dominates; None: torch
-        self.decoder = model.native_decoder() if batch <= NATIVE_DECODE_ROWS else None
+        self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
         self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
 
     @property
