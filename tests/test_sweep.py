@@ -179,3 +179,41 @@ def test_certified_constraints_give_the_exact_report(problem):
     reasons, evaluations = compare_certified(core, manifold_polylines(space, core, reference, spread, 5))
     assert {0, 2} <= reasons  # valid paths and constraint failures between the waypoints
     assert evaluations[True] < evaluations[False]
+
+
+def test_an_unbounded_robot_geometry_turns_sweeps_off_and_keeps_the_report():
+    """A link geometry with no bound (a half-space on the panda's hand, in no collision pair) has no motion bound:
+    the core says why it sweeps no span, still says so after building the constraint's rates (certify=True), and
+    checks paths state by state with the reports of the same robot without it."""
+    import coal
+
+    task = get_task("pose", "panda")
+    scene = get_scene(task, "wall")
+    cores = []
+    for unbounded in (False, True):
+        checker = scene.checker(task.robot)
+        if unbounded:
+            hand = task.robot.model.njoints - 1
+            plate = coal.Halfspace(np.array([0.0, 0.0, 1.0]), -5.0)
+            checker.geom.addGeometryObject(pin.GeometryObject("unbounded_plate", hand, pin.SE3.Identity(), plate))
+            checker.geom_data = pin.GeometryData(checker.geom)
+        space = ConstrainedSpace(task.constraint, scene.condition, checker)
+        core = native.core_space(space)
+        native.set_spheres(core, native.space_spheres(space))
+        cores.append(core)
+    bounded, unbounded = cores
+    assert bounded.sweeps and bounded.sweep_report() == ""
+    assert not unbounded.sweeps and unbounded.sweep_report() == "geometry unbounded_plate is unbounded"
+    paths = manifold_polylines(space, unbounded, scene.start, 0.8, seed=4, count=3)
+    reasons = set()
+    for path in paths:
+        for certify in (False, True):
+            before = unbounded.counts()["sweep_checks"]
+            report = unbounded.validate_path(np.ascontiguousarray(path), certify=certify)
+            assert unbounded.counts()["sweep_checks"] == before
+            expected = bounded.validate_path(np.ascontiguousarray(path), certify=certify)
+            assert report[0] == expected[0] and report[2:] == expected[2:]
+            np.testing.assert_allclose(report[1], expected[1], rtol=1e-12)
+            reasons.add(report[3])
+    assert unbounded.sweep_report() == "geometry unbounded_plate is unbounded" and not unbounded.sweeps
+    assert {0, 4} <= reasons  # valid paths and collisions among them
