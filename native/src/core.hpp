@@ -244,7 +244,6 @@ class Decoder {
   // out_last = q_mean.size(); q_std, lower, upper as q_mean, y_std as y_mean (invalid_argument otherwise).
   Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
           const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper);
-  int latent() const { return latent_; }
   // (count, latent) latent rows from seed (xoshiro256** seeded by splitmix64; Box-Muller for N(0, I)).
   MatF latent_rows(long count, std::uint64_t seed) const;
   // (B, d) configurations decoded from z (B, latent) at condition y (k,).

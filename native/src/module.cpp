@@ -28,6 +28,13 @@ nb::ndarray<nb::numpy, T> owned(std::vector<T>&& data, std::initializer_list<std
   return nb::ndarray<nb::numpy, T>(store->data(), shape.size(), shape.begin(), owner);
 }
 
+// A new numpy array (rows, cols) holding a copy of the row-major Eigen matrix a.
+template <typename M>
+nb::ndarray<nb::numpy, typename M::Scalar> array_of(const M& a) {
+  return owned(std::vector<typename M::Scalar>(a.data(), a.data() + a.size()),
+               {static_cast<std::size_t>(a.rows()), static_cast<std::size_t>(a.cols())});
+}
+
 Vec vec_of(const In1& a) { return Eigen::Map<const Vec>(a.data(), static_cast<long>(a.shape(0))); }
 
 void check_cols(const In2& q, const Space& s) {
@@ -231,9 +238,7 @@ NB_MODULE(manifoldgen_core, m) {
           "sphere_centers",
           [](Space& s, const In1& q) {
             if (static_cast<int>(q.shape(0)) != s.n()) throw nb::value_error("q must have n entries");
-            const RowMat c = s.sphere_centers(q.data());
-            std::vector<double> out(c.data(), c.data() + c.size());
-            return owned(std::move(out), {static_cast<std::size_t>(c.rows()), 3});
+            return array_of(s.sphere_centers(q.data()));
           },
           "q"_a, "(S, 3) world centres of the spheres at q (n,).")
       .def_prop_ro("has_spheres", &Space::has_spheres)
@@ -327,14 +332,6 @@ NB_MODULE(manifoldgen_core, m) {
   using Decoder = mgcore::Decoder;
   using InF2 = nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
   using InF1 = nb::ndarray<const float, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
-  const auto rows_of = [](const Decoder::MatF& x) {
-    std::vector<float> data(x.data(), x.data() + x.size());
-    return owned(std::move(data), {static_cast<std::size_t>(x.rows()), static_cast<std::size_t>(x.cols())});
-  };
-  const auto configurations_of = [](const RowMat& q) {
-    std::vector<double> data(q.data(), q.data() + q.size());
-    return owned(std::move(data), {static_cast<std::size_t>(q.rows()), static_cast<std::size_t>(q.cols())});
-  };
   nb::class_<Decoder>(m, "Decoder")
       .def(
           "__init__",
@@ -351,22 +348,21 @@ NB_MODULE(manifoldgen_core, m) {
           "weights"_a, "biases"_a, "latent"_a, "uniform"_a, "q_mean"_a, "q_std"_a, "y_mean"_a, "y_std"_a, "lower"_a, "upper"_a,
           "A sampling network: float32 weights (out, in) and biases (out,) of Linear layers with SiLU between them, the "
           "latent size, uniform (U(-1, 1) latent rows, else N(0, I)), the model's normalisation and joint limits.")
-      .def_prop_ro("latent", &Decoder::latent)
       .def(
-          "latent_rows", [=](const Decoder& d, long count, std::uint64_t seed) { return rows_of(d.latent_rows(count, seed)); },
+          "latent_rows", [](const Decoder& d, long count, std::uint64_t seed) { return array_of(d.latent_rows(count, seed)); },
           "count"_a, "seed"_a, "(count, latent) float32 latent rows drawn from seed.")
       .def(
           "decode",
-          [=](const Decoder& d, const InF2& z, const In1& y) {
-            return configurations_of(d.decode(
+          [](const Decoder& d, const InF2& z, const In1& y) {
+            return array_of(d.decode(
                 Eigen::Map<const Decoder::MatF>(z.data(), static_cast<long>(z.shape(0)), static_cast<long>(z.shape(1))),
                 vec_of(y)));
           },
           "z"_a, "y"_a, "(B, d) configurations decoded from latent rows z (B, latent) float32 at condition y (k,).")
       .def(
           "sample",
-          [=](const Decoder& d, const In1& y, long count, std::uint64_t seed) {
-            return configurations_of(d.sample(vec_of(y), count, seed));
+          [](const Decoder& d, const In1& y, long count, std::uint64_t seed) {
+            return array_of(d.sample(vec_of(y), count, seed));
           },
           "y"_a, "count"_a, "seed"_a, "(count, d) configurations at condition y (k,): decode(latent_rows(count, seed), y).");
 
@@ -406,9 +402,8 @@ NB_MODULE(manifoldgen_core, m) {
           return RowMat(Eigen::Map<const RowMat>(a.data(), static_cast<long>(a.shape(0)), nn));
         };
         const mgcore::PlanOutput out = mgcore::rrt_connect(space, vec_of(start), vec_of(goal), fetch, st, time_limit);
-        std::vector<double> path(out.path.data(), out.path.data() + out.path.size());
         nb::dict d;
-        d["path"] = owned(std::move(path), {static_cast<std::size_t>(out.path.rows()), static_cast<std::size_t>(nn)});
+        d["path"] = array_of(out.path);
         d["iterations"] = out.iterations;
         d["samples"] = out.samples;
         d["rejected_paths"] = out.rejected;
