@@ -85,24 +85,45 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
             seed: int = typer.Option(0),
             condition: list[float] = typer.Option(None, help="Condition values (default: the task's)"),
             strict: bool = typer.Option(False, help="Refuse conditions outside the task's range"),
+            anchors: bool = typer.Option(True, help="Seed half the rows around the start and goal of the task's "
+                                         "scenes (their IK branches); --no-anchors: uniform seeds only"),
             near_home: float = typer.Option(0.0, help="Seeds normal around the task's home with this standard "
-                                            "deviation (rad): rows on the home's IK branch (0: uniform seeds)"),
+                                            "deviation (rad) instead: rows on the home's IK branch (needs --no-anchors)"),
             output: Path = typer.Option(..., "-o", "--output", help="Dataset .npz to write")):
-    """Collect constraint-satisfying configurations (resumes after an interruption)."""
+    """Collect constraint-satisfying configurations (resumes after an interruption) and report the modes (IK
+    branches) they fall in and how near they come to every scene's start and goal."""
     import time
 
+    from manifoldgen.coverage import task_anchors
     from manifoldgen.data import collect as run_collect
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     check_output_path(output, [_file(task)])
     task_obj = _task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
+    set_torch_threads()
     start = time.perf_counter()
-    dataset = run_collect(task_obj, per_condition, seed, output, conditions=values, near_home=near_home)
+    found = task_anchors(task_obj) if anchors and not near_home else None
+    dataset = run_collect(task_obj, per_condition, seed, output, conditions=values, near_home=near_home,
+                          anchors=found)
     elapsed = time.perf_counter() - start
     console.print(f"wrote {output}: {len(dataset)} rows x {dataset.q.shape[1]} joints "
                   f"({task_obj.robot.name}, {task_obj.name} task) in {elapsed:.1f} s "
                   f"({len(dataset) / elapsed:,.0f} rows/s)")
+    console.print(_coverage_lines(dataset.meta["coverage"]), markup=False, highlight=False)
+
+
+def _coverage_lines(report: dict) -> str:
+    """The collection's coverage report (:func:`manifoldgen.data.coverage`) as a few lines."""
+    counts = [len(shares) for shares in report["modes"].values()]
+    lines = [f"modes (IK branches) per condition: {min(counts)}-{max(counts)}" if min(counts) != max(counts)
+             else f"modes (IK branches) per condition: {counts[0]}"]
+    for value, shares in report["modes"].items():
+        if len(shares) > 1:
+            lines.append(f"  at {value}: " + ", ".join(f"{s:.0%}" for s in shares) + " of the rows")
+    for anchor in report.get("anchors", []):
+        lines.append(f"nearest row to {anchor['label']}: {anchor['gap']:.3f} rad")
+    return "\n".join(lines)
 
 
 @app.command()
@@ -203,6 +224,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     if not result.solved:
         console.print(result.why(), markup=False)
         raise typer.Exit(1)
+    if result.extras.get("sampler_note"):
+        console.print(f"note: {result.extras['sampler_note']}", markup=False)
 
 
 @app.command()

@@ -5,7 +5,11 @@ File: ``q (N, n) float64``, ``y (N, k) float64`` and ``meta`` (JSON string) with
 :meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch;
 batch ``b`` of condition ``c`` draws from ``default_rng([seed, c, b])``, and every
 finished batch is saved under ``<out>.partial/``, so an interrupted run resumes where it
-stopped and produces the same file as an uninterrupted one. ``<out>.partial/meta.json`` records
+stopped and produces the same file as an uninterrupted one. Given query anchors (the start and
+goal configurations of the task's scenes, :mod:`manifoldgen.coverage`), half of every batch's seeds are drawn
+around them, so the rows cover the IK branches the task will be queried on; the meta then records the anchors.
+Every dataset's meta holds ``coverage``: the modes found at each condition and each anchor's distance to the
+nearest row. ``<out>.partial/meta.json`` records
 everything that defines the output (task spec with the robot's identity, condition values, rows
 per condition, seed, batch settings); a rerun that differs in any of them is refused, naming the
 difference, instead of mixing rows. A run that fails with an error removes its partial folder.
@@ -21,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints import project
+from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, modes, rows_at
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
@@ -78,10 +83,13 @@ class Dataset:
 
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
-            give_up: int = 20, progress: bool = True, near_home: float = 0.0) -> Dataset:
+            give_up: int = 20, progress: bool = True, near_home: float = 0.0,
+            anchors: Anchors | None = None) -> Dataset:
     """Collect ``per_condition`` valid rows at each condition value (default: the task's).
 
-    The seeds projected onto the manifold are uniform in the joint limits, or with ``near_home > 0``
+    The seeds projected onto the manifold are uniform in the joint limits; with ``anchors`` (see
+    :func:`manifoldgen.coverage.task_anchors`; what ``manifoldgen collect`` passes for a task with scenes)
+    half of them are normal around the anchors instead; with ``near_home > 0`` all are
     normal around the task's home with that standard deviation (rad, clipped to the limits): rows on
     the home's IK branch (for a task whose manifold has many branches, such as baxter's dual-arm tray,
     where a unimodal model trained on uniform seeds averages the branches into a pose far from every
@@ -106,10 +114,17 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     if per_condition * len(values) > MAX_ROWS:
         raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
                                f"{MAX_ROWS:,} rows; collect several smaller datasets")
-    meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed,
-            "per_condition": per_condition, "method": "uniform seeds + damped least-squares projection" if not near_home
-            else f"seeds normal around the task home (sd {near_home:g} rad) + damped least-squares projection",
-            **({"near_home": float(near_home)} if near_home else {})}
+    anchors = anchors if anchors is not None and len(anchors) else None
+    if near_home and anchors is not None:
+        raise ManifoldgenError("--near-home and query anchors are two seedings; give one (--no-anchors with "
+                               "--near-home)")
+    method = ("uniform seeds" if not (near_home or anchors) else
+              f"seeds normal around the task home (sd {near_home:g} rad)" if near_home else
+              f"half uniform seeds, half normal around the query anchors (sd {ANCHOR_SPREAD:g} rad)")
+    meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed, "per_condition": per_condition,
+            "method": f"{method} + damped least-squares projection",
+            **({"near_home": float(near_home)} if near_home else {}),
+            **({"anchors": anchors.to_meta()} if anchors else {})}
     partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
         out = check_output_path(out)
@@ -121,7 +136,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
                                        "max_batches": max_batches, "give_up": give_up})
             owned = True
         dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta,
-                           near_home)
+                           near_home, anchors)
+        dataset.meta["coverage"] = coverage(dataset, anchors, seed)
         if out is not None:
             dataset.save(out)
     except Exception:  # a failed run leaves nothing behind (an interrupt or a kill keeps the batches to resume)
@@ -134,7 +150,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
 
 
 def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, partial: Path | None, batch: int,
-             max_batches: int, give_up: int, progress: bool, meta: dict, near_home: float = 0.0) -> Dataset:
+             max_batches: int, give_up: int, progress: bool, meta: dict, near_home: float = 0.0,
+             anchors: Anchors | None = None) -> Dataset:
     checker, robot = task_checker(task), task.robot
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
@@ -149,8 +166,10 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
                     rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
                     rng = np.random.default_rng([seed, c, b])
-                    seeds = (robot.sample_uniform(batch, rng) if not near_home else
-                             np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper))
+                    seeds = (np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper)
+                             if near_home else robot.sample_uniform(batch, rng))
+                    if anchors is not None:
+                        seeds[batch // 2:] = anchor_seeds(anchors, batch - batch // 2, rng, robot)
                     res = project(task.constraint, seeds, y)
                     rows = res.q[space.valid(res.q)]
                     if partial is not None:
@@ -167,6 +186,20 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
             qs.append(q)
             ys.append(np.broadcast_to(y, (per_condition, len(y))))
     return Dataset(np.concatenate(qs), np.concatenate(ys).copy(), meta)
+
+
+def coverage(dataset: Dataset, anchors: Anchors | None, seed: int = 0) -> dict:
+    """What the rows cover, JSON-ready: ``modes`` (per condition value, the shares of its rows in each mode,
+    largest first: IK branches, see :func:`manifoldgen.coverage.modes`) and, with anchors, ``anchors``: each
+    one's label and its distance (rad) to the nearest row at the condition nearest its own."""
+    values = np.unique(dataset.y, axis=0)
+    found = {json.dumps(v.tolist()): [round(m["share"], 4) for m in modes(dataset.q[np.all(dataset.y == v, axis=1)],
+                                                                          seed)] for v in values}
+    report: dict = {"modes": found}
+    if anchors is not None:
+        report["anchors"] = [{"label": label, "gap": round(float(gaps(rows_at(dataset.q, dataset.y, y), q)[0]), 4)}
+                             for label, q, y in zip(anchors.labels, anchors.q, anchors.y)]
+    return report
 
 
 def _prepare_partial(partial: Path, settings: dict) -> None:

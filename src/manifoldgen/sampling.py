@@ -9,6 +9,11 @@ A candidate is a raw row (a model decode, a uniform seed: :meth:`Sampler.raw`) r
 ``lazy_refine`` projection iterations and checked. :meth:`Sampler.sample_many` does both before it
 returns a row; :meth:`Sampler.raw_many` returns raw rows for a search that refines and checks a row
 only when it first uses it (the compiled core's RRT-Connect: most pooled rows are never used).
+
+A model sampler is never left worse than projection: at the start of a query (:meth:`ModelSampler.begin_query`)
+it measures how far its samples lie from the start and the goal, and when the model misses either (an IK
+branch it never learned) it mixes projected uniform rows into every batch at once; otherwise it starts mixing
+them only when a query has drawn :data:`MIX_AFTER` rows without solving, up to :data:`MIX_MAX` of each batch.
 """
 
 from __future__ import annotations
@@ -26,16 +31,22 @@ from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
 
 PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # the projection sampler's iterations
+CHECK_ROWS = 256  # model rows a query's start draws to measure its gaps at the start and the goal
+MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows while the model covers its ends
+MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
+MIX_AFTER = 20_000  # raw rows a query draws before a model that covers its ends starts mixing (full after twice)
 
 
 @dataclass
 class SamplerStats:
-    """Counts since construction: candidates made, projected, accepted; batches drawn."""
+    """Counts since construction: candidates made, projected, accepted; batches drawn; ``mixed``: candidates
+    that were projected uniform rows mixed into a model's (see :class:`ModelSampler`)."""
 
     generated: int = 0
     refined: int = 0
     accepted: int = 0
     batches: int = 0
+    mixed: int = 0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -168,21 +179,71 @@ class ModelSampler(Sampler):
         self.model, self.refine = model, int(refine)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
         self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
+        self.missed = False  # the latest query's start or goal lies far from every model sample
+        self.drawn = 0  # raw rows drawn since the latest query began
 
     @property
     def lazy_refine(self) -> int:
-        return self.refine
+        """Projection iterations per raw row: ``refine``, or the projection sampler's when the query's ends are
+        missed (its rows are then mostly uniform seeds, projected lazily as the projection sampler's are)."""
+        return PROJECT_ITERS if self.missed else self.refine
 
-    def raw(self, count):
+    def begin_query(self, start: np.ndarray, goal: np.ndarray) -> str:
+        """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of :data:`CHECK_ROWS` model rows
+        against the rows' own spacing (median nearest-neighbour distance); a miss (see
+        :func:`manifoldgen.coverage.missed`) makes every batch of this query :data:`MIX_MISSED` projected
+        uniform rows. Returns one line saying so, or "" when the model covers both ends."""
+        from manifoldgen.coverage import gaps, missed
+
+        rows = self._decode(CHECK_ROWS)
+        spacing = float(np.median(gaps_within(rows)))
+        ends = gaps(rows, np.stack([start, goal]))
+        self.missed, self.drawn = bool(missed(ends, spacing).any()), 0
+        if not self.missed:
+            return ""
+        return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
+                f"(their own spacing: {spacing:.2f} rad): it misses an IK branch of this query, so {MIX_MISSED:.0%} "
+                f"of its rows are projected uniform samples; name the scene in the task file, recollect (collect "
+                f"seeds around every scene's start and goal) and retrain")
+
+    def mix(self) -> float:
+        """The share of projected uniform rows in the next batch (see the module doc)."""
+        if self.missed:
+            return MIX_MISSED
+        return MIX_MAX * float(np.clip(self.drawn / MIX_AFTER - 1.0, 0.0, 1.0))
+
+    def _decode(self, count: int) -> np.ndarray:
         if self.decoder:
             return self.decoder.sample(self.space.y, count, int(self.rng.integers(0, 2**63 - 1)))
         return self.model.sample(self.space.y, count, self.generator)
 
+    def raw(self, count):
+        share = self.mix()
+        mixed = int(self.rng.binomial(count, share)) if share else 0
+        self.drawn += count
+        rows = self._decode(count - mixed)
+        if not mixed:
+            return rows
+        uniform = self.space.robot.sample_uniform(mixed, self.rng)
+        if not self.missed:  # a query refining rows by `refine` iterations only gets these projected now
+            uniform = self.space.project(uniform, max_iters=PROJECT_ITERS).q
+            self.stats.refined += mixed
+        self.stats.mixed += mixed
+        return np.concatenate([rows, uniform])[self.rng.permutation(count)]
+
     def candidates(self, count):
         q = self.raw(count)
-        q = self.space.project(q, max_iters=self.refine).q if self.refine else q
-        self.stats.refined += count if self.refine else 0
+        refine = self.lazy_refine
+        q = self.space.project(q, max_iters=refine).q if refine else q
+        self.stats.refined += count if refine else 0
         return q
+
+
+def gaps_within(rows: np.ndarray) -> np.ndarray:
+    """(R,) distance from each of ``rows (R, n)`` to its nearest other row."""
+    d = np.sum((rows[:, None] - rows[None]) ** 2, axis=2)
+    np.fill_diagonal(d, np.inf)
+    return np.sqrt(d.min(axis=1))
 
 
 def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = REFINE,

@@ -37,6 +37,7 @@ CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous ep
 OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
 MIN_ROWS = 10
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
+DIMENSION_ROWS = 16  # dataset rows whose constraint Jacobian gives the manifold's dimension (the largest rank wins)
 
 
 @dataclass
@@ -103,11 +104,10 @@ def manifold_dimension(task, q: np.ndarray, y: np.ndarray) -> int:
     return task.robot.n - max(int(np.linalg.matrix_rank(j, tol=1e-6)) for j in J)
 
 
-def _check_latent(model: ConditionalSampler, task, dataset: Dataset) -> None:
-    """Warn when the model's latent is smaller than the manifold's dimension (at the first dataset rows):
-    its samples then cover at most a latent-dimensional sheet of the manifold."""
+def _check_latent(model: ConditionalSampler, dimension: int) -> None:
+    """Warn when the model's latent is smaller than the manifold's ``dimension``: its samples then cover at
+    most a latent-dimensional sheet of the manifold."""
     latent = model.config.get("latent")
-    dimension = manifold_dimension(task, dataset.q[:3], dataset.y[:3])
     if latent is not None and int(latent) < dimension:
         warnings.warn(f"{model.name} latent {latent} is below the constraint manifold's dimension {dimension} "
                       f"(joints minus the constraint Jacobian's rank): its samples cover at most a {latent}-"
@@ -145,12 +145,14 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     perm = torch.randperm(len(q_all), generator=gen)
     n_val = max(1, int(round(validation * len(q_all))))
     val_idx, train_idx = perm[:n_val], perm[n_val:]
+    dimension = manifold_dimension(task, dataset.q[:DIMENSION_ROWS], dataset.y[:DIMENSION_ROWS])
+    model.size_for(task.robot.n, dimension)  # the same data gives a resumed run the same sizes
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model.setup(dataset.meta, dataset.q[train_idx.numpy()], dataset.y[train_idx.numpy()],
                     task.robot.lower, task.robot.upper)
     model.residual_fn = task.constraint.penalty if model.config.get("residual_weight", 0.0) > 0 else None
-    _check_latent(model, task, dataset)
+    _check_latent(model, dimension)
     q_train, y_train = model.normalise_q(q_all[train_idx]), model.normalise_y(y_all[train_idx])
     q_val, y_val = model.normalise_q(q_all[val_idx]), model.normalise_y(y_all[val_idx])
     y_low, y_high = y_train.min(0).values, y_train.max(0).values

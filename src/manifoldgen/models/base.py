@@ -47,6 +47,12 @@ def mlp(inputs: int, hidden: list[int], outputs: int, activation: type[torch.nn.
     return torch.nn.Sequential(*layers)
 
 
+def width_for(joints: int) -> int:
+    """Hidden-layer width for ``joints`` coordinates: 64 + 8 per joint, rounded up to a multiple of 64
+    (7 joints: 128; 14: 192; 34-39: 384)."""
+    return 64 * -(-(64 + 8 * int(joints)) // 64)
+
+
 def pseudo_huber(r2: torch.Tensor) -> torch.Tensor:
     """sqrt(1 + r^2) - 1 for squared normalised residuals: quadratic inside tolerance, linear outside."""
     return torch.sqrt(1.0 + r2) - 1.0
@@ -69,6 +75,7 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"unknown hyper-parameter(s) {unknown} for model '{self.name}'; "
                                    f"known: {', '.join(sorted(self.defaults))}")
         self.config: dict = {**self.defaults, **hyper}
+        self.given = frozenset(hyper)  # set by the user: never resized (see size_for)
         for key, value in self.config.items():
             _check_hyper(self.name, key, value, self.defaults[key])
         self.meta: dict = {}
@@ -106,6 +113,15 @@ class ConditionalSampler(ABC):
         """A scalar to early-stop on (lower is better), on the normalised validation split."""
 
     # ------------------------------------------------------------------ setup
+    def size_for(self, joints: int, dimension: int) -> None:
+        """Size what the user did not set from the data: ``latent`` = the manifold's ``dimension``, every hidden
+        layer :func:`width_for` ``joints`` wide (a 7-joint arm keeps 128)."""
+        if "latent" in self.config and "latent" not in self.given:
+            self.config["latent"] = max(1, int(dimension))
+        for key in ("hidden", "critic_hidden"):
+            if key in self.config and key not in self.given:
+                self.config[key] = [width_for(joints)] * len(self.config[key])
+
     def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
         """Record the dataset meta and normalisation (from training rows ``q (N, d)``, ``y (N, k)``)
         and build fresh networks (initialised from the current torch RNG)."""

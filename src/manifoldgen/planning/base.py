@@ -148,6 +148,8 @@ class Planner(ABC):
         self.trees, self.pool, self._goal_gap = [], None, np.inf
         began = time.perf_counter()
         failure = ""
+        begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
+        note = begin_query(start, goal) if begin_query else ""
         try:
             path = self._direct(start, goal)
             if path is None:
@@ -165,6 +167,8 @@ class Planner(ABC):
                   "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
         if failure:
             extras["failure"] = failure
+        if note:
+            extras["sampler_note"] = note
         path = np.zeros((0, len(start))) if path is None else path
         return PlanResult(len(path) > 0, path, elapsed, self.iterations, self.samples,
                           self.local.projections - projections + sampler["refined"], self.name,

@@ -65,6 +65,8 @@ class PlanResult:
             parts.append("refused extensions: " + ", ".join(f"{what} {count}" for count, what in refused))
         if x.get("rejected_paths"):
             parts.append(f"{x['rejected_paths']} candidate paths failed the dense validation")
+        if x.get("sampler_note"):
+            parts.append(x["sampler_note"])
         return f"not solved in {self.time_s:.3f} s after {self.iterations} iterations: " + "; ".join(parts)
 
     def to_dict(self) -> dict:
