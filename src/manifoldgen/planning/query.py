@@ -65,8 +65,15 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
             "planner": planner, "planner_settings": asdict(solver.settings), "sampler": sampler,
             "local": solver.local.name, "seed": seed,
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
-            "validation": report.to_dict() if report else {"resolution": space.settings.resolution}}
+            "validation": report.to_dict() if report else unsolved_validation(space.settings.resolution)}
     return result, meta
+
+
+def unsolved_validation(resolution: float) -> dict:
+    """``meta["validation"]`` of an unsolved query: a checked path's keys, ``valid`` False, no state checked
+    (``worst_violation`` 0.0, the check's starting value; plain JSON, no NaN)."""
+    return {"valid": False, "worst_violation": 0.0, "reason": "not solved: no path to check", "segment": -1,
+            "states_checked": 0, "resolution": resolution}
 
 
 def task_settings(task: Task, planner: str, settings: dict | None = None) -> dict:
