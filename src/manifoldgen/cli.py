@@ -10,6 +10,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
+from manifoldgen.coverage import gap_lines
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path
 from manifoldgen.runtime import REFINE, TORCH_THREADS, check_seed, set_torch_threads
@@ -121,8 +122,26 @@ def _coverage_lines(report: dict) -> str:
     for value, shares in report["modes"].items():
         if len(shares) > 1:
             lines.append(f"  at {value}: " + ", ".join(f"{s:.0%}" for s in shares) + " of the rows")
-    for anchor in report.get("anchors", []):
-        lines.append(f"nearest row to {anchor['label']}: {anchor['gap']:.3f} rad")
+    lines += gap_lines(report.get("anchors", []), "row")
+    if any(a["missed"] for a in report.get("anchors", [])):
+        lines.append("no row comes near a MISSED start or goal: collect more rows (--per-condition), or check that "
+                     "the scene's condition is among the collected ones")
+    return "\n".join(lines)
+
+
+def _model_gap_lines(net, seed: int) -> str:
+    """For every scene start and goal the model's dataset recorded: how near the model's samples come."""
+    import torch
+
+    from manifoldgen.coverage import anchors_from_meta, model_gaps
+    anchors = anchors_from_meta(net.meta)
+    if anchors is None:
+        return ""
+    report = model_gaps(lambda y, n: net.sample(y, n, torch.Generator().manual_seed(seed)), anchors)
+    lines = gap_lines(report, "sample")
+    if any(r["missed"] for r in report):
+        lines.append("the model misses a MISSED start or goal (an IK branch): planning there falls back to projected "
+                     "uniform samples; train another model (--model cfm) or with more epochs")
     return "\n".join(lines)
 
 
@@ -280,6 +299,9 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
                   f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}) "
                   f"-> {output} (model.json, model.safetensors, loss.png)")
+    gaps = _model_gap_lines(net, seed)
+    if gaps:
+        console.print(gaps, markup=False, highlight=False)
 
 
 @app.command()
@@ -307,6 +329,9 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
                   f"{info['raw_valid_rate']:.2%}, after refine {refine}: {info['refined_valid_rate']:.2%}")
+    gaps = _model_gap_lines(net, seed)
+    if gaps:
+        console.print(gaps, markup=False, highlight=False)
 
 
 def _condition_rows(texts: list[str] | None) -> list[list[float]] | None:

@@ -79,10 +79,45 @@ def gaps(rows: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
+def spacing(rows: np.ndarray, seed: int = 0, count: int = 1000) -> float:
+    """Median distance from a row of ``rows (R, n)`` to its nearest other row (on at most ``count`` rows)."""
+    if len(rows) < 2:
+        return float("inf")
+    sub = rows[np.random.default_rng(seed).choice(len(rows), min(len(rows), count), replace=False)]
+    return float(np.median([np.sqrt(np.partition(np.sum((sub - r) ** 2, axis=1), 1)[1]) for r in sub]))
+
+
 def missed(gap: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """(P,) True where ``gap`` is a miss: far beyond the ``reference`` gap of rows that cover the point
     (e.g. a model's gap against the dataset's, or against projected uniform samples')."""
     return (np.asarray(gap) > FAR * np.asarray(reference)) & (np.asarray(gap) > MIN_MISS)
+
+
+def model_gaps(sample, anchors: Anchors, count: int = 2000) -> list[dict]:
+    """Per anchor: its ``label``, ``gap`` (rad) to the nearest of the ``count`` rows ``sample(y (k,), count)``
+    draws at its condition, their ``spacing`` and ``missed`` (see :func:`missed`)."""
+    report = []
+    for label, a, y in zip(anchors.labels, anchors.q, anchors.y):
+        rows = sample(y, count)
+        gap, space = float(gaps(rows, a)[0]), spacing(rows)
+        report.append({"label": label, "gap": round(gap, 4), "spacing": round(space, 4),
+                       "missed": bool(missed(gap, space))})
+    return report
+
+
+def gap_lines(report: list[dict], what: str) -> list[str]:
+    """One line per anchor of ``report`` (:func:`model_gaps`, or a dataset's ``coverage["anchors"]``)."""
+    return [f"{'MISSED: ' if r['missed'] else ''}nearest {what} to {r['label']}: {r['gap']:.3f} rad "
+            f"({what}s' own spacing {r['spacing']:.3f})" for r in report]
+
+
+def anchors_from_meta(meta: dict) -> Anchors | None:
+    """The anchors a dataset's meta records (a model's meta is its dataset's), or None."""
+    found = meta.get("anchors") or []
+    if not found:
+        return None
+    return Anchors(np.array([a["q"] for a in found], float), np.array([a["condition"] for a in found], float),
+                   [str(a["label"]) for a in found])
 
 
 def rows_at(q: np.ndarray, y_rows: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints import project
-from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, modes, rows_at
+from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
 from manifoldgen.progress import progress_bar
@@ -191,14 +191,20 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
 def coverage(dataset: Dataset, anchors: Anchors | None, seed: int = 0) -> dict:
     """What the rows cover, JSON-ready: ``modes`` (per condition value, the shares of its rows in each mode,
     largest first: IK branches, see :func:`manifoldgen.coverage.modes`) and, with anchors, ``anchors``: each
-    one's label and its distance (rad) to the nearest row at the condition nearest its own."""
+    one's label, its distance ``gap`` (rad) to the nearest row at the condition nearest its own, the rows'
+    ``spacing`` there (median distance to the nearest other row) and ``missed`` (see
+    :func:`manifoldgen.coverage.missed`)."""
     values = np.unique(dataset.y, axis=0)
     found = {json.dumps(v.tolist()): [round(m["share"], 4) for m in modes(dataset.q[np.all(dataset.y == v, axis=1)],
                                                                           seed)] for v in values}
     report: dict = {"modes": found}
     if anchors is not None:
-        report["anchors"] = [{"label": label, "gap": round(float(gaps(rows_at(dataset.q, dataset.y, y), q)[0]), 4)}
-                             for label, q, y in zip(anchors.labels, anchors.q, anchors.y)]
+        report["anchors"] = []
+        for label, q, y in zip(anchors.labels, anchors.q, anchors.y):
+            rows = rows_at(dataset.q, dataset.y, y)
+            gap, space = float(gaps(rows, q)[0]), spacing(rows, seed)
+            report["anchors"].append({"label": label, "gap": round(gap, 4), "spacing": round(space, 4),
+                                      "missed": bool(missed(gap, space))})
     return report
 
 
