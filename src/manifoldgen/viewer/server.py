@@ -62,9 +62,10 @@ def stop_server(server, wait: float = 0.5) -> None:
 
 
 def open_viewer(file: str | Path, host: str = "127.0.0.1", port: int = 8080, task: str | None = None,
-                say: Callable[[str], None] = print) -> Viewer:
-    """Start a viser server on ``host``:``port`` (or the next free port, said) showing ``file``."""
-    source = read_source(file, task)
+                say: Callable[[str], None] = print, *, trust_code: bool = False) -> Viewer:
+    """Start a viser server on ``host``:``port`` (or the next free port, said) showing ``file`` (``task``,
+    ``trust_code``: see :func:`~manifoldgen.viewer.source.read_source`)."""
+    source = read_source(file, task, trust_code=trust_code)
     chosen = free_port(host, port)
     if chosen != port:
         say(f"port {port} is in use; using {chosen}")

@@ -1,0 +1,117 @@
+"""Files are data, never code: a dataset, model or path file naming a user's ``module:Class`` constraint is
+refused (one line) without importing anything or touching ``sys.path``; its recorded ``task_file`` is
+information only."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.data import collect
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import load_npz, save_npz
+from manifoldgen.models import pretrained_model_dir
+from manifoldgen.models.base import document_checksum
+from manifoldgen.tasks import task_from_meta
+
+runner = CliRunner()
+PLANTED = ("evil", "matplotlib", "toppra", "viser", "probe")  # modules a hostile folder plants
+
+
+def _one_error(result) -> str:
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "Traceback" not in result.output, result.output
+    return errors[0]
+
+
+@pytest.fixture(scope="module")
+def hostile(tmp_path_factory, panda_task, planned_path):
+    """A folder of modules that leave a marker file when imported, and panda pose files (dataset, model, path)
+    whose meta points ``task_file`` there: ``user/`` ones name the type ``evil:Thing``, ``this/`` ones the
+    standard library's ``this:X``, ``builtin/`` ones keep their built-in constraint."""
+    root = tmp_path_factory.mktemp("hostile")
+    planted = root / "planted"
+    planted.mkdir()
+    for name in PLANTED:
+        marker = str(planted / f"{name}-ran")
+        (planted / f"{name}.py").write_text(f"open({marker!r}, 'w').close()\nclass Thing: pass\n")
+    data = collect(panda_task, 12, seed=0, conditions=[[0.3], [0.5]], progress=False)
+    for kind, ctype in (("user", "evil:Thing"), ("this", "this:X"), ("builtin", None)):
+        folder = root / kind
+        folder.mkdir()
+
+        def edit(meta: dict) -> dict:
+            meta = json.loads(json.dumps(meta))
+            meta["task"]["task_file"] = str(planted / "task.toml")
+            if ctype is not None:
+                meta["task"]["constraint"]["type"] = meta["constraint"]["type"] = ctype
+            return meta
+        save_npz(folder / "d.npz", edit(data.meta), q=data.q, y=data.y)
+        meta, arrays = load_npz(planned_path("wall"), ("path",))
+        save_npz(folder / "p.npz", edit(meta), **arrays)
+        shutil.copytree(pretrained_model_dir(), folder / "m")
+        doc = json.loads((folder / "m" / "model.json").read_text())
+        doc["meta"] = edit(doc["meta"])
+        doc["sha256"] = document_checksum(doc)  # a checksum, not a signature: anyone can recompute it
+        (folder / "m" / "model.json").write_text(json.dumps(doc))
+    return root
+
+
+@pytest.fixture
+def untouched(hostile):
+    """Asserts, after the test, that nothing planted ran, no planted module is importable and sys.path is as
+    it was."""
+    before = list(sys.path)
+    yield
+    assert sys.path == before
+    assert not [p.name for p in (hostile / "planted").glob("*-ran")]
+    assert importlib.util.find_spec("probe") is None and "evil" not in sys.modules and "this" not in sys.modules
+
+
+REFUSED = [
+    ("train", "train {H}/user/d.npz -o {O}/m"),
+    ("sample", "sample {H}/user/m --condition 0.4 -o {O}/s.npz"),
+    ("view-export-path", "view {H}/user/p.npz --export {O}/v.html"),
+    ("view-export-dataset", "view {H}/user/d.npz --export {O}/v.html"),
+    ("view-snapshots", "view {H}/user/p.npz --snapshots {O}/v.png"),
+    ("trajectory", "trajectory {H}/user/p.npz -o {O}/t.json"),
+    ("bench-sampling", "bench sampling {H}/user/m -o {O}/b"),
+    ("this-module", "trajectory {H}/this/p.npz -o {O}/t.json"),
+]
+
+
+@pytest.mark.parametrize("args", [a for _, a in REFUSED], ids=[i for i, _ in REFUSED])
+def test_a_file_naming_user_code_is_refused_and_nothing_is_imported(args, hostile, untouched, tmp_path):
+    message = _one_error(runner.invoke(app, args.format(H=hostile, O=tmp_path).split()))
+    assert ("evil:Thing" in message or "this:X" in message) and "--task FILE" in message and "--trust-code" in message
+    assert not list(tmp_path.iterdir()), "nothing is written"
+
+
+def test_the_api_refuses_too(hostile, untouched):
+    for kind in ("user", "this"):
+        meta, _ = load_npz(hostile / kind / "d.npz", ("q",))
+        with pytest.raises(ManifoldgenError, match="reading a file never imports code"):
+            task_from_meta(meta)
+
+
+def test_a_recorded_task_file_is_information_only(hostile, untouched, tmp_path):
+    """Built-in constraint types work from files alone; their task_file (the planted folder) is never on sys.path."""
+    for args in (f"trajectory {hostile}/builtin/p.npz -o {tmp_path}/t.json",
+                 f"sample {hostile}/builtin/m --condition 0.4 -n 20 -o {tmp_path}/s.npz",
+                 f"train {hostile}/builtin/d.npz --epochs 1 --set hidden=[8] --set batch=8 -o {tmp_path}/m"):
+        result = runner.invoke(app, args.split())
+        assert result.exit_code == 0, result.output
+
+
+def test_a_given_task_must_match_the_file(hostile, untouched, tmp_path):
+    message = _one_error(runner.invoke(app, ["trajectory", f"{hostile}/user/p.npz", "--task", "sphere",
+                                             "-o", f"{tmp_path}/t.json"]))
+    assert "made for another task" in message
