@@ -1,6 +1,6 @@
 """Files are data, never code: a dataset, model or path file naming a user's ``module:Class`` constraint is
 refused (one line) without importing anything or touching ``sys.path``; its recorded ``task_file`` is
-information only."""
+information only. Also: the viewer's websocket accepts only its own page's Origin."""
 
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ import sys
 from pathlib import Path
 
 import pytest
+import viser
 from typer.testing import CliRunner
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
 
 from manifoldgen.cli import app
 from manifoldgen.data import collect
@@ -20,6 +23,7 @@ from manifoldgen.io import load_npz, save_npz
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.models.base import document_checksum
 from manifoldgen.tasks import task_from_meta
+from manifoldgen.viewer.server import ORIGIN_REFUSED, free_port, origin_allowed, start_server, stop_server
 
 runner = CliRunner()
 PLANTED = ("evil", "matplotlib", "toppra", "viser", "probe")  # modules a hostile folder plants
@@ -115,3 +119,34 @@ def test_a_given_task_must_match_the_file(hostile, untouched, tmp_path):
     message = _one_error(runner.invoke(app, ["trajectory", f"{hostile}/user/p.npz", "--task", "sphere",
                                              "-o", f"{tmp_path}/t.json"]))
     assert "made for another task" in message
+
+
+# ---------------------------------------------------------------------- the viewer's websocket
+def test_origin_rule():
+    assert origin_allowed(None, "127.0.0.1:8080")  # no browser
+    assert origin_allowed("http://127.0.0.1:8080", "127.0.0.1:8080")
+    assert origin_allowed("http://localhost:9000", "localhost:9000")  # through a tunnel
+    assert origin_allowed("http://[::1]:8080", "[::1]:8080")
+    assert origin_allowed("http://10.1.2.3:8080", "10.1.2.3:8080", "0.0.0.0")
+    assert not origin_allowed("http://evil.example", "127.0.0.1:8080")
+    assert not origin_allowed("http://evil.example:8080", "evil.example:8080")  # DNS rebinding
+    assert not origin_allowed("http://localhost:3000", "localhost:8080")  # another local site
+    assert not origin_allowed("null", "127.0.0.1:8080")
+    assert not origin_allowed("http://127.0.0.1:8080", None)
+
+
+def test_the_viewer_closes_a_foreign_origin_before_sending_anything():
+    server = start_server("127.0.0.1", free_port("127.0.0.1", 8700))
+    port = server.get_port()
+    try:
+        def first_frame(origin: str):
+            with connect(f"ws://127.0.0.1:{port}", origin=origin, subprotocols=[f"viser-v{viser.__version__}"],
+                         open_timeout=10) as ws:
+                try:
+                    return ws.recv(timeout=10)
+                except ConnectionClosed as exc:
+                    return exc.rcvd.code
+        assert first_frame("http://evil.example") == ORIGIN_REFUSED
+        assert isinstance(first_frame(f"http://127.0.0.1:{port}"), bytes)  # the scene
+    finally:
+        stop_server(server)
