@@ -1,6 +1,7 @@
 """Files are data, never code: a dataset, model or path file naming a user's ``module:Class`` constraint is
 refused (one line) without importing anything or touching ``sys.path``; its recorded ``task_file`` is
-information only. Also: the viewer's websocket accepts only its own page's Origin."""
+information only. Also: labels that become file names are plain names, and the viewer's websocket accepts only
+its own page's Origin."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from typer.testing import CliRunner
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
+from manifoldgen.bench.planning import Method
 from manifoldgen.cli import app
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
@@ -119,6 +121,22 @@ def test_a_given_task_must_match_the_file(hostile, untouched, tmp_path):
     message = _one_error(runner.invoke(app, ["trajectory", f"{hostile}/user/p.npz", "--task", "sphere",
                                              "-o", f"{tmp_path}/t.json"]))
     assert "made for another task" in message
+
+
+# ---------------------------------------------------------------------- labels are names
+@pytest.mark.parametrize("label", ["DIR/keep", "../../x", ".hidden", "a..b", "a b"])
+def test_a_label_that_is_not_a_plain_name_is_refused(label, tmp_path):
+    out = tmp_path / "out"
+    (tmp_path / "DIR").mkdir()
+    message = _one_error(runner.invoke(app, ["bench", "plan", "pose", "--scene", "wall", "-m",
+                                             f"{label}=rrtconnect@project", "--snapshots", "-o", str(out)]))
+    assert "not a plain name" in message and label in message
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["DIR"], "nothing written"
+
+
+def test_plain_labels_pass():
+    assert Method.parse("cvae-1.5_x+y:z=rrtconnect@project").label == "cvae-1.5_x+y:z"
+    assert Method.parse("rrtconnect@project,batch=8").label == "rrtconnect@project,batch=8"
 
 
 # ---------------------------------------------------------------------- the viewer's websocket

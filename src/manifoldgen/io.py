@@ -6,6 +6,7 @@ import errno
 import glob
 import json
 import os
+import re
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -140,6 +141,18 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
                 part = "" if hit == source else f", part of the input folder {given}"
                 raise ManifoldgenError(f"{what} {path} would overwrite the input {hit}{part}; choose another output")
     return path
+
+
+NAME = re.compile(r"[A-Za-z0-9_@+=:,-][A-Za-z0-9_.@+=:,-]{0,99}")
+
+
+def check_name(name: str, what: str, fix: str = "rename it") -> str:
+    """Refuse a user's string that becomes part of a file name unless it is a plain name: letters, digits and
+    ``_-.@+=:,``, at most 100 characters, no leading ``.`` and no ``..`` (so never a path)."""
+    if not (NAME.fullmatch(name) and ".." not in name):
+        raise ManifoldgenError(f"{what} '{name}' is not a plain name (letters, digits and _ - . @ + = : , only; no "
+                               f"'/', no '..', no leading '.'): it becomes a file name; {fix}")
+    return name
 
 
 def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:

@@ -46,7 +46,7 @@ import numpy as np
 
 from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, check_name
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 
@@ -108,7 +108,9 @@ class Method:
                 raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
                                        f"{', '.join(LOCAL_PLANNERS)}")
             sampler = sampler or "uniform"
-        return cls(label or _default_label(planner, local, sampler or None), planner, local, sampler or None, text)
+        label = check_name(label or _default_label(planner, local, sampler or None), f"method '{text}': label",
+                           "name the method LABEL=... with a plain LABEL")
+        return cls(label, planner, local, sampler or None, text)
 
     def resolved(self, sampler: str | None) -> Method:
         """The same method with another sampler spec (e.g. ``pg`` given its dataset path)."""
