@@ -1,14 +1,17 @@
 """Files are data, never code: a dataset, model or path file naming a user's ``module:Class`` constraint is
 refused (one line) without importing anything or touching ``sys.path``; its recorded ``task_file`` is
-information only. Also: labels that become file names are plain names, and the viewer's websocket accepts only
-its own page's Origin."""
+information only. Also: one writer per output (lock files), labels that become file names are plain names,
+and the viewer's websocket accepts only its own page's Origin."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import shutil
+import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -21,13 +24,14 @@ from manifoldgen.bench.planning import Method
 from manifoldgen.cli import app
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import load_npz, save_npz
+from manifoldgen.io import load_npz, output_lock, save_npz
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.models.base import document_checksum
 from manifoldgen.tasks import task_from_meta
 from manifoldgen.viewer.server import ORIGIN_REFUSED, free_port, origin_allowed, start_server, stop_server
 
 runner = CliRunner()
+SRC = Path(__file__).resolve().parents[1] / "src"
 PLANTED = ("evil", "matplotlib", "toppra", "viser", "probe")  # modules a hostile folder plants
 
 
@@ -121,6 +125,57 @@ def test_a_given_task_must_match_the_file(hostile, untouched, tmp_path):
     message = _one_error(runner.invoke(app, ["trajectory", f"{hostile}/user/p.npz", "--task", "sphere",
                                              "-o", f"{tmp_path}/t.json"]))
     assert "made for another task" in message
+
+
+# ---------------------------------------------------------------------- one writer per output
+HOLDER = textwrap.dedent("""
+    import sys, time
+    from manifoldgen.io import output_lock
+    with output_lock(sys.argv[1]):
+        print("held", flush=True)
+        time.sleep(60)
+""")
+
+
+@pytest.fixture
+def held(tmp_path):
+    """``held(path)``: another process holding the output lock of ``path``; returns its pid."""
+    started = []
+
+    def hold(path: Path) -> int:
+        process = subprocess.Popen([sys.executable, "-c", HOLDER, str(path)], stdout=subprocess.PIPE, text=True,
+                                   env={**os.environ, "PYTHONPATH": str(SRC)})
+        started.append(process)
+        assert process.stdout.readline().strip() == "held"
+        return process.pid
+    yield hold
+    for process in started:
+        process.kill()
+        process.wait()
+
+
+def test_a_second_writer_is_refused(held, tmp_path):
+    out, bench = tmp_path / "x.npz", tmp_path / "b"
+    pid = held(out)
+    message = _one_error(runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(out)]))
+    assert f"process {pid}" in message and f"{out}.lock" in message
+    pid = held(bench)
+    message = _one_error(runner.invoke(app, ["bench", "plan", "pose", "--scene", "wall", "-m", "rrtconnect@project",
+                                             "--runs", "1", "-o", str(bench)]))
+    assert f"process {pid}" in message and f"{bench}.lock" in message
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.lock", "x.npz.lock"], "only the holders' locks"
+    with output_lock(tmp_path / "y"), pytest.raises(ManifoldgenError, match=f"process {os.getpid()}"):
+        with output_lock(tmp_path / "y"):
+            pass
+
+
+def test_a_stale_lock_is_taken_over(tmp_path):
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    out = tmp_path / "x.npz"
+    Path(f"{out}.lock").write_text(gone.stdout)  # left by a writer that was killed
+    result = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.is_file() and not Path(f"{out}.lock").exists()
 
 
 # ---------------------------------------------------------------------- labels are names

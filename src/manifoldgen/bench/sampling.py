@@ -22,7 +22,7 @@ import torch
 from manifoldgen.bench.metrics import accuracy, coverage_metrics
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, locks_output
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed, set_torch_threads
@@ -99,6 +99,7 @@ def _plain(ys: list[tuple]) -> list:
     return [y[0] if len(y) == 1 else list(y) for y in ys]
 
 
+@locks_output("out")  # one benchmark per output folder
 def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples: int = 3000, refine: int = 3,
                        reference_rows: int = 3000, repeats: int = 7, counts: tuple[int, ...] = COUNTS,
                        seen: list[float] | None = None, unseen: list[float] | None = None, seed: int = 0,
