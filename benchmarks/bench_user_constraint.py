@@ -98,7 +98,8 @@ def plan_bench():
         folder = Path(tempfile.mkdtemp(prefix="bench-user-cvae-"))
         wall, cpu = time.perf_counter(), time.process_time()
         model = get_model_class("cvae")()
-        model.fit(collect(task, args.per_condition, seed=0, progress=False), epochs=args.epochs, seed=0, progress=False)
+        model.fit(collect(task, args.per_condition, seed=0, progress=False), epochs=args.epochs, seed=0, progress=False,
+                  task=task)
         model.save(folder)
         sampler = f"cvae:{folder}"
         print(f"CVAE trained on the user constraint ({args.per_condition} rows per condition, {args.epochs} epochs): "
@@ -200,7 +201,7 @@ for label, file in (("user", "tool-down-xarm7.toml"), ("built-in", "tool-down-xa
     wall, cpu = time.perf_counter(), time.process_time()
     data = collect(task, args.per_condition, seed=0, progress=False)
     model = get_model_class("cvae")()
-    model.fit(data, epochs=args.epochs, seed=0, progress=False)
+    model.fit(data, epochs=args.epochs, seed=0, progress=False, task=task)
     gen = torch.Generator().manual_seed(0)
     rates[label] = {float(y[0]): float(task.constraint.satisfied(model.sample(y, args.samples, gen), y).mean())
                     for y in task.condition.grid}

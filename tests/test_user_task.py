@@ -1,7 +1,8 @@
 """docs/tasks.md end to end: a user's ~20-line constraint and task file through the public CLI only.
 
-collect -> train (with the residual penalty) -> sample -> plan, on xarm7 (a robot no built-in task
-uses); every result is rechecked here with pinocchio from the files alone, state by state.
+collect -> train (with the residual penalty) -> sample -> plan -> trajectory, on xarm7 (a robot no built-in
+task uses); every result is rechecked here with pinocchio from the files alone, state by state. The files
+name the user's module:Class, so the commands that read them are given the task file (--task).
 """
 
 from pathlib import Path
@@ -40,8 +41,8 @@ def trained(tmp_path_factory):
     out = tmp_path_factory.mktemp("user")
     collected = runner.invoke(app, ["collect", TASK, "--per-condition", "200", "-o", str(out / "d.npz")])
     assert collected.exit_code == 0, collected.output
-    trained = runner.invoke(app, ["train", str(out / "d.npz"), "--epochs", "30", "--set", "hidden=[64,64]",
-                                  "-o", str(out / "m")])
+    trained = runner.invoke(app, ["train", str(out / "d.npz"), "--task", TASK, "--epochs", "30", "--set",
+                                  "hidden=[64,64]", "-o", str(out / "m")])
     assert trained.exit_code == 0, trained.output
     return out
 
@@ -56,8 +57,8 @@ def test_collect_and_train_a_user_constraint(trained):
 
 def test_sample_the_user_model(trained):
     out = trained / "s.npz"
-    result = runner.invoke(app, ["sample", str(trained / "m"), "--condition", "0.4", "-n", "300", "--refine", "0",
-                                 "-o", str(out)])
+    result = runner.invoke(app, ["sample", str(trained / "m"), "--task", TASK, "--condition", "0.4", "-n", "300",
+                                 "--refine", "0", "-o", str(out)])
     assert result.exit_code == 0, result.output
     data = Dataset.load(out)
     raw = _tool_down_ok(data.meta, data.q, data.y).mean()
@@ -78,3 +79,21 @@ def test_plan_the_user_task_with_its_model(trained):
     assert _tool_down_ok(meta, np.array(states), y).all()
     np.testing.assert_allclose(path[0], meta["start"])
     np.testing.assert_allclose(path[-1], meta["goal"])
+    timed = runner.invoke(app, ["trajectory", str(out), "--task", TASK, "-o", str(trained / "t.json")])
+    assert timed.exit_code == 0 and "100.0% valid" in timed.output, timed.output
+
+
+def test_the_user_files_need_the_task_file(trained, monkeypatch):
+    """Without --task the files are refused in one line; a task file of another constraint is refused; with
+    --trust-code the module is imported from PYTHONPATH."""
+    alone = runner.invoke(app, ["train", str(trained / "d.npz"), "-o", str(trained / "m2")])
+    assert alone.exit_code == 2 and alone.output.count("\n") == 1, alone.output
+    assert "tool_down:ToolDownAtX" in alone.output and "--task FILE" in alone.output
+    other = runner.invoke(app, ["sample", str(trained / "m"), "--task", str(EXAMPLE / "tool-down-xarm7-builtin.toml"),
+                                "--condition", "0.4", "-o", str(trained / "s2.npz")])
+    assert other.exit_code == 2 and "made for another task" in other.output, other.output
+    assert not (trained / "m2").exists() and not (trained / "s2.npz").exists()
+    monkeypatch.syspath_prepend(str(EXAMPLE))
+    trusted = runner.invoke(app, ["sample", str(trained / "m"), "--trust-code", "--condition", "0.4", "-n", "20",
+                                  "-o", str(trained / "s3.npz")])
+    assert trusted.exit_code == 0, trusted.output

@@ -47,6 +47,11 @@ def friendly(command):
 
 TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"
 ROBOT_HELP = "Robot of a built-in task (default: the task's default robot)"
+MADE_FOR_HELP = ("The task the input file was made for (refused unless it matches the file's); needed when the file "
+                 "names a user's module:Class constraint, whose module is then imported from this task file: "
+                 + TASK_HELP)
+TRUST_HELP = ("Import a module:Class constraint the input file names from PYTHONPATH without its task file: this "
+              "EXECUTES that module's code; only for files you trust (prefer --task)")
 
 
 def _names(registry: str) -> list[str]:
@@ -69,6 +74,11 @@ def _file(name: str | None) -> Path | None:
 def _task(task: str, robot: str | None):
     from manifoldgen.tasks import get_task
     return get_task(task, robot)
+
+
+def _made_for(task: str | None, robot: str | None = None):
+    """The task given for an input file (``--task``), or None: the file's own, from its meta."""
+    return None if task is None else _task(task, robot)
 
 
 def _check_conditions(task_obj, condition: list[float] | None, strict: bool):
@@ -147,7 +157,9 @@ def _model_gap_lines(net, seed: int) -> str:
 
 @app.command()
 @friendly
-def tasks(files: list[str] = typer.Argument(None, help="Task .toml files to describe (default: the built-in tasks)")):
+def tasks(files: list[str] = typer.Argument(None, help="Task .toml files to describe (default: the built-in "
+                                             "tasks); a file naming a module:Class constraint imports, i.e. runs, "
+                                             "that module")):
     """List tasks: robot, planning group size, condition range, training values and scenes."""
     from manifoldgen.tasks import builtin_tasks, get_task
     entries = [(f, None) for f in files] if files else [(n, r) for n, robots in builtin_tasks().items() for r in robots]
@@ -257,7 +269,9 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
             friction: float = typer.Option(0.8, help="Foot-ground sliding friction coefficient"),
             tilt: float = typer.Option(10.0, help="Upright: max base tilt from the plan, degrees"),
             feet: list[str] = typer.Option(None, "--feet", help="Foot frames (default: the balance constraint's)"),
-            output: Path = typer.Option(None, "-o", "--output", help="Also write the report as JSON")):
+            output: Path = typer.Option(None, "-o", "--output", help="Also write the report as JSON"),
+            task: str = typer.Option(None, help=MADE_FOR_HELP),
+            trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Execute the path quasi-statically in MuJoCo (feet on the ground, base free, joints servoed): upright?"""
     from manifoldgen.io import atomic_write_text, check_output_path
     from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
@@ -267,7 +281,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
         check_output_path(output, [path])
-    result = check_path_file(path, settings, feet=feet, progress=True)
+    result = check_path_file(path, settings, feet=feet, progress=True, task=_made_for(task), trust_code=trust_code)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
         atomic_write_text(output, to_json(result))
@@ -285,17 +299,22 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
           epochs: int = typer.Option(None, help="Maximum epochs (default: the model's)"),
           resume: bool = typer.Option(False, help="Continue an interrupted run from its checkpoint"),
           threads: int = typer.Option(TORCH_THREADS, help="torch CPU threads (one is as fast for these small MLPs "
-                                      "and never spins against other processes)")):
+                                      "and never spins against other processes)"),
+          task: str = typer.Option(None, help=MADE_FOR_HELP),
+          trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Train a conditional generative model (checkpoints every epoch; --resume continues)."""
     from manifoldgen.data import Dataset
     from manifoldgen.models import get_model_class
     from manifoldgen.settings import parse_settings
+    from manifoldgen.tasks import task_from_meta
     from manifoldgen.training import OUTPUT_FILES
-    check_output_path(output, [dataset, config], directory=True, writes=OUTPUT_FILES)
+    check_output_path(output, [dataset, config, _file(task)], directory=True, writes=OUTPUT_FILES)
     set_torch_threads(threads)
     cls = get_model_class(model)
     net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
-    log = net.fit(Dataset.load(dataset), epochs=epochs, seed=seed, out=output, resume=resume)
+    data = Dataset.load(dataset)
+    task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
+    log = net.fit(data, epochs=epochs, seed=seed, out=output, resume=resume, task=task_obj)
     console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
                   f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}) "
                   f"-> {output} (model.json, model.safetensors, loss.png)")
@@ -313,9 +332,10 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
            refine: int = typer.Option(REFINE, help="Max projection iterations per written sample (0: raw rows; "
                                       "the raw rate is printed either way)"),
            strict: bool = typer.Option(False, help="Refuse conditions outside the trained range"),
-           task: str = typer.Option(None, help="Task to check against (default: the model's own, from its file): "
-                                    + TASK_HELP),
+           task: str = typer.Option(None, help="Task to check against (default: the model's own, from its file; "
+                                    "needed for a user's module:Class constraint): " + TASK_HELP),
            robot: str = typer.Option(None, help=ROBOT_HELP),
+           trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP),
            output: Path = typer.Option(..., "-o", "--output", help="Samples .npz (dataset format)")):
     """Generate configurations with a trained model; prints raw and refined within-tolerance rates."""
     from manifoldgen.models import load_model
@@ -324,7 +344,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     set_torch_threads(2)
     net = load_model(model_dir)
     check_output_path(output, [model_dir, _file(task)])
-    task_obj = task_from_meta(net.meta) if task is None else _task(task, robot)
+    task_obj = task_from_meta(net.meta, task=_made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
@@ -359,14 +379,16 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                    unseen: list[str] = typer.Option(None, help="Unseen conditions to score (repeatable; default: "
                                                     "midpoints and one step past the top); unreachable ones are "
                                                     "skipped with a warning"),
-                   seed: int = typer.Option(0)):
+                   seed: int = typer.Option(0),
+                   task: str = typer.Option(None, help=MADE_FOR_HELP),
+                   trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
     from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
-    check_output_path(output, model_dirs, directory=True, writes=OUTPUT_FILES)
+    check_output_path(output, [*model_dirs, _file(task)], directory=True, writes=OUTPUT_FILES)
     set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=max(1, threads), seen=_condition_rows(seen),
-                       unseen=_condition_rows(unseen))
+                       unseen=_condition_rows(unseen), task=_made_for(task), trust_code=trust_code)
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from manifoldgen.cli import app, console, friendly
+from manifoldgen.cli import MADE_FOR_HELP, TRUST_HELP, app, console, friendly
 from manifoldgen.errors import ManifoldgenError
 
 TRAJECTORY_FORMATS = (".json", ".csv")
@@ -19,7 +19,9 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
          host: str = typer.Option("127.0.0.1", help="Address to serve on (0.0.0.0: every interface)"),
          port: int = typer.Option(8080, help="Port to serve on (the next free one if it is taken)"),
          task: str = typer.Option(None, help="Task of a scene .json (default: the built-in task that lists it, "
-                                  "else pose)"),
+                                  "else pose), or of an .npz (default: its own, from its meta; needed for a user's "
+                                  "module:Class constraint, and checked against the file)"),
+         trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP),
          export: Path = typer.Option(None, help="Write one self-contained .html page that replays the scene "
                                      "offline, instead of serving"),
          snapshots: Path = typer.Option(None, help="Write a .png strip of robot snapshots along a path, instead "
@@ -32,7 +34,7 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
             check_output_path(out, [file], what=option)
     if export is not None:
         from manifoldgen.viewer.export import export_html
-        info = export_html(file, export, task)
+        info = export_html(file, export, task, trust_code=trust_code)
         if info["note"]:
             console.print(info["note"], markup=False)
         console.print(f"wrote {export}: {info['bytes'] / 1e6:.1f} MB, {info['frames']} frames "
@@ -41,14 +43,15 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
     if snapshots is not None:
         from manifoldgen.viewer.source import read_source
         from manifoldgen.viz.snapshots import draw_snapshots
-        source = read_source(file, task)
+        source = read_source(file, task, trust_code=trust_code)
         if source.kind != "path":
             raise ManifoldgenError(f"--snapshots needs a path file (made by `manifoldgen plan`), not {file}")
         draw_snapshots(source.q, source.task, source.scene, snapshots)
         console.print(f"wrote {snapshots} in {time.perf_counter() - start:.1f} s", markup=False)
         return
     from manifoldgen.viewer.server import open_viewer, serve
-    viewer = open_viewer(file, host, port, task, say=lambda line: console.print(line, markup=False))
+    viewer = open_viewer(file, host, port, task, say=lambda line: console.print(line, markup=False),
+                         trust_code=trust_code)
     shown = "localhost" if host == "0.0.0.0" else host
     console.print(f"viewer of {file} ready in {time.perf_counter() - start:.1f} s at "
                   f"http://{shown}:{viewer.server.get_port()} (Ctrl-C to stop)", markup=False, highlight=False)
@@ -63,14 +66,17 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
                                                "(2 x the velocity limit per second)"),
                dt: float = typer.Option(0.01, help="Seconds between samples"),
                output: Path = typer.Option(..., "-o", "--output", help="traj.json (ROS JointTrajectory layout) "
-                                           "or traj.csv")):
+                                           "or traj.csv"),
+               task: str = typer.Option(None, help=MADE_FOR_HELP),
+               trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Time-parameterise a path with TOPP-RA within joint limits; every sample is rechecked."""
+    from manifoldgen.cli import _made_for
     from manifoldgen.io import check_output_path
     from manifoldgen.trajectory import trajectory_of_file
     if output.suffix.lower() not in TRAJECTORY_FORMATS:
         raise ManifoldgenError(f"-o must end in .json or .csv, got {output.name}")
     check_output_path(output, [path_file])
-    traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt)
+    traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt, task=_made_for(task), trust_code=trust_code)
     info, check = traj.info, traj.info["check"]
     if check["first_invalid"] is not None:
         bad = check["first_invalid"]

@@ -27,7 +27,7 @@ import numpy as np
 from manifoldgen.constraints import project
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.errors import ManifoldgenError, file_reader
-from manifoldgen.io import atomic_write_text, check_output_path, load_npz, save_npz
+from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import task_checker
@@ -81,6 +81,7 @@ class Dataset:
                 "conditions": {json.dumps(v.tolist()): int(c) for v, c in zip(values, counts)}}
 
 
+@locks_output("out")  # one writer per output: a second collect into the same file is refused
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
             give_up: int = 20, progress: bool = True, near_home: float = 0.0,

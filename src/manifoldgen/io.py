@@ -1,11 +1,16 @@
-"""Atomic file writes, output-path checks, and the JSON ``meta`` carried by every .npz file."""
+"""Atomic file writes, output-path checks, one writer per output, and the JSON ``meta`` carried by every
+.npz file."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import functools
 import glob
+import inspect
 import json
 import os
+import re
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -140,6 +145,72 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
                 part = "" if hit == source else f", part of the input folder {given}"
                 raise ManifoldgenError(f"{what} {path} would overwrite the input {hit}{part}; choose another output")
     return path
+
+
+NAME = re.compile(r"[A-Za-z0-9_@+=:,-][A-Za-z0-9_.@+=:,-]{0,99}")
+
+
+def check_name(name: str, what: str, fix: str = "rename it") -> str:
+    """Refuse a user's string that becomes part of a file name unless it is a plain name: letters, digits and
+    ``_-.@+=:,``, at most 100 characters, no leading ``.`` and no ``..`` (so never a path)."""
+    if not (NAME.fullmatch(name) and ".." not in name):
+        raise ManifoldgenError(f"{what} '{name}' is not a plain name (letters, digits and _ - . @ + = : , only; no "
+                               f"'/', no '..', no leading '.'): it becomes a file name; {fix}")
+    return name
+
+
+@contextlib.contextmanager
+def output_lock(path: str | Path, what: str = "-o"):
+    """Hold ``<path>.lock`` while writing the output ``path`` (a file or a folder): one writer per output. The
+    lock is an exclusive ``flock`` on that file, which holds the writer's process id; a second writer is
+    refused, naming the lock and that process. The kernel drops the lock of a process that is gone, so a lock
+    file left by a killed writer is taken over. The file is removed when the writer finishes."""
+    import fcntl
+
+    path = Path(path)
+    lock = path.with_name(path.name + ".lock")
+    if not lock.parent.is_dir():
+        raise ManifoldgenError(f"output directory {lock.parent} does not exist; create it or choose another path")
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise write_error(lock, exc) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise ManifoldgenError(f"{what} {path} is being written by process {holder} (lock {lock}); wait for it "
+                                   "to finish or choose another output") from None
+        try:
+            current = os.stat(lock).st_ino
+        except FileNotFoundError:
+            current = None
+        if current == os.fstat(fd).st_ino:
+            break
+        os.close(fd)  # its writer finished and removed it between our open and flock: lock the next one
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield lock
+    finally:
+        lock.unlink(missing_ok=True)  # removed while still held, then released
+        os.close(fd)
+
+
+def locks_output(parameter: str):
+    """Decorator: a call holds :func:`output_lock` on its argument ``parameter`` (an output path) unless None."""
+    def wrap(function):
+        signature = inspect.signature(function)
+
+        @functools.wraps(function)
+        def locked(*args, **kwargs):
+            out = signature.bind(*args, **kwargs).arguments.get(parameter)
+            with output_lock(out) if out is not None else contextlib.nullcontext():
+                return function(*args, **kwargs)
+        return locked
+    return wrap
 
 
 def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:

@@ -56,6 +56,7 @@ import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -64,6 +65,9 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import load_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot, robots_dir
+
+if TYPE_CHECKING:
+    from manifoldgen.tasks import Task
 
 _MESH_FORMATS = (".stl", ".obj", ".msh")  # what MuJoCo reads itself
 _GAP = 0.005  # m: a foot further above the ground at the start is reported as not touching it
@@ -139,15 +143,17 @@ class PhysicsResult:
 
 # ---------------------------------------------------------------------- entry points
 def check_path_file(path_file: str | Path, settings: PhysicsSettings | None = None, *,
-                    feet: list[str] | None = None, progress: bool = False) -> PhysicsResult:
-    """Rebuild the task from the path file's meta and execute its ``path (K, n)`` (see :func:`check_path`)."""
+                    feet: list[str] | None = None, progress: bool = False, task: Task | None = None,
+                    trust_code: bool = False) -> PhysicsResult:
+    """Rebuild the task from the path file's meta (``task``, ``trust_code``: see
+    :func:`~manifoldgen.tasks.task_from_meta`) and execute its ``path (K, n)`` (see :func:`check_path`)."""
     from manifoldgen.tasks import task_from_meta
 
     meta, arrays = load_npz(path_file, ("path",))
     if not meta.get("floating_base"):
         raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the "
                                "physics check needs a floating-base robot standing on its feet (a balance task's path)")
-    task = task_from_meta(meta)
+    task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
     feet = list(feet) if feet else balance_feet(meta.get("constraint") or {})
     if not feet:
         raise ManifoldgenError(f"{path_file}: its constraint ({(meta.get('constraint') or {}).get('type')}) names no "

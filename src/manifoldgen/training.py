@@ -28,7 +28,7 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
-from manifoldgen.tasks import Task
+from manifoldgen.tasks import Task, task_from_meta
 
 if TYPE_CHECKING:  # the models call train(); training needs them only as a type
     from manifoldgen.models.base import ConditionalSampler
@@ -61,9 +61,10 @@ class TrainingLog:
         return {**asdict(self), "seconds": self.seconds}
 
 
-def check_dataset(dataset: Dataset) -> Task:
+def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
     """Refuse datasets a conditional model cannot learn from, or that do not hold their own task
-    (joint order, condition columns, rows on the constraint); returns the task."""
+    (joint order, condition columns, rows on the constraint); returns the task (``task``, when given,
+    once the dataset is found made for it)."""
     q, y = np.asarray(dataset.q), np.asarray(dataset.y)
     if q.ndim != 2 or y.ndim != 2 or len(q) != len(y):
         raise ManifoldgenError(f"dataset has inconsistent shapes q {q.shape}, y {y.shape}")
@@ -74,7 +75,7 @@ def check_dataset(dataset: Dataset) -> Task:
     if len(np.unique(y, axis=0)) < 2:
         raise ManifoldgenError(f"dataset has a single condition value {y[0].tolist()}; a conditional model "
                                "needs rows at two or more values (collect with several --condition values)")
-    task = dataset.task()
+    task = task_from_meta(dataset.meta, task=task, what="the dataset")
     if list(dataset.meta["joints"]) != task.robot.joints:
         raise ManifoldgenError(f"dataset joints {dataset.meta['joints']} are not its task's planning group "
                                f"{task.robot.joints} in that order; recollect the dataset")
@@ -116,9 +117,10 @@ def _check_latent(model: ConditionalSampler, dimension: int) -> None:
 
 def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
-          validation: float = 0.1) -> TrainingLog:
-    """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping."""
-    task = check_dataset(dataset)
+          validation: float = 0.1, task: Task | None = None) -> TrainingLog:
+    """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping; ``task``: the
+    task the dataset was made for, when its meta names a user's constraint type (see :func:`check_dataset`)."""
+    task = check_dataset(dataset, task)
     epochs = int(model.config["epochs"] if epochs is None else epochs)
     if epochs <= 0:
         raise ManifoldgenError(f"--epochs must be positive, got {epochs}")

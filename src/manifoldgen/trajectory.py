@@ -22,6 +22,7 @@ import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +30,9 @@ from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz
 from manifoldgen.robot import BASE_JOINTS, Robot
 from manifoldgen.space import ConstrainedSpace, ValidationSettings, densify
+
+if TYPE_CHECKING:
+    from manifoldgen.tasks import Task
 
 ACC_PER_VELOCITY = 2.0  # reference acceleration limit per unit of velocity limit (1/s): full speed in 0.5 s
 BASE_VELOCITY = 0.5  # m/s or rad/s for floating-base coordinates (no URDF joint)
@@ -131,8 +135,9 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
 
 @file_reader
 def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale: float = 1.0,
-                       dt: float = 0.01) -> Trajectory:
-    """The time-parameterised trajectory of a path file, every sample rechecked (``info["check"]``)."""
+                       dt: float = 0.01, *, task: Task | None = None, trust_code: bool = False) -> Trajectory:
+    """The time-parameterised trajectory of a path file, every sample rechecked (``info["check"]``); ``task``,
+    ``trust_code``: see :func:`~manifoldgen.tasks.task_from_meta`."""
     from manifoldgen.scene import Scene
     from manifoldgen.tasks import task_from_meta
 
@@ -144,7 +149,7 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
         raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array); give a file written by "
                                "`manifoldgen plan`")
     path = np.asarray(arrays["path"], float)
-    task = task_from_meta(meta)
+    task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
     robot = task.robot
     if path.ndim != 2 or len(path) == 0 or path.shape[1] != robot.n:
         raise ManifoldgenError(f"{path_file}: path of shape {path.shape} is empty or does not fit the {robot.n} "

@@ -46,7 +46,7 @@ import numpy as np
 
 from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, check_name, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 
@@ -108,7 +108,9 @@ class Method:
                 raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
                                        f"{', '.join(LOCAL_PLANNERS)}")
             sampler = sampler or "uniform"
-        return cls(label or _default_label(planner, local, sampler or None), planner, local, sampler or None, text)
+        label = check_name(label or _default_label(planner, local, sampler or None), f"method '{text}': label",
+                           "name the method LABEL=... with a plain LABEL")
+        return cls(label, planner, local, sampler or None, text)
 
     def resolved(self, sampler: str | None) -> Method:
         """The same method with another sampler spec (e.g. ``pg`` given its dataset path)."""
@@ -408,6 +410,7 @@ def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
                                    "resume with the same scene, time limit and seed, or choose another folder")
 
 
+@locks_output("out_dir")  # one benchmark per output folder
 def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *, runs: int, workers: int = 1,
               resume: bool = False, pg_rows: int = 10_000, baseline: str | None = None,
               progress: bool = True, snapshots: bool = False) -> tuple[str, list[MethodSummary]]:

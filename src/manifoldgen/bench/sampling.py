@@ -22,11 +22,11 @@ import torch
 from manifoldgen.bench.metrics import accuracy, coverage_metrics
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, locks_output
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed, set_torch_threads
-from manifoldgen.tasks import check_made_for, task_from_meta
+from manifoldgen.tasks import Task, check_made_for, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
 MIN_ROWS = 20  # samples and reference rows per condition: the k-NN metrics need more than k (5) of each
@@ -99,11 +99,14 @@ def _plain(ys: list[tuple]) -> list:
     return [y[0] if len(y) == 1 else list(y) for y in ys]
 
 
+@locks_output("out")  # one benchmark per output folder
 def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples: int = 3000, refine: int = 3,
                        reference_rows: int = 3000, repeats: int = 7, counts: tuple[int, ...] = COUNTS,
                        seen: list[float] | None = None, unseen: list[float] | None = None, seed: int = 0,
-                       threads: int = 2, progress: bool = True) -> dict:
-    """Benchmark every model in ``model_dirs`` on its task; write the report into ``out``."""
+                       threads: int = 2, progress: bool = True, task: Task | None = None,
+                       trust_code: bool = False) -> dict:
+    """Benchmark every model in ``model_dirs`` on its task (``task``, ``trust_code``: see
+    :func:`~manifoldgen.tasks.task_from_meta`); write the report into ``out``."""
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
     limits = {"--samples": (samples, MIN_ROWS, 10**6), "--reference": (reference_rows, MIN_ROWS, 10**6),
@@ -115,12 +118,12 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     if len({Path(d).resolve() for d in model_dirs}) < len(model_dirs):
         raise ManifoldgenError(f"a model directory is given twice in {[str(d) for d in model_dirs]}; give each once")
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     models = {str(d): load_model(d) for d in model_dirs}
     first = next(iter(models.values()))
-    task = task_from_meta(first.meta)
+    task = task_from_meta(first.meta, task=task, trust_code=trust_code, what=f"model {next(iter(models))}")
     for path, model in models.items():
         check_made_for(model.meta, task.constraint, f"model {path}")
+    out.mkdir(parents=True, exist_ok=True)
     k = task.condition.k
     if k == 0:
         raise ManifoldgenError("the sampling benchmark needs a conditioned task (its condition has no values)")

@@ -28,6 +28,7 @@ from manifoldgen.training import TrainingLog, train
 
 if TYPE_CHECKING:
     from manifoldgen.data import Dataset
+    from manifoldgen.tasks import Task
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
@@ -171,10 +172,10 @@ class ConditionalSampler(ABC):
 
     # ------------------------------------------------------------------ public API
     def fit(self, dataset: Dataset, *, epochs: int | None = None, seed: int = 0, progress: bool = True,
-            out: str | Path | None = None, resume: bool = False) -> TrainingLog:
-        """Train on ``dataset`` (see :func:`manifoldgen.training.train`); with ``out``, checkpoints
-        are written there every epoch and the final model is saved there."""
-        return train(self, dataset, epochs=epochs, seed=seed, progress=progress, out=out, resume=resume)
+            out: str | Path | None = None, resume: bool = False, task: Task | None = None) -> TrainingLog:
+        """Train on ``dataset`` (see :func:`manifoldgen.training.train`, also for ``task``); with ``out``,
+        checkpoints are written there every epoch and the final model is saved there."""
+        return train(self, dataset, epochs=epochs, seed=seed, progress=progress, out=out, resume=resume, task=task)
 
     def sample(self, y: np.ndarray, n: int, generator: torch.Generator | None = None) -> np.ndarray:
         """(n, d) float64 configurations for condition ``y`` ((k,), (1, k) or (n, k))."""

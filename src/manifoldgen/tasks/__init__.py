@@ -6,10 +6,16 @@ command takes a task name it takes a task file path too. A :class:`Task` describ
 fully in :meth:`Task.spec` (robot by name and URDF hash, every locked joint, the constraint's
 full spec), which every dataset, model and path file stores, and :func:`task_from_spec`
 rebuilds it from that alone. The task file format is documented in ``docs/tasks.md``.
+
+Reading a file never imports code: a file whose constraint is a user's ``module:Class`` is refused unless
+the caller gives the task file it was made from (``task=``, checked against the file) or trusts the code
+(``trust_code=True``: the module is imported from ``sys.path``). The ``task_file`` a spec records is
+information only. A task file's own ``module:Class`` is imported from its folder (the user named the file).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import re
@@ -82,10 +88,27 @@ def _base_joints(robot: Robot) -> list[str]:
     return robot.joints[:6] if robot.floating_base else []
 
 
-def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
-    """Rebuild the task :meth:`Task.spec` described (no registry lookup, no task file)."""
-    if spec.get("task_file"):  # a user's module:Class constraint is importable from the task file's folder
-        _importable_from(Path(spec["task_file"]).parent)
+def code_types(spec) -> list[str]:
+    """The ``module:Class`` types anywhere in ``spec`` (a task or constraint spec): code that building it imports."""
+    if isinstance(spec, dict):
+        own = [spec["type"]] if isinstance(spec.get("type"), str) and ":" in spec["type"] else []
+        return own + [t for value in spec.values() for t in code_types(value)]
+    if isinstance(spec, list):
+        return [t for value in spec for t in code_types(value)]
+    return []
+
+
+def task_from_spec(spec: dict, robot_hint: str | None = None, *, trust_code: bool = False,
+                   what: str = "the file") -> Task:
+    """Rebuild the task :meth:`Task.spec` described (no registry lookup, no task file). A spec naming a
+    ``module:Class`` type is refused unless ``trust_code``: then the module is imported from ``sys.path``
+    as it stands (``task_file`` is never added to it)."""
+    code = code_types(spec)
+    if code and not trust_code:
+        modules = ", ".join(sorted({t.partition(":")[0] for t in code}))
+        raise ManifoldgenError(f"{what} names the user constraint type {', '.join(code)}, and reading a file never "
+                               "imports code: pass the task file it was made from with --task FILE (checked against "
+                               f"the file), or --trust-code to import {modules} from PYTHONPATH (runs that code)")
     robot_field = spec["robot"]
     source = find_robot(robot_field, robot_hint or spec.get("robot_source")) if isinstance(robot_field, dict) \
         else robot_field
@@ -103,14 +126,20 @@ def task_from_spec(spec: dict, robot_hint: str | None = None) -> Task:
     return task
 
 
-def task_from_meta(meta: dict, robot_hint: str | None = None) -> Task:
-    """The task a dataset, model or path file was made for, from its ``meta`` alone."""
+def task_from_meta(meta: dict, robot_hint: str | None = None, *, task: Task | None = None,
+                   trust_code: bool = False, what: str = "the file") -> Task:
+    """The task a dataset, model or path file (``what``, for messages) was made for: ``task`` (a task the
+    user gave, refused unless the file was made for it), else rebuilt from the file's ``meta`` alone
+    (see :func:`task_from_spec` for ``trust_code``)."""
+    if task is not None:
+        check_made_for(meta if isinstance(meta, dict) else {}, task.constraint, what)
+        return task
     spec = meta.get("task") if isinstance(meta, dict) else None
     if not isinstance(spec, dict):
         raise ManifoldgenError("the file's meta has no task specification (made by manifoldgen before 0.2); "
                                "recollect the dataset or retrain the model with this version")
     try:
-        return task_from_spec(spec, robot_hint)
+        return task_from_spec(spec, robot_hint, trust_code=trust_code, what=what)
     except ManifoldgenError:
         raise
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError) as exc:  # a damaged file
@@ -220,7 +249,6 @@ def load_task_file(path: str | Path) -> Task:
             raise ManifoldgenError(f"{path}: missing '{key}' ({TASK_KEYS[key]}); every task file needs name, robot "
                                    "and at least one [[constraints]] table")
     base = path.resolve().parent
-    _importable_from(base)
     source = str(data["robot"])
     if source.endswith(".urdf") or "/" in source:
         source = str((base / source).resolve())
@@ -238,7 +266,8 @@ def load_task_file(path: str | Path) -> Task:
     parts = []
     for i, table in enumerate(tables):
         try:
-            parts.append(build_constraint(robot_obj, table))
+            with _importable_from(base) if code_types(table) else contextlib.nullcontext():
+                parts.append(build_constraint(robot_obj, table))
         except ManifoldgenError as exc:
             raise ManifoldgenError(f"{path}, line {_nth_table_line(text, 'constraints', i)}: constraint {i + 1}: "
                                    f"{exc}") from None
@@ -295,10 +324,17 @@ def _held(task: Task, table) -> dict:
     return held.to_dict()
 
 
-def _importable_from(folder: Path) -> None:
-    """Let ``module:Class`` names import modules that sit in ``folder`` (a task file's)."""
-    if folder.is_dir() and str(folder) not in sys.path:
-        sys.path.insert(0, str(folder))
+@contextlib.contextmanager
+def _importable_from(folder: Path):
+    """Let a task file's ``module:Class`` import a module that sits in ``folder`` (the file's): the folder is
+    first on ``sys.path`` only while that constraint is built, so no file there shadows a later import."""
+    entry = str(folder)
+    sys.path.insert(0, entry)
+    try:
+        yield
+    finally:
+        if entry in sys.path:
+            sys.path.remove(entry)
 
 
 def _floats_table(table, where) -> dict[str, float]:
@@ -345,4 +381,5 @@ def get_task(task: str, robot: str | None = None) -> Task:
     return load_task_file(robots[robot])
 
 
-__all__ = ["Task", "builtin_tasks", "check_made_for", "get_task", "load_task_file", "task_from_meta", "task_from_spec"]
+__all__ = ["Task", "builtin_tasks", "check_made_for", "code_types", "get_task", "load_task_file", "task_from_meta",
+           "task_from_spec"]

@@ -23,10 +23,11 @@ EXPORT_ROWS = 60
 ROW_SECONDS = 0.5
 
 
-def export_html(file: str | Path, out: str | Path, task: str | None = None) -> dict:
-    """Write the page; returns ``{"bytes", "frames", "seconds", "note"}``."""
+def export_html(file: str | Path, out: str | Path, task: str | None = None, *, trust_code: bool = False) -> dict:
+    """Write the page (``task``, ``trust_code``: see :func:`~manifoldgen.viewer.source.read_source`); returns
+    ``{"bytes", "frames", "seconds", "note"}``."""
     out = check_output_path(out)
-    source = read_source(file, task)
+    source = read_source(file, task, trust_code=trust_code)
     server = start_server("127.0.0.1", 0)
     try:
         viewer = build_scene(server, source)

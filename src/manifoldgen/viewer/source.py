@@ -3,7 +3,8 @@
 Kinds: ``path`` (an .npz with ``path (K, n)``), ``dataset`` (an .npz with ``q (N, n)`` and
 ``y (N, k)``: datasets and sample files), ``scene`` (a scene .json: start and goal) and
 ``task`` (a task .toml: its first scene's start and goal, else its home configuration).
-The task is rebuilt from the file's meta alone (:func:`~manifoldgen.tasks.task_from_meta`).
+The task is rebuilt from the file's meta alone (:func:`~manifoldgen.tasks.task_from_meta`), or is the task given
+for it (needed for a user's ``module:Class`` constraint: reading a file imports no code).
 """
 
 from __future__ import annotations
@@ -38,15 +39,16 @@ class ViewSource:
 
 
 @file_reader
-def read_source(file: str | Path, task: str | None = None) -> ViewSource:
+def read_source(file: str | Path, task: str | None = None, *, trust_code: bool = False) -> ViewSource:
     """Read ``file``; ``task`` names the task of a scene .json (default: the built-in task that lists
-    the scene, else ``pose`` for the scene's robot)."""
+    the scene, else ``pose`` for the scene's robot), or of an .npz (checked against its meta; default: the
+    task in its meta; ``trust_code``: see :func:`~manifoldgen.tasks.task_from_spec`)."""
     file = Path(file)
     if not file.is_file():
         raise ManifoldgenError(f"file not found: {file}")
     suffix = file.suffix.lower()
     if suffix == ".npz":
-        return _read_npz(file)
+        return _read_npz(file, None if task is None else get_task(task), trust_code)
     if suffix == ".json":
         return _read_scene(file, task)
     if suffix == ".toml":
@@ -54,11 +56,11 @@ def read_source(file: str | Path, task: str | None = None) -> ViewSource:
     raise ManifoldgenError(f"cannot show {file}: unknown file kind '{suffix or file.name}'; give {KINDS}")
 
 
-def _read_npz(file: Path) -> ViewSource:
+def _read_npz(file: Path, task: Task | None, trust_code: bool) -> ViewSource:
     meta, arrays = load_npz(file, ())
     if "path" in arrays:
         path = np.asarray(arrays["path"], float)
-        t = task_from_meta(meta)
+        t = task_from_meta(meta, task=task, trust_code=trust_code, what=str(file))
         _check_width(path, t, file)
         if len(path) == 0:
             raise ManifoldgenError(f"{file} holds an empty path (the query was not solved); nothing to show")
@@ -67,7 +69,7 @@ def _read_npz(file: Path) -> ViewSource:
         return ViewSource("path", file, meta, t, path, y, scene,
                           f"{t.robot.name} {t.name}, scene {scene.name or '?'}: {len(path)} waypoints")
     if "q" in arrays and "y" in arrays:
-        t = task_from_meta(meta)
+        t = task_from_meta(meta, task=task, trust_code=trust_code, what=str(file))
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         _check_width(q, t, file)
         what = "samples" if "generated_by" in meta else "dataset"
