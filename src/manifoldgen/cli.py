@@ -6,14 +6,17 @@ import functools
 import warnings
 from pathlib import Path
 
-import typer
-from rich.console import Console
-from rich.text import Text
+from manifoldgen.runtime import REFINE, TORCH_THREADS, check_seed, limit_threads, set_torch_threads
 
-from manifoldgen.coverage import gap_lines
-from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import check_output_path
-from manifoldgen.runtime import REFINE, TORCH_THREADS, check_seed, set_torch_threads
+limit_threads()  # before numpy and torch start their pools: on a busy machine, spinning threads slowed collect 18x
+
+import typer  # noqa: E402
+from rich.console import Console  # noqa: E402
+from rich.text import Text  # noqa: E402
+
+from manifoldgen.coverage import gap_lines  # noqa: E402
+from manifoldgen.errors import ManifoldgenError  # noqa: E402
+from manifoldgen.io import check_output_path  # noqa: E402
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Constrained motion planning with learned samplers.")
@@ -92,7 +95,8 @@ def _check_conditions(task_obj, condition: list[float] | None, strict: bool):
 @friendly
 def collect(task: str = typer.Argument(..., help=TASK_HELP),
             robot: str = typer.Option(None, help=ROBOT_HELP),
-            per_condition: int = typer.Option(1000, help="Valid rows per condition value"),
+            per_condition: int = typer.Option(None, help="Valid rows per condition value (default: 10,000 rows "
+                                              "shared by the condition values, at least 200 each)"),
             seed: int = typer.Option(0),
             condition: list[float] = typer.Option(None, help="Condition values (default: the task's)"),
             strict: bool = typer.Option(False, help="Refuse conditions outside the task's range"),
@@ -106,8 +110,8 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     import time
 
     from manifoldgen.coverage import task_anchors
-    from manifoldgen.data import collect as run_collect
-    if per_condition <= 0:
+    from manifoldgen.data import collect as run_collect, default_rows
+    if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     check_output_path(output, [_file(task)])
     task_obj = _task(task, robot)
@@ -115,6 +119,8 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     set_torch_threads()
     start = time.perf_counter()
     found = task_anchors(task_obj) if anchors and not near_home else None
+    if per_condition is None:
+        per_condition = default_rows(len(task_obj.condition.grid) if values is None else len(values))
     dataset = run_collect(task_obj, per_condition, seed, output, conditions=values, near_home=near_home,
                           anchors=found)
     elapsed = time.perf_counter() - start

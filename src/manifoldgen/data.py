@@ -36,6 +36,13 @@ from manifoldgen.tasks import Task, task_from_meta
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
+DEFAULT_ROWS = 10_000  # rows a collection makes by default, shared by its condition values ...
+MIN_PER_CONDITION = 200  # ... but at least this many at each
+
+
+def default_rows(conditions: int) -> int:
+    """Rows per condition value by default for ``conditions`` values (see :data:`DEFAULT_ROWS`)."""
+    return max(MIN_PER_CONDITION, -(-DEFAULT_ROWS // max(1, conditions)))
 
 
 @dataclass

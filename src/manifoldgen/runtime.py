@@ -5,6 +5,18 @@ TORCH_THREADS = 1  # these small MLPs gain nothing from a second thread, and two
 REFINE = 2  # projection iterations a model sample gets by default (Algorithm 1's refinement; 0 = raw)
 
 
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def limit_threads() -> None:
+    """Default the OpenMP and BLAS thread pools to :data:`TORCH_THREADS` (a variable already set wins); only
+    takes effect before numpy and torch are imported: the command line calls it first."""
+    import os
+
+    for variable in THREAD_VARIABLES:
+        os.environ.setdefault(variable, str(TORCH_THREADS))
+
+
 def set_torch_threads(threads: int = TORCH_THREADS) -> None:
     """Set torch's CPU thread count (at least 1)."""
     import torch
