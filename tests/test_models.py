@@ -85,15 +85,17 @@ def test_model_contract(name, trained, tiny, task):
 
 @pytest.mark.parametrize("name", MODELS.names())
 def test_native_decoder_is_the_models_network(name, trained):
-    """The core's copy of the sampling network decodes latent rows as torch does (float32 rounding apart),
-    draws them from the model's law, and is deterministic for a seed; a flow has none (torch samples it)."""
+    """The core's copy of the sampling network decodes latent rows as torch does (float32 rounding apart; a
+    velocity field integrated in Heun steps as the model samples), draws them from the model's law, and is
+    deterministic for a seed; a flow has none (torch samples it)."""
     model = trained[name][0]
     decoder = model.native_decoder()
     if name == "flow":
         assert decoder is None
         return
+    steps = model._integration_steps()
     z = decoder.latent_rows(20_000, 5)
-    assert z.shape == (20_000, model.config["latent"]) and z.dtype == np.float32
+    assert z.shape == (20_000, model.d if steps else model.config["latent"]) and z.dtype == np.float32
     if model._sampling_net()[1] == "uniform":
         assert np.abs(z).max() <= 1.0
         np.testing.assert_allclose(z.std(0), 3 ** -0.5, atol=0.01)
@@ -105,7 +107,16 @@ def test_native_decoder_is_the_models_network(name, trained):
     with torch.inference_mode():
         net = model._sampling_net()[0]
         yn = model.normalise_y(torch.tensor(y, dtype=torch.float32)).expand(2000, 1)
-        expected = (net(torch.cat([torch.from_numpy(z[:2000]), yn], 1)) * model._q_std + model._q_mean).double().numpy()
+        x = torch.from_numpy(z[:2000])
+        if steps:
+            h = 1.0 / steps
+            for i in range(steps):
+                t0, t1 = torch.full((2000, 1), i * h), torch.full((2000, 1), (i + 1) * h)
+                v = net(torch.cat([x, yn, t0], 1))
+                x = x + 0.5 * h * (v + net(torch.cat([x + h * v, yn, t1], 1)))
+        else:
+            x = net(torch.cat([x, yn], 1))
+        expected = (x * model._q_std + model._q_mean).double().numpy()
     expected = np.clip(expected, model.norm["lower"], model.norm["upper"])
     np.testing.assert_allclose(decoder.decode(z[:2000], y), expected, rtol=0, atol=2e-5)
     q = decoder.sample(y, 300, 11)

@@ -236,14 +236,17 @@ NearestAnswers nearest_queries(const RowMat& points, const std::vector<char>& al
 // A generative model's sampling network (models/base.py: the CVAE's decoder, a GAN's generator), run in the core:
 // latent rows z (B, latent), N(0, I) or U(-1, 1), then Linear layers with SiLU between them on [z, normalised y];
 // the output is de-normalised (q_mean + out * q_std) and clipped to the joint limits. float32, as torch runs it.
+// With steps > 0 the network is a velocity field v([x, normalised y, t]) (models/cfm.py; latent = d) and a decode
+// integrates dx/dt = v from x = z at t = 0 to t = 1 in that many Heun steps before de-normalising.
 class Decoder {
  public:
   using MatF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using VecF = Eigen::VectorXf;
   // weights[i] (out_i, in_i) and biases[i] (out_i,) in torch's layout; in_0 = latent + y_mean.size(),
-  // out_last = q_mean.size(); q_std, lower, upper as q_mean, y_std as y_mean (invalid_argument otherwise).
+  // out_last = q_mean.size(); q_std, lower, upper as q_mean, y_std as y_mean (invalid_argument otherwise);
+  // steps > 0: in_0 = latent + y_mean.size() + 1 and latent = q_mean.size().
   Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
-          const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper);
+          const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps = 0);
   // (count, latent) latent rows from seed (xoshiro256** seeded by splitmix64; Box-Muller for N(0, I)).
   MatF latent_rows(long count, std::uint64_t seed) const;
   // (B, d) configurations decoded from z (B, latent) at condition y (k,).
@@ -251,10 +254,12 @@ class Decoder {
   RowMat sample(const Vec& y, long count, std::uint64_t seed) const { return decode(latent_rows(count, seed), y); }
 
  private:
+  MatF forward(const MatF& x) const;  // the network on x (B, in_0): (B, out_last)
   std::vector<MatF> weights_;
   std::vector<VecF> biases_;
   int latent_;
   bool uniform_;
+  int steps_;
   VecF q_mean_, q_std_, y_mean_, y_std_;
   Vec lower_, upper_;
 };

@@ -44,8 +44,8 @@ void require(bool ok, const std::string& message) {
 }  // namespace
 
 Decoder::Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
-                 const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper)
-    : weights_(std::move(weights)), biases_(std::move(biases)), latent_(latent), uniform_(uniform),
+                 const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps)
+    : weights_(std::move(weights)), biases_(std::move(biases)), latent_(latent), uniform_(uniform), steps_(steps),
       q_mean_(q_mean.cast<float>()), q_std_(q_std.cast<float>()), y_mean_(y_mean.cast<float>()),
       y_std_(y_std.cast<float>()), lower_(lower), upper_(upper) {
   require(!weights_.empty() && weights_.size() == biases_.size(), "give one bias per weight matrix, at least one layer");
@@ -53,7 +53,9 @@ Decoder::Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent
   require(y_std.size() == y_mean.size() && q_std.size() == q_mean.size() && lower.size() == q_mean.size() &&
               upper.size() == q_mean.size(),
           "normalisation vectors and limits must match the condition and configuration sizes");
-  long width = latent + y_mean.size();
+  require(steps >= 0, "the number of integration steps must be >= 0");
+  require(steps == 0 || latent == q_mean.size(), "a velocity field's latent size is the number of joints");
+  long width = latent + y_mean.size() + (steps > 0 ? 1 : 0);
   for (std::size_t i = 0; i < weights_.size(); ++i) {
     require(weights_[i].cols() == width && biases_[i].size() == weights_[i].rows(),
             "layer " + std::to_string(i) + " takes " + std::to_string(weights_[i].cols()) + " inputs, the layer before gives " +
@@ -82,14 +84,7 @@ Decoder::MatF Decoder::latent_rows(long count, std::uint64_t seed) const {
   return z;
 }
 
-RowMat Decoder::decode(const MatF& z, const Vec& y) const {
-  require(z.cols() == latent_, "latent rows must have " + std::to_string(latent_) + " columns");
-  require(y.size() == y_mean_.size(), "the condition must have " + std::to_string(y_mean_.size()) + " values");
-  const long B = z.rows(), k = y_mean_.size();
-  MatF x(B, latent_ + k);
-  x.leftCols(latent_) = z;
-  const Eigen::RowVectorXf yn = ((y.cast<float>() - y_mean_).array() / y_std_.array()).matrix().transpose();
-  x.rightCols(k) = yn.replicate(B, 1);
+Decoder::MatF Decoder::forward(const MatF& x) const {
   std::vector<int> widths{static_cast<int>(x.cols())};
   std::vector<const float*> w, b;
   for (std::size_t i = 0; i < weights_.size(); ++i) {
@@ -97,9 +92,36 @@ RowMat Decoder::decode(const MatF& z, const Vec& y) const {
     w.push_back(weights_[i].data());
     b.push_back(biases_[i].data());
   }
-  MatF out(B, widths.back());
-  mg_mlp_forward(static_cast<int>(weights_.size()), widths.data(), w.data(), b.data(), B, x.data(), out.data());
-  x.swap(out);
+  MatF out(x.rows(), widths.back());
+  mg_mlp_forward(static_cast<int>(weights_.size()), widths.data(), w.data(), b.data(), x.rows(), x.data(), out.data());
+  return out;
+}
+
+RowMat Decoder::decode(const MatF& z, const Vec& y) const {
+  require(z.cols() == latent_, "latent rows must have " + std::to_string(latent_) + " columns");
+  require(y.size() == y_mean_.size(), "the condition must have " + std::to_string(y_mean_.size()) + " values");
+  const long B = z.rows(), k = y_mean_.size();
+  const Eigen::RowVectorXf yn = ((y.cast<float>() - y_mean_).array() / y_std_.array()).matrix().transpose();
+  MatF x;
+  if (steps_ == 0) {
+    MatF in(B, latent_ + k);
+    in.leftCols(latent_) = z;
+    in.rightCols(k) = yn.replicate(B, 1);
+    x = forward(in);
+  } else {  // Heun steps of dx/dt = v([x, y, t]) from t = 0 to 1, as models/cfm.py samples
+    const float h = 1.0f / static_cast<float>(steps_);
+    MatF in(B, latent_ + k + 1);
+    in.middleCols(latent_, k) = yn.replicate(B, 1);
+    x = z;
+    for (int i = 0; i < steps_; ++i) {
+      in.leftCols(latent_) = x;
+      in.col(latent_ + k).setConstant(static_cast<float>(i) * h);
+      const MatF v = forward(in);
+      in.leftCols(latent_) = x + h * v;
+      in.col(latent_ + k).setConstant(static_cast<float>(i + 1) * h);
+      x += (0.5f * h) * (v + forward(in));
+    }
+  }
   const Eigen::RowVectorXf mean = q_mean_.transpose(), std = q_std_.transpose();
   x = (x.array().rowwise() * std.array()).rowwise() + mean.array();
   RowMat q = x.cast<double>();

@@ -6,7 +6,7 @@ import functools
 import warnings
 from pathlib import Path
 
-from manifoldgen.runtime import REFINE, TORCH_THREADS, check_seed, limit_threads, set_torch_threads
+from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, check_seed, limit_threads, set_torch_threads
 
 limit_threads()  # before numpy and torch start their pools: on a busy machine, spinning threads slowed collect 18x
 
@@ -296,7 +296,8 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
 @app.command()
 @friendly
 def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
-          model: str = typer.Option("cvae", "--model", help=f"Model: {', '.join(_names('models'))}, or module:Class"),
+          model: str = typer.Option("auto", "--model", help=f"Model: auto (train {', '.join(CANDIDATES)} and keep the "
+                                    f"best on held-out rows), {', '.join(_names('models'))}, or module:Class"),
           settings: list[str] = typer.Option(None, "--set", help="Hyper-parameter KEY=VALUE (repeatable), e.g. "
                                              "--set latent=8 --set 'hidden=[128,128]'"),
           config: Path = typer.Option(None, help="TOML file of hyper-parameters (--set wins)"),
@@ -308,22 +309,37 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
                                       "and never spins against other processes)"),
           task: str = typer.Option(None, help=MADE_FOR_HELP),
           trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
-    """Train a conditional generative model (checkpoints every epoch; --resume continues)."""
+    """Train a conditional generative model (checkpoints every epoch; --resume continues). Sizes not set are
+    taken from the data (latent: the manifold's dimension; width: from the joint count)."""
     from manifoldgen.data import Dataset
     from manifoldgen.models import get_model_class
+    from manifoldgen.selection import SELECTION_FILE, select_model
     from manifoldgen.settings import parse_settings
     from manifoldgen.tasks import task_from_meta
     from manifoldgen.training import OUTPUT_FILES
-    check_output_path(output, [dataset, config, _file(task)], directory=True, writes=OUTPUT_FILES)
+    check_output_path(output, [dataset, config, _file(task)], directory=True,
+                      writes=OUTPUT_FILES + (SELECTION_FILE, "candidates"))
+    if model == "auto" and (settings or config):
+        raise ManifoldgenError("--set and --config set one model's hyper-parameters; name it with --model (e.g. "
+                               "--model cvae)")
     set_torch_threads(threads)
-    cls = get_model_class(model)
-    net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
     data = Dataset.load(dataset)
     task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
-    log = net.fit(data, epochs=epochs, seed=seed, out=output, resume=resume, task=task_obj)
-    console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
-                  f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}) "
-                  f"-> {output} (model.json, model.safetensors, loss.png)")
+    if model == "auto":
+        net, table = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
+        for row in table:
+            console.print(f"{'chosen' if row['chosen'] else 'tried '} {row['model']}: {row['epochs']} epochs in "
+                          f"{row['seconds']:.0f} s; on held-out rows {row['accuracy']:.1%} of raw samples within "
+                          f"tolerance, recall {row['recall']:.2f}", markup=False)
+        console.print(f"trained {net.name} on {dataset} -> {output} (model.json, model.safetensors, loss.png, "
+                      f"{SELECTION_FILE}, candidates/)")
+    else:
+        cls = get_model_class(model)
+        net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
+        log = net.fit(data, epochs=epochs, seed=seed, out=output, resume=resume, task=task_obj)
+        console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
+                      f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}"
+                      f") -> {output} (model.json, model.safetensors, loss.png)")
     gaps = _model_gap_lines(net, seed)
     if gaps:
         console.print(gaps, markup=False, highlight=False)

@@ -2,6 +2,7 @@
 
 TORCH_THREADS = 1  # these small MLPs gain nothing from a second thread, and two torch processes with two
 # OpenMP threads each spin against each other on a shared 2-core machine (seen: 40x slower training)
+CANDIDATES = ("cvae", "cfm")  # the models `train --model auto` trains and chooses from (manifoldgen.selection)
 REFINE = 2  # projection iterations a model sample gets by default (Algorithm 1's refinement; 0 = raw)
 
 

@@ -163,13 +163,15 @@ class DatasetSampler(Sampler):
 
 class ModelSampler(Sampler):
     """Algorithm 1 with a learned model: batches of model samples at the space's condition,
-    refined by at most ``refine`` projection (Levenberg-Marquardt) iterations, checked before
+    refined by at most ``refine`` projection (Levenberg-Marquardt) iterations (default: the model's own
+    :attr:`~manifoldgen.models.base.ConditionalSampler.refine`, else ``runtime.REFINE``), checked before
     they are returned. The model's network runs in the compiled core where it can
     (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
 
-    def __init__(self, space: ConstrainedSpace, model, *, refine: int = REFINE, batch: int = 1024,
+    def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, batch: int = 1024,
                  seed: int | np.random.Generator = 0, max_batches: int = 10_000):
         super().__init__(space, batch=batch, seed=seed, max_batches=max_batches)
+        refine = (model.refine if model.refine is not None else REFINE) if refine is None else refine
         if refine < 0:
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
         check_made_for(model.meta, space.constraint, "the model")

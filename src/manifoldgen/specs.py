@@ -4,7 +4,8 @@
 ``pg:DATASET.npz`` (the paper's precomputed-graph baseline: rows of a dataset) or
 ``MODEL:DIR`` (a trained model directory, e.g. ``cvae:runs/cvae``; any registered model
 name). Options follow after commas: ``cvae:runs/cvae,refine=0,batch=2048``; model samples
-get ``runtime.REFINE`` projection iterations unless ``refine`` says otherwise (``refine=0``:
+get the projection iterations the model's training measured they need (``runtime.REFINE`` for a model that
+records none) unless ``refine`` says otherwise (``refine=0``:
 raw model samples, the paper's setting).
 """
 
@@ -14,7 +15,6 @@ from pathlib import Path
 
 from manifoldgen.data import Dataset
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.runtime import REFINE
 from manifoldgen.sampling import DatasetSampler, ProjectionSampler, Sampler, UniformSampler
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
@@ -60,10 +60,10 @@ def make_sampler(spec: str, space: ConstrainedSpace, seed: int) -> Sampler:
         dataset = Dataset.load(arg)
         check_made_for(dataset.meta, space.constraint, f"dataset {arg}")
         return DatasetSampler(space, dataset.q, dataset.y, **common)
-    return _model_sampler(name, arg, space, options.get("refine", REFINE), common)
+    return _model_sampler(name, arg, space, options.get("refine"), common)
 
 
-def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int, common: dict) -> Sampler:
+def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | None, common: dict) -> Sampler:
     from manifoldgen.models import get_model_class, load_model
     from manifoldgen.sampling import ModelSampler
 

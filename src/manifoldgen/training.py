@@ -27,7 +27,7 @@ from manifoldgen.data import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.progress import progress_bar
-from manifoldgen.runtime import check_seed
+from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.tasks import Task, task_from_meta
 
 if TYPE_CHECKING:  # the models call train(); training needs them only as a type
@@ -37,6 +37,9 @@ CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous ep
 OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
 MIN_ROWS = 10
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
+REFINE_LADDER = (REFINE, 5, 10, 20)  # projection iterations tried for a model's samples (see needed_refine)
+REFINE_SHARE = 0.9  # ... until this share of them is within tolerance
+REFINE_CONDITIONS, REFINE_SAMPLES = 4, 256  # condition values and samples at each it is measured on
 DIMENSION_ROWS = 16  # dataset rows whose constraint Jacobian gives the manifold's dimension (the largest rank wins)
 
 
@@ -92,6 +95,33 @@ def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
     return task
 
 
+def needed_refine(model: ConditionalSampler, task: Task, y: np.ndarray, seed: int) -> int:
+    """The fewest projection iterations of :data:`REFINE_LADDER` that bring :data:`REFINE_SHARE` of the model's
+    samples within tolerance at the condition values of ``y (N, k)`` (at most :data:`REFINE_CONDITIONS` of
+    them; the last rung when none does): what a model sampler refines its rows by default."""
+    from manifoldgen.constraints import project
+
+    values = np.unique(y, axis=0)
+    values = values[np.unique(np.linspace(0, len(values) - 1, min(len(values), REFINE_CONDITIONS)).astype(int))]
+    with torch.no_grad():
+        rows = [(model.sample(v, REFINE_SAMPLES, torch.Generator().manual_seed(seed + i)), v)
+                for i, v in enumerate(values)]
+    for refine in REFINE_LADDER:
+        within = np.mean([task.constraint.satisfied(project(task.constraint, q, v, max_iters=refine).q, v).mean()
+                          for q, v in rows])
+        if within >= REFINE_SHARE:
+            return refine
+    return REFINE_LADDER[-1]
+
+
+def split(rows: int, validation: float, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """(validation indices, training indices) of ``rows`` rows: a ``validation`` fraction (at least one) held
+    out, drawn from ``generator`` (a fresh one seeded with the training seed gives :func:`train`'s split)."""
+    perm = torch.randperm(rows, generator=generator)
+    n_val = max(1, int(round(validation * rows)))
+    return perm[:n_val], perm[n_val:]
+
+
 def _fingerprint(dataset: Dataset) -> str:
     digest = hashlib.sha256(np.ascontiguousarray(dataset.q, dtype=np.float64).tobytes())
     digest.update(np.ascontiguousarray(dataset.y, dtype=np.float64).tobytes())
@@ -144,9 +174,7 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     q_all = torch.as_tensor(dataset.q, dtype=torch.float32)
     y_all = torch.as_tensor(dataset.y, dtype=torch.float32)
     gen = torch.Generator().manual_seed(seed)
-    perm = torch.randperm(len(q_all), generator=gen)
-    n_val = max(1, int(round(validation * len(q_all))))
-    val_idx, train_idx = perm[:n_val], perm[n_val:]
+    val_idx, train_idx = split(len(q_all), validation, gen)
     dimension = manifold_dimension(task, dataset.q[:DIMENSION_ROWS], dataset.y[:DIMENSION_ROWS])
     model.size_for(task.robot.n, dimension)  # the same data gives a resumed run the same sizes
     with torch.random.fork_rng(devices=[]):
@@ -210,6 +238,7 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
                                f"{out}: rerun the same command with --resume to continue") from None
 
     model.nets.load_state_dict(best_state)
+    model.refine = needed_refine(model, task, dataset.y[val_idx.numpy()], seed)
     if out is not None:
         model.save(out)
         atomic_write_text(out / "training.json", json.dumps(log.to_dict(), indent=1))

@@ -77,6 +77,7 @@ class ConditionalSampler(ABC):
                                    f"known: {', '.join(sorted(self.defaults))}")
         self.config: dict = {**self.defaults, **hyper}
         self.given = frozenset(hyper)  # set by the user: never resized (see size_for)
+        self.refine: int | None = None  # projection iterations its samples need (training measures it), if known
         for key, value in self.config.items():
             _check_hyper(self.name, key, value, self.defaults[key])
         self.meta: dict = {}
@@ -148,15 +149,17 @@ class ConditionalSampler(ABC):
     def normalise_y(self, y: torch.Tensor) -> torch.Tensor:
         return (y - self._y_mean) / self._y_std
 
-    def penalty(self, q: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q`` at ``y``,
-        plus their joint-limit violation in units of ``LIMIT_SCALE`` rad (so samples learn to stay inside)."""
+    def penalty(self, q: torch.Tensor, y: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
+        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q (B, d)`` at ``y (B, k)``,
+        plus their joint-limit violation in units of ``LIMIT_SCALE`` rad (so samples learn to stay inside);
+        with ``weight (B,)``, each row's term is scaled by it before the mean."""
         if self.residual_fn is None or self.config.get("residual_weight", 0.0) <= 0:
             return torch.zeros(())
         q = q * self._q_std + self._q_mean
         outside = (torch.relu(q - self._upper) + torch.relu(self._lower - q)) / LIMIT_SCALE
         r2 = self.residual_fn(q, y * self._y_std + self._y_mean) + outside.pow(2).sum(dim=1)
-        return pseudo_huber(r2).mean()
+        terms = pseudo_huber(r2)
+        return (terms if weight is None else terms * weight).mean()
 
     @property
     def condition(self) -> Condition:
@@ -216,9 +219,15 @@ class ConditionalSampler(ABC):
             return None
         weights = [layer.weight.detach().float().contiguous().numpy() for layer in linear]
         biases = [layer.bias.detach().float().contiguous().numpy() for layer in linear]
-        return core.Decoder(weights, biases, int(self.config["latent"]), law == "uniform",
+        steps = self._integration_steps()
+        return core.Decoder(weights, biases, self.d if steps else int(self.config["latent"]), law == "uniform",
                             *(np.asarray(self.norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
-                                                                            "lower", "upper")))
+                                                                            "lower", "upper")), steps=steps)
+
+    def _integration_steps(self) -> int:
+        """0: the sampling network maps [latent, y] to a row; n > 0: it is a velocity field v([x, y, t]) that
+        sampling integrates from latent rows in n Heun steps (a flow-matching model)."""
+        return 0
 
     def state_tensors(self) -> dict[str, torch.Tensor]:
         return {k: v.detach().contiguous().clone() for k, v in self.nets.state_dict().items()}
@@ -226,7 +235,8 @@ class ConditionalSampler(ABC):
     def describe(self) -> dict:
         """The JSON document saved as model.json (without the weights' hash)."""
         return {"format_version": MODEL_FORMAT_VERSION, "model": self.name, "config": self.config,
-                "dims": {"d": self.d, "k": self.k}, "normalisation": self.norm, "meta": self.meta}
+                "dims": {"d": self.d, "k": self.k}, "normalisation": self.norm, "meta": self.meta,
+                **({"refine": self.refine} if self.refine is not None else {})}
 
     def save(self, path: str | Path) -> None:
         """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first)."""
@@ -258,6 +268,10 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid config ({exc}); "
                                    "the file was edited or is damaged: retrain or restore it") from exc
         model.meta, model.norm = doc["meta"], doc["normalisation"]
+        refine = doc.get("refine")
+        if refine is not None and (isinstance(refine, bool) or not isinstance(refine, int) or not 0 <= refine <= 1000):
+            raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid refine {refine!r}; retrain or restore it")
+        model.refine = refine
         model.d, model.k = doc["dims"]["d"], doc["dims"]["k"]
         model._set_tensors()
         try:

@@ -1,0 +1,90 @@
+"""The default model, chosen on held-out rows: ``manifoldgen train DATASET`` (``--model auto``).
+
+Each candidate model (:data:`CANDIDATES`, every size from the data: :meth:`ConditionalSampler.size_for`)
+is trained with the same seed into ``OUT/candidates/NAME``; on the rows training held out (the same split
+for all) each is scored at every condition value there: ``accuracy``, the share of its raw samples within
+tolerance, and ``recall``, the share of held-out rows that some sample comes near (k-NN recall,
+:func:`manifoldgen.bench.metrics.prdc`). The chosen model is the most accurate of those whose recall is within
+:data:`RECALL_SLACK` of the best recall (a model that misses an IK branch fails queries there; a less accurate
+one only refines more), and its files are copied to ``OUT``; ``OUT/selection.json`` holds the table.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from manifoldgen.bench.metrics import joint_features, prdc
+from manifoldgen.data import Dataset
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import atomic_write_text
+from manifoldgen.models import get_model_class, load_model
+from manifoldgen.models.base import CONFIG_FILE, WEIGHTS_FILE, ConditionalSampler
+from manifoldgen.runtime import CANDIDATES
+from manifoldgen.tasks import Task
+from manifoldgen.training import CHECKPOINT, check_dataset, split
+
+RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
+SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
+SAMPLES = 1000  # samples drawn per scored condition value
+K = 5  # neighbours of the k-NN recall
+SELECTION_FILE = "selection.json"
+
+
+def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: int | None = None,
+                 resume: bool = False, progress: bool = True, task: Task | None = None,
+                 validation: float = 0.1) -> tuple[ConditionalSampler, list[dict]]:
+    """Train every candidate, score it on the held-out rows, write the chosen one to ``out``; returns it and
+    the table (one dict per candidate: ``model``, ``accuracy``, ``recall``, ``epochs``, ``seconds``,
+    ``chosen``). A candidate already trained in ``out/candidates`` is reused; one interrupted resumes with
+    ``resume``."""
+    task = task or check_dataset(dataset)
+    out = Path(out)
+    if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
+        raise ManifoldgenError(f"no checkpoint in {out}/candidates to resume (training finished or never started); "
+                               "run without --resume")
+    (out / "candidates").mkdir(parents=True, exist_ok=True)
+    held_out = split(len(dataset), validation, torch.Generator().manual_seed(seed))[0].numpy()
+    table, models = [], {}
+    for name in CANDIDATES:
+        folder = out / "candidates" / name
+        if (folder / CONFIG_FILE).exists() and not (folder / CHECKPOINT).exists():
+            model = load_model(folder)
+            log = json.loads((folder / "training.json").read_text())
+        else:
+            model = get_model_class(name)()
+            log = model.fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress,
+                            resume=resume and (folder / CHECKPOINT).exists(), task=task).to_dict()
+        models[name] = model
+        table.append({"model": name, **score(model, task, dataset.q[held_out], dataset.y[held_out], seed),
+                      "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1)})
+    best_recall = max(row["recall"] for row in table)
+    chosen = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
+    for row in table:
+        row["chosen"] = row is chosen
+    for file in (WEIGHTS_FILE, CONFIG_FILE, "training.json", "loss.png"):
+        shutil.copyfile(out / "candidates" / chosen["model"] / file, out / file)
+    atomic_write_text(out / SELECTION_FILE, json.dumps({"rule": f"most accurate within {RECALL_SLACK} of the best "
+                                                                f"recall", "candidates": table}, indent=1))
+    return models[chosen["model"]], table
+
+
+def score(model: ConditionalSampler, task: Task, q: np.ndarray, y: np.ndarray, seed: int) -> dict:
+    """Mean ``accuracy`` (raw samples within tolerance) and ``recall`` (k-NN, joint-range scaled) of ``model``
+    against held-out rows ``q (N, n)`` at conditions ``y (N, k)``, over at most :data:`SCORED_CONDITIONS` values."""
+    values = np.unique(y, axis=0)
+    values = values[np.unique(np.linspace(0, len(values) - 1, min(len(values), SCORED_CONDITIONS)).astype(int))]
+    accuracy, recall = [], []
+    lower, upper = task.robot.lower, task.robot.upper
+    for i, value in enumerate(values):
+        rows = q[np.all(y == value, axis=1)]
+        samples = model.sample(value, SAMPLES, torch.Generator().manual_seed(seed + i))
+        accuracy.append(float(task.constraint.satisfied(samples, value).mean()))
+        if len(rows) > K:
+            recall.append(prdc(joint_features(rows, lower, upper), joint_features(samples, lower, upper), K).recall)
+    return {"accuracy": round(float(np.mean(accuracy)), 4),
+            "recall": round(float(np.mean(recall)) if recall else float("nan"), 4)}
