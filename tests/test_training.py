@@ -112,3 +112,48 @@ def test_a_latent_below_the_manifold_dimension_is_warned(tiny):
         CVAE(**TINY).fit(tiny, epochs=1, progress=False)  # latent 3 = the dimension: no warning
     with pytest.warns(UserWarning, match="latent 2 is below the constraint manifold's dimension 3.*--set latent=3"):
         CVAE(**{**TINY, "latent": 2}).fit(tiny, epochs=1, progress=False)
+
+
+def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
+    sized = CVAE(batch=16, patience=100)
+    sized.fit(tiny, epochs=1, seed=0, progress=False)
+    assert sized.config["latent"] == 3 and sized.config["hidden"] == [128, 128]  # panda pose: 7 joints, dimension 3
+    kept = CVAE(latent=5, hidden=[16], batch=16, patience=100)
+    kept.fit(tiny, epochs=1, seed=0, progress=False)
+    assert kept.config["latent"] == 5 and kept.config["hidden"] == [16]
+
+
+def test_a_model_records_the_refinement_its_samples_need(tiny, tmp_path):
+    from manifoldgen.constraints import project
+    from manifoldgen.training import REFINE_LADDER, REFINE_SHARE
+
+    model = CVAE(**TINY)
+    model.fit(tiny, epochs=3, seed=0, progress=False, out=tmp_path / "m")
+    loaded = load_model(tmp_path / "m")
+    assert loaded.refine == model.refine and loaded.refine in REFINE_LADDER
+    y = np.array([0.3])
+    rows = loaded.sample(y, 512, torch.Generator().manual_seed(9))
+    rate = tiny.task().constraint.satisfied(project(tiny.task().constraint, rows, y, max_iters=loaded.refine).q, y)
+    assert rate.mean() >= REFINE_SHARE - 0.1 or loaded.refine == REFINE_LADDER[-1]
+
+
+def test_auto_trains_every_candidate_and_keeps_the_rule_s_choice(tiny, tmp_path):
+    out = tmp_path / "auto"
+    result = runner.invoke(app, ["train", str(_saved(tiny, tmp_path)), "--seed", "0", "-o", str(out), "--epochs", "2"])
+    assert result.exit_code == 0, result.output
+    table = json.loads((out / "selection.json").read_text())["candidates"]
+    assert [row["model"] for row in table] == ["cvae", "cfm"] and sum(row["chosen"] for row in table) == 1
+    best = max(row["recall"] for row in table)
+    chosen = next(row for row in table if row["chosen"])
+    assert chosen["recall"] >= best - 0.1
+    assert all(row["accuracy"] <= chosen["accuracy"] for row in table if row["recall"] >= best - 0.1)
+    assert load_model(out).name == chosen["model"] and f"chosen {chosen['model']}" in result.output
+    refused = runner.invoke(app, ["train", str(_saved(tiny, tmp_path)), "-o", str(out), "--set", "latent=2"])
+    assert refused.exit_code == 2 and "name it with --model" in refused.output
+
+
+def _saved(dataset: Dataset, folder) -> str:
+    path = folder / "tiny.npz"
+    if not path.exists():
+        dataset.save(path)
+    return str(path)

@@ -177,7 +177,7 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
                     seeds = (np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper)
                              if near_home else robot.sample_uniform(batch, rng))
                     if anchors is not None:
-                        seeds[batch // 2:] = anchor_seeds(anchors, batch - batch // 2, rng, robot)
+                        seeds[1::2] = anchor_seeds(anchors, batch // 2, rng, robot)  # interleaved: any prefix is half
                     res = project(task.constraint, seeds, y)
                     rows = res.q[space.valid(res.q)]
                     if partial is not None:
