@@ -103,7 +103,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
             anchors: bool = typer.Option(True, help="Seed half the rows around the start and goal of the task's "
                                          "scenes (their IK branches); --no-anchors: uniform seeds only"),
             near_home: float = typer.Option(0.0, help="Seeds normal around the task's home with this standard "
-                                            "deviation (rad) instead of uniformly and around the anchors: rows on the home's IK branch"),
+                                            "deviation (rad) instead: rows on the home's IK branch (0: as above)"),
             output: Path = typer.Option(..., "-o", "--output", help="Dataset .npz to write")):
     """Collect constraint-satisfying configurations (resumes after an interruption) and report the modes (IK
     branches) they fall in and how near they come to every scene's start and goal."""
