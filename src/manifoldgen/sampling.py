@@ -31,6 +31,7 @@ from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
 
 PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # the projection sampler's iterations
+FIRST_ROWS = 64  # a model sampler's first batch; each next one doubles, up to its batch size
 CHECK_ROWS = 256  # model rows a query's start draws to measure its gaps at the start and the goal
 MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows while the model covers its ends
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
@@ -73,16 +74,20 @@ class Sampler(ABC):
         """(count, n) new raw candidates: :meth:`candidates` before ``lazy_refine`` projection iterations."""
         return self.candidates(count)
 
+    def _batch_rows(self) -> int:
+        """Rows in the next batch: ``batch``."""
+        return self.batch
+
     def _refill(self) -> None:
         """A new batch of checked candidates into the buffer :meth:`sample_many` takes from."""
-        q = self.candidates(self.batch)
+        q = self.candidates(self._batch_rows())
         self.stats.generated += len(q)
         self.stats.batches += 1
         self._buffer = q[self.space.valid(q)]
 
     def _refill_raw(self) -> None:
         """A new batch of raw candidates into the buffer :meth:`raw_many` takes from."""
-        self._raw = self.raw(self.batch)
+        self._raw = self.raw(self._batch_rows())
         self.stats.generated += len(self._raw)
         self.stats.batches += 1
 
@@ -183,6 +188,11 @@ class ModelSampler(Sampler):
         self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
         self.missed = False  # the latest query's start or goal lies far from every model sample
         self.drawn = 0  # raw rows drawn since the latest query began
+
+    def _batch_rows(self) -> int:
+        """Batches grow from :data:`FIRST_ROWS` rows, doubling up to ``batch``: an easy query decodes few rows
+        it never uses (a flow-matching model's decode costs tens of microseconds a row)."""
+        return min(self.batch, FIRST_ROWS << min(self.stats.batches, 20))
 
     @property
     def lazy_refine(self) -> int:
