@@ -130,6 +130,17 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     console.print(_coverage_lines(dataset.meta["coverage"]), markup=False, highlight=False)
 
 
+def _engine(result) -> str:
+    """Where the search ran, and why not in the compiled core when it could not."""
+    where = result.extras.get("core")
+    if where == "native":
+        return "compiled core"
+    if where == "python":
+        return f"Python search ({result.extras['core_fallback']})" if result.extras.get("core_fallback") \
+            else "Python search (asked for)"
+    return "Python search (this planner has no compiled version)"
+
+
 def _coverage_lines(report: dict) -> str:
     """The collection's coverage report (:func:`manifoldgen.data.coverage`) as a few lines."""
     counts = [len(shares) for shares in report["modes"].values()]
@@ -257,7 +268,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         picture = f"{picture}, {snapshots}"
     status = "[green]solved[/]" if result.solved else "[red]not solved[/]"
     console.print(f"{status} in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
-                  f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations -> {output}, {picture}")
+                  f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {_engine(result)} "
+                  f"-> {output}, {picture}")
     if not result.solved:
         console.print(result.why(), markup=False)
         raise typer.Exit(1)
