@@ -157,3 +157,16 @@ def _saved(dataset: Dataset, folder) -> str:
     if not path.exists():
         dataset.save(path)
     return str(path)
+
+
+def test_candidates_trained_in_parallel_are_the_sequential_ones(tiny, tmp_path):
+    from manifoldgen.selection import select_model
+
+    _, one = select_model(tiny, tmp_path / "one", seed=4, epochs=1, progress=False, workers=1)
+    _, two = select_model(tiny, tmp_path / "two", seed=4, epochs=1, progress=False, workers=2)
+    assert [{k: v for k, v in row.items() if k != "seconds"} for row in one] == \
+        [{k: v for k, v in row.items() if k != "seconds"} for row in two]
+    for name in ("cvae", "cfm"):
+        a, b = (load_model(tmp_path / run / "candidates" / name) for run in ("one", "two"))
+        for key, value in a.state_tensors().items():
+            torch.testing.assert_close(b.state_tensors()[key], value, rtol=0, atol=0)

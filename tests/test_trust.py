@@ -116,7 +116,7 @@ def test_a_recorded_task_file_is_information_only(hostile, untouched, tmp_path):
     """Built-in constraint types work from files alone; their task_file (the planted folder) is never on sys.path."""
     for args in (f"trajectory {hostile}/builtin/p.npz -o {tmp_path}/t.json",
                  f"sample {hostile}/builtin/m --condition 0.4 -n 20 -o {tmp_path}/s.npz",
-                 f"train {hostile}/builtin/d.npz --epochs 1 --set hidden=[8] --set batch=8 -o {tmp_path}/m"):
+                 f"train {hostile}/builtin/d.npz --epochs 1 --model cvae --set hidden=[8] --set batch=8 -o {tmp_path}/m"):
         result = runner.invoke(app, args.split())
         assert result.exit_code == 0, result.output
 

@@ -6,13 +6,18 @@ for all) each is scored at every condition value there: ``accuracy``, the share 
 tolerance, and ``recall``, the share of held-out rows that some sample comes near (k-NN recall,
 :func:`manifoldgen.bench.metrics.prdc`). The chosen model is the most accurate of those whose recall is within
 :data:`RECALL_SLACK` of the best recall (a model that misses an IK branch fails queries there; a less accurate
-one only refines more), and its files are copied to ``OUT``; ``OUT/selection.json`` holds the table.
+one only refines more), and its files are copied to ``OUT``; ``OUT/selection.json`` holds the table. The
+candidates train side by side, one process each (as many as there are CPUs), each as it would alone: the
+same bytes as a sequential run.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import shutil
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -25,42 +30,51 @@ from manifoldgen.io import atomic_write_text
 from manifoldgen.models import get_model_class, load_model
 from manifoldgen.models.base import CONFIG_FILE, WEIGHTS_FILE, ConditionalSampler
 from manifoldgen.runtime import CANDIDATES
-from manifoldgen.tasks import Task
-from manifoldgen.training import CHECKPOINT, check_dataset, split
+from manifoldgen.tasks import Task, code_types
+from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
 SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
 SAMPLES = 1000  # samples drawn per scored condition value
 K = 5  # neighbours of the k-NN recall
 SELECTION_FILE = "selection.json"
+PARALLEL_ROWS = 2000  # from this many rows on, candidates train in parallel (below, starting processes costs more)
 
 
 def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: int | None = None,
                  resume: bool = False, progress: bool = True, task: Task | None = None,
-                 validation: float = 0.1) -> tuple[ConditionalSampler, list[dict]]:
+                 workers: int | None = None) -> tuple[ConditionalSampler, list[dict]]:
     """Train every candidate, score it on the held-out rows, write the chosen one to ``out``; returns it and
     the table (one dict per candidate: ``model``, ``accuracy``, ``recall``, ``epochs``, ``seconds``,
     ``chosen``). A candidate already trained in ``out/candidates`` is reused; one interrupted resumes with
-    ``resume``."""
+    ``resume``. ``workers``: processes training side by side (default: one per CPU and candidate for datasets
+    of :data:`PARALLEL_ROWS` rows or more, else 1; 1 where the task runs user code, which a child cannot load)."""
     task = task or check_dataset(dataset)
     out = Path(out)
     if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
         raise ManifoldgenError(f"no checkpoint in {out}/candidates to resume (training finished or never started); "
                                "run without --resume")
     (out / "candidates").mkdir(parents=True, exist_ok=True)
-    held_out = split(len(dataset), validation, torch.Generator().manual_seed(seed))[0].numpy()
+    held_out = split(len(dataset), VALIDATION, torch.Generator().manual_seed(seed))[0].numpy()
+    folders = {name: out / "candidates" / name for name in CANDIDATES}
+    todo = [name for name, folder in folders.items()
+            if not (folder / CONFIG_FILE).exists() or (folder / CHECKPOINT).exists()]
+    jobs = [(name, dataset, epochs, seed, folders[name], resume and (folders[name] / CHECKPOINT).exists())
+            for name in todo]
+    if workers is None:
+        workers = (os.cpu_count() or 1) if len(dataset) >= PARALLEL_ROWS else 1
+    workers = min(len(jobs), workers)
+    if workers > 1 and not code_types(task.spec()):  # a child rebuilds the task from the dataset's meta: no user code
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            list(pool.map(_train_candidate, jobs))
+    else:
+        for job in jobs:
+            _train_candidate(job, task=task, progress=progress)
     table, models = [], {}
-    for name in CANDIDATES:
-        folder = out / "candidates" / name
-        if (folder / CONFIG_FILE).exists() and not (folder / CHECKPOINT).exists():
-            model = load_model(folder)
-            log = json.loads((folder / "training.json").read_text())
-        else:
-            model = get_model_class(name)()
-            log = model.fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress,
-                            resume=resume and (folder / CHECKPOINT).exists(), task=task).to_dict()
-        models[name] = model
-        table.append({"model": name, **score(model, task, dataset.q[held_out], dataset.y[held_out], seed),
+    for name, folder in folders.items():
+        models[name] = load_model(folder)
+        log = json.loads((folder / "training.json").read_text())
+        table.append({"model": name, **score(models[name], task, dataset.q[held_out], dataset.y[held_out], seed),
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1)})
     best_recall = max(row["recall"] for row in table)
     chosen = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
@@ -73,9 +87,22 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     return models[chosen["model"]], table
 
 
+def _train_candidate(job: tuple, *, task: Task | None = None, progress: bool = False) -> None:
+    """Train one candidate ``(name, dataset, epochs, seed, folder, resume)`` into its folder (in a child process,
+    ``task`` None: rebuilt from the dataset's meta)."""
+    from manifoldgen.runtime import set_torch_threads
+
+    name, dataset, epochs, seed, folder, resume = job
+    if task is None:
+        set_torch_threads()
+    get_model_class(name)().fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress, resume=resume,
+                                task=task)
+
+
 def score(model: ConditionalSampler, task: Task, q: np.ndarray, y: np.ndarray, seed: int) -> dict:
     """Mean ``accuracy`` (raw samples within tolerance) and ``recall`` (k-NN, joint-range scaled) of ``model``
-    against held-out rows ``q (N, n)`` at conditions ``y (N, k)``, over at most :data:`SCORED_CONDITIONS` values."""
+    against held-out rows ``q (N, n)`` at conditions ``y (N, k)``, over at most :data:`SCORED_CONDITIONS` values
+    (recall 0 where no value has more than :data:`K` held-out rows)."""
     values = np.unique(y, axis=0)
     values = values[np.unique(np.linspace(0, len(values) - 1, min(len(values), SCORED_CONDITIONS)).astype(int))]
     accuracy, recall = [], []
@@ -87,4 +114,4 @@ def score(model: ConditionalSampler, task: Task, q: np.ndarray, y: np.ndarray, s
         if len(rows) > K:
             recall.append(prdc(joint_features(rows, lower, upper), joint_features(samples, lower, upper), K).recall)
     return {"accuracy": round(float(np.mean(accuracy)), 4),
-            "recall": round(float(np.mean(recall)) if recall else float("nan"), 4)}
+            "recall": round(float(np.mean(recall)) if recall else 0.0, 4)}  # too few held-out rows: no evidence

@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # the models call train(); training needs them only as a type
 CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous epoch's or this one's, never a mix
 OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
 MIN_ROWS = 10
+VALIDATION = 0.1  # the share of a dataset's rows training holds out (early stopping; the default model's choice)
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
 REFINE_LADDER = (REFINE, 5, 10, 20)  # projection iterations tried for a model's samples (see needed_refine)
 REFINE_SHARE = 0.9  # ... until this share of them is within tolerance
@@ -147,7 +148,7 @@ def _check_latent(model: ConditionalSampler, dimension: int) -> None:
 
 def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
-          validation: float = 0.1, task: Task | None = None) -> TrainingLog:
+          validation: float = VALIDATION, task: Task | None = None) -> TrainingLog:
     """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping; ``task``: the
     task the dataset was made for, when its meta names a user's constraint type (see :func:`check_dataset`)."""
     task = check_dataset(dataset, task)
