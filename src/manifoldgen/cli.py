@@ -57,6 +57,19 @@ TRUST_HELP = ("Import a module:Class constraint the input file names from PYTHON
               "EXECUTES that module's code; only for files you trust (prefer --task)")
 
 
+RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
+          "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive
+
+
+def _bounded(option: str, value):
+    """``value`` of ``option`` when inside its :data:`RANGES` entry (None passes: the default), else a one-line error."""
+    low, high = RANGES[option]
+    if value is not None and not low <= value <= high:
+        raise ManifoldgenError(f"{option} must be from {low:g} to {high:g}, got {value:g}" if isinstance(value, float)
+                               else f"{option} must be from {low} to {high}, got {value}")
+    return value
+
+
 def _names(registry: str) -> list[str]:
     """Names in a registry, for --help (``models``, ``planners``, ``constraints``)."""
     if registry == "models":
@@ -243,6 +256,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.viz.path import plot_path
     from manifoldgen.specs import parse_spec
     set_torch_threads()
+    _bounded("--time", time_limit)
     picture = output.with_suffix(".png")
     if picture == output or snapshots in (output, picture):
         also = f" and --snapshots {snapshots}" if snapshots else ""
@@ -293,6 +307,8 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
     """Execute the path quasi-statically in MuJoCo (feet on the ground, base free, joints servoed): upright?"""
     from manifoldgen.io import atomic_write_text, check_output_path
     from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
+    for option, value in (("--settle", settle), ("--hold", hold), ("--duration-scale", duration_scale)):
+        _bounded(option, value)
     pace = PhysicsSettings()
     settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * duration_scale,
                                seconds_per_m=pace.seconds_per_m * duration_scale, settle_s=settle, hold_s=hold,
@@ -334,7 +350,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     if model == "auto" and (settings or config):
         raise ManifoldgenError("--set and --config set one model's hyper-parameters; name it with --model (e.g. "
                                "--model cvae)")
-    set_torch_threads(threads)
+    set_torch_threads(_bounded("--threads", threads))
     data = Dataset.load(dataset)
     task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
     if model == "auto":
@@ -376,6 +392,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     from manifoldgen.sampling import sample_to_file
     from manifoldgen.tasks import task_from_meta
     set_torch_threads(2)
+    _bounded("--refine", refine)
     net = load_model(model_dir)
     check_output_path(output, [model_dir, _file(task)])
     task_obj = task_from_meta(net.meta, task=_made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
@@ -436,6 +453,8 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
     from manifoldgen.tasks import BUILTIN_DIR, get_task
+    _bounded("--runs", runs)
+    _bounded("--time", time_limit)
     samplers = [Method.parse(m).sampler for m in methods or []]
     check_output_path(output, [_file(task), _file(scene), config, *(models or []),
                                *(_file(parse_spec(s)[1]) for s in samplers if s)],

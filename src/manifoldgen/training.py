@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # the models call train(); training needs them only as a type
 CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous epoch's or this one's, never a mix
 OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
 MIN_ROWS = 10
+MAX_MODEL_BYTES = 4 * 2**30  # training memory a model's layers may take (float32 weights, gradients, Adam's two)
 VALIDATION = 0.1  # the share of a dataset's rows training holds out (early stopping; the default model's choice)
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
 REFINE_LADDER = (REFINE, 5, 10, 20)  # projection iterations tried for a model's samples (see needed_refine)
@@ -136,6 +137,17 @@ def manifold_dimension(task, q: np.ndarray, y: np.ndarray) -> int:
     return task.robot.n - max(int(np.linalg.matrix_rank(j, tol=1e-6)) for j in J)
 
 
+def _check_size(model: ConditionalSampler, width: int) -> None:
+    """Refuse, before anything is allocated, hidden layers whose weights, gradients and optimiser state would take
+    more than :data:`MAX_MODEL_BYTES` (float32; ``width``: joints + condition values, about a layer's in or out)."""
+    layers = [v for k, v in model.config.items() if k.endswith("hidden") and isinstance(v, list)]
+    parameters = sum(sum(a * b for a, b in zip([width, *widths], [*widths, width])) for widths in layers)
+    if 4 * 4 * parameters > MAX_MODEL_BYTES:
+        raise ManifoldgenError(f"hidden layers {layers} make about {parameters:,} parameters, {16 * parameters / 2**30:.1f} "
+                               f"GiB to train (weights, gradients, optimiser state); keep it under "
+                               f"{MAX_MODEL_BYTES / 2**30:.0f} GiB (e.g. --set 'hidden=[256,256]')")
+
+
 def _check_latent(model: ConditionalSampler, dimension: int) -> None:
     """Warn when the model's latent is smaller than the manifold's ``dimension``: its samples then cover at
     most a latent-dimensional sheet of the manifold."""
@@ -178,6 +190,7 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     val_idx, train_idx = split(len(q_all), validation, gen)
     dimension = manifold_dimension(task, dataset.q[:DIMENSION_ROWS], dataset.y[:DIMENSION_ROWS])
     model.size_for(task.robot.n, dimension)  # the same data gives a resumed run the same sizes
+    _check_size(model, task.robot.n + task.condition.k)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model.setup(dataset.meta, dataset.q[train_idx.numpy()], dataset.y[train_idx.numpy()],
