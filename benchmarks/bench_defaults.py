@@ -74,7 +74,7 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
         if code:
             raise SystemExit(f"train failed for {entry}; see {log}")
     kind = json.loads((model / "model.json").read_text())["model"]
-    sampler = f"{kind}:{model}"
+    sampler = f"model:{model}"
     wall, cpu, _ = timed(["plan", str(task), "--scene", scene, "--sampler", sampler, "--seed", str(seed),
                           "-o", str(folder / "first-path.npz")], log)
     pipeline["plan"] = (wall, cpu)

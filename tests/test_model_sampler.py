@@ -123,3 +123,14 @@ def test_sample_command_errors(model_dir, tmp_path):
     assert other.exit_code == 2 and "robot panda" in other.output and "vs pr2" in other.output
     missing = runner.invoke(app, ["sample", str(tmp_path), "--condition", "0.4", "-n", "10", "-o", out])
     assert missing.exit_code == 2 and "missing model.json" in missing.output
+
+
+def test_model_spec_takes_whichever_model_a_directory_holds(model_dir, panda_task):
+    from manifoldgen.specs import make_sampler
+
+    space = ConstrainedSpace(panda_task.constraint, [0.4])
+    sampler = make_sampler(f"model:{model_dir},batch=64", space, seed=1)
+    assert isinstance(sampler, ModelSampler) and sampler.model.name == "cvae"
+    assert sampler.refine == load_model(model_dir).refine  # the refinement the model recorded
+    with pytest.raises(ManifoldgenError, match="holds a cvae model, not cfm"):
+        make_sampler(f"cfm:{model_dir}", space, seed=1)

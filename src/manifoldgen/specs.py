@@ -3,7 +3,7 @@
 ``uniform`` (rejection in the joint limits), ``project`` (uniform seeds projected),
 ``pg:DATASET.npz`` (the paper's precomputed-graph baseline: rows of a dataset) or
 ``MODEL:DIR`` (a trained model directory, e.g. ``cvae:runs/cvae``; any registered model
-name). Options follow after commas: ``cvae:runs/cvae,refine=0,batch=2048``; model samples
+name, or ``model`` for whichever model the directory holds). Options follow after commas: ``cvae:runs/cvae,refine=0,batch=2048``; model samples
 get the projection iterations the model's training measured they need (``runtime.REFINE`` for a model that
 records none) unless ``refine`` says otherwise (``refine=0``:
 raw model samples, the paper's setting).
@@ -19,7 +19,8 @@ from manifoldgen.sampling import DatasetSampler, ProjectionSampler, Sampler, Uni
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import check_made_for
 
-SPEC_HELP = "uniform, project, pg:DATASET.npz, or MODEL:DIR (e.g. cvae:runs/cvae; options: ,refine=N,batch=B)"
+SPEC_HELP = ("uniform, project, pg:DATASET.npz, or MODEL:DIR (e.g. cvae:runs/cvae, or model:DIR for whichever model "
+             "DIR holds; options: ,refine=N,batch=B)")
 OPTIONS = {"refine": int, "batch": int}
 LIMITS = {"refine": (0, 1000), "batch": (1, 1_000_000)}  # inclusive ranges of the options
 
@@ -67,12 +68,13 @@ def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | 
     from manifoldgen.models import get_model_class, load_model
     from manifoldgen.sampling import ModelSampler
 
-    get_model_class(name)  # an unknown model name is reported with the known ones
+    if name != "model":
+        get_model_class(name)  # an unknown model name is reported with the known ones
     if not (Path(path) / "model.json").is_file():
         raise ManifoldgenError(f"no trained model at '{path}' (model.json missing); train one with "
                                f"`manifoldgen train DATASET --model {name} ...` or fix the path")
     model = load_model(path)
-    if model.name != name:
+    if name not in ("model", model.name):
         raise ManifoldgenError(f"'{path}' holds a {model.name} model, not {name}; use '{model.name}:{path}'")
     check_made_for(model.meta, space.constraint, f"model {path}")
     return ModelSampler(space, model, refine=refine, **common)
