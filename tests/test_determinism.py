@@ -28,7 +28,7 @@ def test_collect_twice_same_bytes(panda_task, tmp_path):
 def test_train_twice_same_bytes(panda_task, tmp_path):
     collect(panda_task, 20, 2, tmp_path / "d.npz", conditions=[[0.3], [0.5]], progress=False)
     for name in ("a", "b"):
-        _run("train", str(tmp_path / "d.npz"), "--set", "hidden=[8]", "--set", "batch=8", "--epochs", "2",
+        _run("train", str(tmp_path / "d.npz"), "--model", "cvae", "--set", "hidden=[8]", "--set", "batch=8", "--epochs", "2",
              "--seed", "4", "--threads", "1", "-o", str(tmp_path / name))
     for name in ("model.json", "model.safetensors"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name

@@ -7,6 +7,7 @@ import pytest
 
 from manifoldgen import native
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.sampling import FIRST_ROWS
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
 
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
@@ -224,7 +225,7 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeyp
     raw = twin.sampler.raw(40)
     refined = space.project(raw, max_iters=twin.sampler.lazy_refine).q
     np.testing.assert_allclose(refined, sampler.candidates(40), atol=1e-12)  # raw rows, then the refinement
-    assert len(twin.sampler.raw_many(40)) == 40 and twin.sampler.stats.generated == twin.sampler.batch
+    assert len(twin.sampler.raw_many(40)) == 40 and twin.sampler.stats.generated == FIRST_ROWS  # the first batch
     assert twin.sampler.stats.accepted == 0  # raw rows are not samples yet
     sampler.stats = type(sampler.stats)()
     before = space.counts()

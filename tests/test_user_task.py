@@ -41,7 +41,7 @@ def trained(tmp_path_factory):
     out = tmp_path_factory.mktemp("user")
     collected = runner.invoke(app, ["collect", TASK, "--per-condition", "200", "-o", str(out / "d.npz")])
     assert collected.exit_code == 0, collected.output
-    trained = runner.invoke(app, ["train", str(out / "d.npz"), "--task", TASK, "--epochs", "30", "--set",
+    trained = runner.invoke(app, ["train", str(out / "d.npz"), "--task", TASK, "--model", "cvae", "--epochs", "30", "--set",
                                   "hidden=[64,64]", "-o", str(out / "m")])
     assert trained.exit_code == 0, trained.output
     return out
