@@ -27,6 +27,11 @@ inside the user's constraint (or the Python plane's).
 
 ``--jacobians``: the callback's Jacobian alone on random xarm7 rows, per batch size: CPU per call of torch
 autograd (the constraint's default ``jacobian``) and of central differences, and their largest difference.
+
+``--evaluations``: the core's own cost of one state, what the searches ask for one row at a time: CPU per call of
+``residual`` and ``jacobian`` on single random xarm7 rows for the user constraint compiled and through callbacks,
+the built-in task (orientation + plane, the plane compiled) and the same manifold from built-in C++ terms only
+(orientation + a pose term holding x), and the planner's setup (tracing and checking the user residual).
 """
 
 import argparse
@@ -58,6 +63,8 @@ SEARCHES = {"python": "Python", "autograd": "core + callbacks, autograd Jacobian
 parser.add_argument("--searches", nargs="+", choices=tuple(SEARCHES), default=list(SEARCHES))
 parser.add_argument("--jacobians", action="store_true", help="time the callback's Jacobian: autograd vs central "
                     "differences, per batch size")
+parser.add_argument("--evaluations", action="store_true", help="time the core's residual and Jacobian of one "
+                    "state: compiled, callbacks, built-in terms")
 args = parser.parse_args()
 set_torch_threads()
 FD_ROWS, COMPILE = native.FD_ROWS, native.COMPILE
@@ -66,7 +73,8 @@ FD_ROWS, COMPILE = native.FD_ROWS, native.COMPILE
 def count_calls(constraint):
     """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count the Python search's
     calls, rows (configurations) and the CPU seconds spent inside them, and its Jacobian calls and their rows;
-    returns the running totals {"calls", "rows", "cpu", "jacobian_calls", "jacobian_rows"}."""
+    returns the running totals {"calls", "rows", "cpu", "jacobian_calls", "jacobian_rows"}. The task is cached
+    (get_task): :func:`uncount` takes the wrappers off again."""
     totals, depth = {"calls": 0, "rows": 0, "cpu": 0.0, "jacobian_calls": 0, "jacobian_rows": 0}, [0]
     for name in ("residual", "jacobian", "inequality"):
         method = getattr(constraint, name)
@@ -89,6 +97,12 @@ def count_calls(constraint):
                     totals["cpu"] += time.process_time() - began
         setattr(constraint, name, counted)
     return totals
+
+
+def uncount(constraint) -> None:
+    """Take :func:`count_calls`' wrappers off ``constraint`` (its class's methods again)."""
+    for name in ("residual", "jacobian", "inequality"):
+        constraint.__dict__.pop(name, None)
 
 
 def plan_bench():
@@ -133,6 +147,7 @@ def plan_bench():
             wall, cpu = time.perf_counter(), time.process_time()
             result = planner.solve(scene.start, scene.goal, args.time)
             cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+            uncount(constraint)
             assert result.extras["core"] == core, result.extras
             if core == "native":  # the core's own count of its calls into Python agrees with ours
                 assert result.extras.get("callbacks", {"calls": 0, "rows": 0}) == {"calls": totals["calls"],
@@ -204,8 +219,50 @@ def jacobian_bench():
         print(f"| {B} | {autograd * 1e3:.2f} | {differences * 1e3:.2f} | {autograd / differences:.1f}x | {error:.1e} |")
 
 
+def evaluation_bench():
+    """CPU per call of the core's residual and Jacobian on single xarm7 rows, per way the constraint runs."""
+    from manifoldgen.constraints import ConstraintSet, OrientationConstraint, PoseConstraint
+    from manifoldgen.space import ConstrainedSpace
+
+    user = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
+    builtin = get_task(str(EXAMPLES / "tool-down-xarm7-builtin.toml")).constraint
+    robot = user.robot
+    terms = ConstraintSet([OrientationConstraint(robot, "link_eef", direction=(0.0, 0.0, -1.0)),
+                           PoseConstraint(robot, "link_eef", np.eye(3), [[0.4]], position_axes=("x",),
+                                          orientation_axes=())])
+    rows = robot.sample_uniform(2000, np.random.default_rng(0))
+
+    def per_call(f):
+        f(rows[:1])
+        began = time.process_time()
+        for i in range(len(rows)):
+            f(rows[i:i + 1])
+        return (time.process_time() - began) / len(rows)
+
+    cases = (("user, compiled", user, True), ("user, callbacks", user, False),
+             ("built-in task (plane compiled)", builtin, True),
+             ("built-in C++ terms only (orientation + pose x)", terms, True))
+    times = {label: [] for label, _, _ in cases}
+    for _ in range(3):  # rounds, the cases in turn; medians printed
+        for label, constraint, compile in cases:
+            space = ConstrainedSpace(constraint, [0.4])
+            began = time.process_time()
+            core = native.core_space(space, compile=compile)
+            setup = time.process_time() - began
+            times[label].append((per_call(core.residual), per_call(core.jacobian), setup))
+    print("| constraint in the core | residual (us CPU a row) | residual + Jacobian (us CPU a row) | core setup "
+          "(ms CPU) |")
+    print("|---|---|---|---|")
+    for label, runs in times.items():
+        residual, jacobian, setup = np.median(runs, axis=0)
+        print(f"| {label} | {residual * 1e6:.2f} | {jacobian * 1e6:.2f} | {setup * 1e3:.1f} |")
+
+
 if args.jacobians:
     jacobian_bench()
+    raise SystemExit(0)
+if args.evaluations:
+    evaluation_bench()
     raise SystemExit(0)
 if args.plan:
     callback_totals = count_callbacks()

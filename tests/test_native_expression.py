@@ -302,3 +302,23 @@ def test_a_planned_path_on_the_compiled_user_task_passes_the_python_rule():
     assert space.constraint.violation(states, space.y).max() <= 1.0
     assert task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
     assert space.validate_path(result.path).valid
+
+
+def test_compiled_and_callback_parts_of_one_set_keep_their_rows(robots):
+    """A set of a part that compiles (with an inequality) and one that does not: rows in order, each part's way."""
+    from manifoldgen.constraints import ConstraintSet
+    robot = robots["xarm7"]
+    constraint = ConstraintSet([Synthetic(robot, "where", _where), DownAndNear(robot, "link_eef")])
+    space = ConstrainedSpace(constraint, [0.4])
+    core = native.core_space(space)
+    report = native.compile_report(space)
+    assert report["compiled"] == [constraint.parts[1].spec()["type"]] and core.batched and core.g == 1
+    assert "where is not recorded" in report["callbacks"][constraint.parts[0].spec()["type"]]
+    q = robot.sample_uniform(30, np.random.default_rng(2))
+    ys = np.full((30, 1), 0.4)
+    F, J = core.jacobian(q)
+    F_py, J_py = constraint.jacobian(q, ys)
+    np.testing.assert_allclose(F, F_py, rtol=0, atol=AGREE)
+    np.testing.assert_allclose(J, J_py, rtol=0, atol=1e-7)  # the callback part's central differences
+    np.testing.assert_allclose(core.inequality(q), constraint.inequality(q, ys), rtol=0, atol=AGREE)
+    np.testing.assert_allclose(core.violation(q), space.violation(q), rtol=0, atol=AGREE)

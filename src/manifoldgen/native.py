@@ -165,28 +165,19 @@ class CompiledPart:
     inequality: trace.Program
 
 
-_COMPILED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # part -> {y bytes: CompiledPart or why not}
 _REPORTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # space -> its latest core's compile report
 
 
 def compiled_part(part: Constraint, y: np.ndarray, robot: Robot) -> CompiledPart | str:
-    """``part`` at the condition ``y (k,)`` traced into programs the core runs (kept per part and y), or why it
-    is not (a one-line reason: something its residual uses that the tracer does not record, an operation the
-    core lacks, or its compiled form disagreeing with its numpy residual)."""
+    """``part`` at the condition ``y (k,)`` traced into programs the core runs, or why not (a one-line reason:
+    something its residual uses that the tracer does not record, or an operation the core lacks). Traced anew for
+    every core (about a millisecond): a constraint changed since is traced as it is now."""
     try:
-        known = _COMPILED.setdefault(part, {})
-    except TypeError:  # an unhashable constraint class: traced each time
-        known = {}
-    key = np.asarray(y, float).tobytes()
-    if key not in known:
-        try:
-            residual, inequality = trace.trace(part, y, robot)
-            missing = {op for op, _, _ in residual.code + inequality.code} - set(core_module().Op.__members__)
-            known[key] = (f"the core has no operation {', '.join(sorted(missing))}" if missing
-                          else CompiledPart(residual, inequality))
-        except trace.Untraceable as exc:
-            known[key] = f"its residual does not trace: {exc}"
-    return known[key]
+        residual, inequality = trace.trace(part, y, robot)
+    except trace.Untraceable as exc:
+        return f"its residual does not trace: {exc}"
+    missing = {op for op, _, _ in residual.code + inequality.code} - set(core_module().Op.__members__)
+    return f"the core has no operation {', '.join(sorted(missing))}" if missing else CompiledPart(residual, inequality)
 
 
 def compile_report(space: ConstrainedSpace) -> dict:
@@ -215,8 +206,9 @@ def constraint_terms(space: ConstrainedSpace) -> list[dict]:
 def _layout(space: ConstrainedSpace, compile: bool = True, refused: dict | None = None) -> list[tuple[str, object]]:
     """``space``'s constraint in residual order: ("term", a built-in part's C++ term, see
     :func:`constraint_terms`), ("expression", (part, y, its :class:`CompiledPart`)) for a part that is not built in
-    and compiles (``compile``; not in ``refused``: id(part) -> why not) and ("callback", a
-    :class:`ConstraintCallback` for a run of consecutive parts that are not built in and do not)."""
+    and compiles (``compile``, and not in ``refused``: id(part) -> why not, to which it adds the parts that do not
+    trace) and ("callback", a :class:`ConstraintCallback` for a run of consecutive parts that are not built in and
+    do not)."""
     robot, out, offset = space.robot, [], 0
     refused = {} if refused is None else refused
     for part in _parts(space):
@@ -359,56 +351,54 @@ def _python_inequalities(space: ConstrainedSpace, layout: list[tuple[str, object
 def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
     """A ``manifoldgen_core.Space`` for ``space`` (see the module docstring); a one-line error when the
     core is not built or cannot take the space. ``compile`` (default :data:`COMPILE`): Python parts that trace
-    run as compiled expressions, else through callbacks (:func:`compile_report` says which did)."""
+    and pass :func:`_disagreements`' check run as compiled expressions, the others through callbacks
+    (:func:`compile_report` says which did, and why not)."""
     core = core_module()
     if core is None:
         raise ManifoldgenError(f"the compiled core manifoldgen_core is not installed; {BUILD_HINT}")
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
-    refused: dict[int, str] | None = {} if (COMPILE if compile is None else compile) else None
-    while True:
-        out, checks = _build_core(space, refused)
-        failed = _disagreements(space, out, checks)
-        if not failed:
-            break
-        for key, why in failed.items():
-            part, _, y, _ = checks[key]
-            refused[key] = why
-            try:
-                _COMPILED.get(part, {})[np.asarray(y, float).tobytes()] = why
-            except TypeError:  # unhashable: not kept
-                pass
+    compiling = COMPILE if compile is None else compile
+    refused: dict[int, str] = {}  # id(part) -> why it is not compiled
+    layout = _layout(space, compile=compiling, refused=refused)
+    failed = _disagreements(space, [term for kind, term in layout if kind == "expression"])
+    if failed:
+        for part, why in failed:
+            refused[id(part)] = why
             warnings.warn(f"constraint '{part.spec()['type']}': {why}; it runs through Python callbacks instead",
                           stacklevel=2)
-    parts = _parts(space)
-    _REPORTS[space] = {"compiled": [part.spec()["type"] for part in parts if id(part) in checks],
-                       "callbacks": {part.spec()["type"]: (refused or {}).get(id(part), "compilation is off")
-                                     for part in parts if type(part) not in BUILT_IN and id(part) not in checks}}
+        layout = _layout(space, compile=compiling, refused=refused)
+    out = _build_core(space, layout)
+    compiled = {id(term[0]) for kind, term in layout if kind == "expression"}
+    _REPORTS[space] = {"compiled": [part.spec()["type"] for part in _parts(space) if id(part) in compiled],
+                       "callbacks": {part.spec()["type"]: refused.get(id(part), "compilation is off")
+                                     for part in _parts(space) if type(part) not in BUILT_IN
+                                     and id(part) not in compiled}}
     return out
 
 
-def _build_core(space: ConstrainedSpace, refused: dict | None):
-    """The core for ``space`` (refused None: nothing compiled) and its compiled parts: id(part) -> (part, rows,
-    y, inequality rows), rows and inequality rows: its slices of the core's residual and inequality."""
-    core, robot = core_module(), space.robot
+def _empty_core(space: ConstrainedSpace, geometry: bool = True):
+    """A ``manifoldgen_core.Space`` of ``space``'s robot, limits and settings without constraint terms; with its
+    collision model (``geometry``), else with none."""
+    robot = space.robot
     with tempfile.TemporaryDirectory(prefix="manifoldgen-core-") as folder:
         model_file, geometry_file = write_models(space, Path(folder))
-        out = core.Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
-                         robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
-    layout = _layout(space, compile=refused is not None, refused=refused)
-    checks = {}
+        if not geometry:
+            pin.GeometryModel().saveToBinary(str(geometry_file))
+        return core_module().Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
+                                   robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
+
+
+def _build_core(space: ConstrainedSpace, layout: list[tuple[str, object]]):
+    """The core for ``space`` with the constraint as ``layout`` has it (:func:`_layout`)."""
+    out = _empty_core(space)
     for kind, term in layout:
         if kind == "callback":
             out.add_callback(term.rows, term.residuals)
             continue
         if kind == "expression":
-            part, y, compiled = term
-            m, g = out.m, out.g
-            out.add_expression(*_lowered(compiled.residual))
-            if compiled.inequality.rows:
-                out.add_expression_inequality(*_lowered(compiled.inequality))
-            checks[id(part)] = (part, slice(m, out.m), y, slice(g, out.g))
+            _add_compiled(out, term[2])
             continue
         kind = term["type"]
         if kind == "pose":
@@ -425,7 +415,17 @@ def _build_core(space: ConstrainedSpace, refused: dict | None):
     python_inequalities = _python_inequalities(space, layout)
     if python_inequalities:
         out.set_inequalities(*python_inequalities)
-    return out, checks
+    return out
+
+
+def _add_compiled(core, compiled: CompiledPart) -> tuple[slice, slice]:
+    """Add a compiled part's residual and inequalities to ``core``: their rows (slices of its residual and of its
+    inequality)."""
+    m, g = core.m, core.g
+    core.add_expression(*_lowered(compiled.residual))
+    if compiled.inequality.rows:
+        core.add_expression_inequality(*_lowered(compiled.inequality))
+    return slice(m, core.m), slice(g, core.g)
 
 
 def _lowered(program: trace.Program) -> tuple:
@@ -435,28 +435,36 @@ def _lowered(program: trace.Program) -> tuple:
             list(program.frames), list(program.outputs))
 
 
-def _disagreements(space: ConstrainedSpace, core, checks: dict) -> dict:
-    """Compiled parts whose residual, inequalities or Jacobian in ``core`` differ from the part's own on
-    :data:`COMPILE_ROWS` random configurations: id(part) -> why. Residual and inequalities: the numpy ones within
-    :data:`COMPILE_AGREE`; the Jacobian: :func:`central_difference` of the numpy residual within :data:`FD_AGREE`,
-    else the part's ``jacobian`` (autograd unless it has its own: central differences cross the kinks of a
-    non-smooth residual) within :data:`COMPILE_AGREE`; each relative to max(1, max |.|)."""
-    if not checks:
-        return {}
+def _disagreements(space: ConstrainedSpace, compiled: list[tuple]) -> list[tuple[Constraint, str]]:
+    """The compiled parts ((part, y, :class:`CompiledPart`)) whose residual, inequalities or Jacobian, in a core of
+    their own, differ from the part's own on :data:`COMPILE_ROWS` random configurations, and why. Residual and
+    inequalities: the numpy ones within :data:`COMPILE_AGREE`; the Jacobian: :func:`central_difference` of the
+    numpy residual within :data:`FD_AGREE`, else the part's ``jacobian`` (autograd unless it has its own: central
+    differences cross the kinks of a non-smooth residual) within :data:`COMPILE_AGREE`; each relative to
+    max(1, max |.|). A part whose own evaluation raises there is left to Python too."""
+    if not compiled:
+        return []
+    core = _empty_core(space, geometry=False)
+    rows = [_add_compiled(core, c) for _, _, c in compiled]
     q = space.robot.sample_uniform(COMPILE_ROWS, np.random.default_rng(0))
     F, J = core.jacobian(q)
     G = core.inequality(q)
-    failed = {}
-    for key, (part, rows, y, inequality_rows) in checks.items():
+    failed = []
+    for (part, y, _), (residual_rows, inequality_rows) in zip(compiled, rows):
         ys = np.broadcast_to(y, (len(q), len(y)))
-        error = _error(F[:, rows], part.residual(q, ys), COMPILE_AGREE)
-        what = "residual"
-        if error is None:
-            what, error = "inequality", _error(G[:, inequality_rows], part.inequality(q, ys), COMPILE_AGREE)
-        if error is None and _error(J[:, rows], central_difference(part.residual, q, ys)[1], FD_AGREE) is not None:
-            what, error = "Jacobian", _error(J[:, rows], part.jacobian(q, ys)[1], COMPILE_AGREE)
+        try:
+            what, error = "residual", _error(F[:, residual_rows], part.residual(q, ys), COMPILE_AGREE)
+            if error is None:
+                what, error = "inequality", _error(G[:, inequality_rows], part.inequality(q, ys), COMPILE_AGREE)
+            ours = J[:, residual_rows]
+            if error is None and _error(ours, central_difference(part.residual, q, ys)[1], FD_AGREE) is not None:
+                what, error = "Jacobian", _error(ours, part.jacobian(q, ys)[1], COMPILE_AGREE)
+        except Exception as exc:  # the part's own evaluation refuses a random configuration: left to Python
+            failed.append((part, f"its numpy residual raised on random configurations ({type(exc).__name__}: {exc})"))
+            continue
         if error is not None:
-            failed[key] = f"its compiled {what} differs from its numpy {what} by {error:.1e} on random configurations"
+            failed.append((part, f"its compiled {what} differs from its numpy {what} by {error:.1e} on random "
+                                 "configurations"))
     return failed
 
 
