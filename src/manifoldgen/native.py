@@ -383,8 +383,11 @@ def _empty_core(space: ConstrainedSpace, geometry: bool = True):
     collision model (``geometry``), else with none."""
     robot = space.robot
     with tempfile.TemporaryDirectory(prefix="manifoldgen-core-") as folder:
-        model_file, geometry_file = write_models(space, Path(folder))
-        if not geometry:
+        if geometry:
+            model_file, geometry_file = write_models(space, Path(folder))
+        else:
+            model_file, geometry_file = Path(folder) / "model.bin", Path(folder) / "geometry.bin"
+            robot.model.saveToBinary(str(model_file))
             pin.GeometryModel().saveToBinary(str(geometry_file))
         return core_module().Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
                                    robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
