@@ -322,3 +322,22 @@ def test_compiled_and_callback_parts_of_one_set_keep_their_rows(robots):
     np.testing.assert_allclose(J, J_py, rtol=0, atol=1e-7)  # the callback part's central differences
     np.testing.assert_allclose(core.inequality(q), constraint.inequality(q, ys), rtol=0, atol=AGREE)
     np.testing.assert_allclose(core.violation(q), space.violation(q), rtol=0, atol=AGREE)
+
+
+def _nan(c, q, y):
+    """NaN on every configuration (log of a negative number), through maximum and minimum."""
+    xp = array_namespace(q)
+    p, _ = c.robot.frame_pose(q, c.a)
+    bad = xp.log(p[:, :1] - 10.0)
+    return xp.concat([xp.maximum(bad, -1.0), xp.minimum(-1.0, bad), p[:, 1:2]], axis=1)
+
+
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
+def test_a_nan_residual_stays_nan_compiled(robots):
+    """numpy's maximum and minimum keep NaN: so do the compiled ones (the state is then invalid both ways)."""
+    constraint = Synthetic(robots["xarm7"], "nan", _nan)
+    space = ConstrainedSpace(constraint, [0.4])
+    core = native.core_space(space)
+    assert not core.batched and native.compile_report(space)["compiled"]
+    F = core.residual(robots["xarm7"].sample_uniform(4, np.random.default_rng(0)))
+    assert np.isnan(F[:, :2]).all() and np.isfinite(F[:, 2]).all()

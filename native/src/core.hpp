@@ -77,8 +77,8 @@ enum class Op : int {
   DIV,
   POW,
   ATAN2,  // atan2(a, b)
-  MAX,    // derivative of a where a >= b, else of b
-  MIN,    // derivative of a where a <= b, else of b
+  MAX,    // NaN if either is (numpy's maximum); derivative of a where a >= b, else of b
+  MIN,    // NaN if either is (numpy's minimum); derivative of a where a <= b, else of b
 };
 
 struct Instruction {

@@ -155,8 +155,12 @@ void Expression::evaluate(const Leaves& leaves, double* F, double* J) {
         out = std::atan2(x, y), da = y / s, db = -x / s;
         break;
       }
-      case Op::MAX: out = x >= y ? x : y, da = x >= y ? 1.0 : 0.0, db = 1.0 - da; break;
-      case Op::MIN: out = x <= y ? x : y, da = x <= y ? 1.0 : 0.0, db = 1.0 - da; break;
+      case Op::MAX:  // numpy's maximum and minimum: NaN when either is NaN
+      case Op::MIN: {
+        const bool first = std::isnan(x) || (!std::isnan(y) && (c.op == Op::MAX ? x >= y : x <= y));
+        out = first ? x : y, da = first ? 1.0 : 0.0, db = 1.0 - da;
+        break;
+      }
     }
     v[i] = out;
     if (!derive || is_leaf(c.op)) continue;

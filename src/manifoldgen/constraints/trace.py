@@ -10,7 +10,7 @@ registers that the core (``native/src/expression.cpp``) evaluates with forward-m
 residual needs no Python call per state.
 
 Recorded: indexing and slicing of every axis but the batch axis (integer lists included), ``+ - * / **``, unary
-minus and ``abs`` with scalars and broadcast arrays, ``@`` and ``matmul``, ``.T`` of vectors, ``.mT``,
+minus and ``abs`` with scalars and broadcast arrays, ``@`` and ``matmul``, ``.T`` (of constants), ``.mT``,
 ``matrix_transpose``, ``permute_dims``, ``reshape``, ``expand_dims``, ``squeeze``, ``sum``, ``prod``, ``mean``,
 ``max``, ``min``, ``concat``/``stack``, ``sqrt``, ``square``, ``sin``, ``cos``, ``tan``, ``asin``, ``acos``,
 ``atan``, ``atan2``, ``exp``, ``log``, ``tanh``, ``pow``, ``maximum``, ``minimum``, ``clip``, ``vecdot``,
@@ -34,7 +34,7 @@ UNARY = {"NEG": operator.neg, "SQRT": math.sqrt, "SIN": math.sin, "COS": math.co
          "ASIN": math.asin, "ACOS": math.acos, "ATAN": math.atan, "EXP": math.exp, "LOG": math.log, "ABS": abs,
          "TANH": math.tanh}
 BINARY = {"ADD": operator.add, "SUB": operator.sub, "MUL": operator.mul, "DIV": operator.truediv,
-          "POW": operator.pow, "ATAN2": math.atan2, "MAX": max, "MIN": min}
+          "POW": operator.pow, "ATAN2": math.atan2, "MAX": np.maximum, "MIN": np.minimum}  # NaN in, NaN out
 OPS = LEAVES + tuple(UNARY) + tuple(BINARY)
 _COMMUTATIVE = {"ADD", "MUL", "MAX", "MIN"}
 # results that are finite whenever their operands are (x * 0 folds to 0 only for such an x: NaN * 0 is NaN)
