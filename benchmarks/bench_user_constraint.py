@@ -13,15 +13,25 @@ gap (target: within 10 points), with wall and CPU time.
 
 ``--plan``: the user constraint's task (xarm7, tool down at x = 0.4, the `open` scene's query with a box
 between start and goal), RRT-Connect with the `project` sampler (or a CVAE trained first on the user
-constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``); three searches interleaved per seed
-(seeds 0..runs-1): the Python search, the compiled core calling the user's residual back with the Jacobian by
-torch autograd (the callback path before central differences: ``native.FD_ROWS = 0``), and the core as it is
-(central differences of the numpy residual, :func:`manifoldgen.native.central_difference`). Prints per search:
-solved, median CPU and wall time of a query, the median number of Python constraint calls and configurations
-per call, the Jacobian calls and their median batch, and the CPU share inside the user's constraint.
+constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``); searches interleaved per seed
+(seeds 0..runs-1, ``--searches`` picks them): ``python``, the Python search; ``autograd``, the compiled core
+calling the user's residual back with the Jacobian by torch autograd (the callback path before central
+differences: ``native.FD_ROWS = 0``); ``callback``, the core calling it back with central differences of the
+numpy residual (:func:`manifoldgen.native.central_difference`; ``native.COMPILE = False``); ``compiled``, the
+core running the user's residual traced into a compiled expression (no Python call per state); ``builtin``, the
+same manifold from the built-in orientation + plane constraints (`tool-down-xarm7-builtin.toml`, the plane's
+residual compiled too) on the same query; ``builtin-callback``, that with the plane through callbacks (as before
+compiled expressions). Prints per search: solved, median CPU and wall time of a query, the median number of
+Python constraint calls and configurations per call, the Jacobian calls and their median batch, and the CPU share
+inside the user's constraint (or the Python plane's).
 
 ``--jacobians``: the callback's Jacobian alone on random xarm7 rows, per batch size: CPU per call of torch
 autograd (the constraint's default ``jacobian``) and of central differences, and their largest difference.
+
+``--evaluations``: the core's own cost of one state, what the searches ask for one row at a time: CPU per call of
+``residual`` and ``jacobian`` on single random xarm7 rows for the user constraint compiled and through callbacks,
+the built-in task (orientation + plane, the plane compiled) and the same manifold from built-in C++ terms only
+(orientation + a pose term holding x), and the planner's setup (tracing and checking the user residual).
 """
 
 import argparse
@@ -46,17 +56,25 @@ parser.add_argument("--plan", action="store_true", help="time planning: Python s
 parser.add_argument("--runs", type=int, default=10)
 parser.add_argument("--time", type=float, default=30.0)
 parser.add_argument("--sampler", choices=("project", "cvae"), default="project")
+SEARCHES = {"python": "Python", "autograd": "core + callbacks, autograd Jacobian",
+            "callback": "core + callbacks, central differences", "compiled": "core, compiled user residual",
+            "builtin": "core, built-in orientation + plane (plane compiled)",
+            "builtin-callback": "core, built-in orientation + plane (plane through callbacks)"}
+parser.add_argument("--searches", nargs="+", choices=tuple(SEARCHES), default=list(SEARCHES))
 parser.add_argument("--jacobians", action="store_true", help="time the callback's Jacobian: autograd vs central "
                     "differences, per batch size")
+parser.add_argument("--evaluations", action="store_true", help="time the core's residual and Jacobian of one "
+                    "state: compiled, callbacks, built-in terms")
 args = parser.parse_args()
 set_torch_threads()
-FD_ROWS = native.FD_ROWS
+FD_ROWS, COMPILE = native.FD_ROWS, native.COMPILE
 
 
 def count_calls(constraint):
     """Wrap ``constraint``'s residual, jacobian and inequality (instance attributes) to count the Python search's
     calls, rows (configurations) and the CPU seconds spent inside them, and its Jacobian calls and their rows;
-    returns the running totals {"calls", "rows", "cpu", "jacobian_calls", "jacobian_rows"}."""
+    returns the running totals {"calls", "rows", "cpu", "jacobian_calls", "jacobian_rows"}. The task is cached
+    (get_task): :func:`uncount` takes the wrappers off again."""
     totals, depth = {"calls": 0, "rows": 0, "cpu": 0.0, "jacobian_calls": 0, "jacobian_rows": 0}, [0]
     for name in ("residual", "jacobian", "inequality"):
         method = getattr(constraint, name)
@@ -79,6 +97,12 @@ def count_calls(constraint):
                     totals["cpu"] += time.process_time() - began
         setattr(constraint, name, counted)
     return totals
+
+
+def uncount(constraint) -> None:
+    """Take :func:`count_calls`' wrappers off ``constraint`` (its class's methods again)."""
+    for name in ("residual", "jacobian", "inequality"):
+        constraint.__dict__.pop(name, None)
 
 
 def plan_bench():
@@ -104,41 +128,49 @@ def plan_bench():
         sampler = f"cvae:{folder}"
         print(f"CVAE trained on the user constraint ({args.per_condition} rows per condition, {args.epochs} epochs): "
               f"{time.perf_counter() - wall:.0f} s wall, {time.process_time() - cpu:.0f} s CPU", flush=True)
-    searches = {"python": "Python", "autograd": "compiled core + callbacks, autograd Jacobian (before)",
-                "native": "compiled core + callbacks, central differences"}
-    rows = {search: [] for search in searches}
+    rows = {search: [] for search in args.searches}
     for seed in range(args.runs):
         for search in rows:
-            constraint = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
+            builtin = search.startswith("builtin")
+            constraint = get_task(str(EXAMPLES / ("tool-down-xarm7-builtin.toml" if builtin else
+                                                  "tool-down-xarm7.toml"))).constraint
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
             native.FD_ROWS = 0 if search == "autograd" else FD_ROWS
+            native.COMPILE = search in ("compiled", "builtin")
             core = "python" if search == "python" else "native"
+            setup = time.process_time()  # the planner with its core (tracing and checking a compiled residual)
             planner = RRTConnect(space, make_sampler(sampler, space, seed), seed=seed,
                                  settings=RRTConnectSettings(core=core))
+            setup = time.process_time() - setup
             totals = count_calls(constraint) if core == "python" else callback_totals
             totals.update(calls=0, rows=0, cpu=0.0, jacobian_calls=0, jacobian_rows=0)
             wall, cpu = time.perf_counter(), time.process_time()
             result = planner.solve(scene.start, scene.goal, args.time)
             cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+            uncount(constraint)
             assert result.extras["core"] == core, result.extras
             if core == "native":  # the core's own count of its calls into Python agrees with ours
-                assert result.extras["callbacks"] == {"calls": totals["calls"], "rows": totals["rows"]}
+                assert result.extras.get("callbacks", {"calls": 0, "rows": 0}) == {"calls": totals["calls"],
+                                                                                   "rows": totals["rows"]}
+                assert bool(result.extras.get("compiled")) == native.COMPILE, result.extras
             if result.solved:
                 assert space.validate_path(result.path).valid
             rows[search].append((result.solved, cpu, wall, totals["calls"], totals["rows"], totals["jacobian_calls"],
-                                 totals["jacobian_rows"], totals["cpu"] / cpu))
-            print(f"seed {seed} {search:>8}: solved {result.solved}, {cpu:.2f} s CPU, {wall:.2f} s wall, "
+                                 totals["jacobian_rows"], totals["cpu"] / cpu, setup))
+            print(f"seed {seed} {search:>16}: solved {result.solved}, {cpu:.3f} s CPU, {wall:.3f} s wall, "
+                  f"setup {setup * 1e3:.1f} ms CPU, "
                   f"{totals['calls']} Python constraint calls, {totals['rows']} configurations, "
                   f"{totals['jacobian_calls']} Jacobian calls ({totals['jacobian_rows']} configurations), "
                   f"{totals['cpu']:.2f} s CPU inside them", flush=True)
-    native.FD_ROWS = FD_ROWS
-    print("\n| search | solved | median CPU (s) | median wall (s) | Python constraint calls (median) | configurations "
-          "per call | Jacobian calls (median) | configurations per Jacobian call | CPU inside the user's constraint "
-          "(median) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    native.FD_ROWS, native.COMPILE = FD_ROWS, COMPILE
+    print("\n| search | solved | median CPU (s) | median wall (s) | planner setup CPU (ms, median) | Python constraint "
+          "calls (median) | configurations per call | Jacobian calls (median) | configurations per Jacobian call "
+          "| CPU inside the Python constraint (median) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for search, runs in rows.items():
-        solved, cpu, wall, calls, n, jcalls, jn, inside = (np.array(c, float) for c in zip(*runs))
-        print(f"| {searches[search]} | {int(solved.sum())}/{len(runs)} | {np.median(cpu):.2f} | {np.median(wall):.2f} "
+        solved, cpu, wall, calls, n, jcalls, jn, inside, setup = (np.array(c, float) for c in zip(*runs))
+        print(f"| {SEARCHES[search]} | {int(solved.sum())}/{len(runs)} | {np.median(cpu):.3f} | {np.median(wall):.3f} "
+              f"| {np.median(setup) * 1e3:.1f} "
               f"| {np.median(calls):,.0f} | {n.sum() / max(calls.sum(), 1):.1f} | {np.median(jcalls):,.0f} "
               f"| {jn.sum() / max(jcalls.sum(), 1):.1f} | {np.median(inside):.0%} |")
 
@@ -187,8 +219,50 @@ def jacobian_bench():
         print(f"| {B} | {autograd * 1e3:.2f} | {differences * 1e3:.2f} | {autograd / differences:.1f}x | {error:.1e} |")
 
 
+def evaluation_bench():
+    """CPU per call of the core's residual and Jacobian on single xarm7 rows, per way the constraint runs."""
+    from manifoldgen.constraints import ConstraintSet, OrientationConstraint, PoseConstraint
+    from manifoldgen.space import ConstrainedSpace
+
+    user = get_task(str(EXAMPLES / "tool-down-xarm7.toml")).constraint
+    builtin = get_task(str(EXAMPLES / "tool-down-xarm7-builtin.toml")).constraint
+    robot = user.robot
+    terms = ConstraintSet([OrientationConstraint(robot, "link_eef", direction=(0.0, 0.0, -1.0)),
+                           PoseConstraint(robot, "link_eef", np.eye(3), [[0.4]], position_axes=("x",),
+                                          orientation_axes=())])
+    rows = robot.sample_uniform(2000, np.random.default_rng(0))
+
+    def per_call(f):
+        f(rows[:1])
+        began = time.process_time()
+        for i in range(len(rows)):
+            f(rows[i:i + 1])
+        return (time.process_time() - began) / len(rows)
+
+    cases = (("user, compiled", user, True), ("user, callbacks", user, False),
+             ("built-in task (plane compiled)", builtin, True),
+             ("built-in C++ terms only (orientation + pose x)", terms, True))
+    times = {label: [] for label, _, _ in cases}
+    for _ in range(3):  # rounds, the cases in turn; medians printed
+        for label, constraint, compile in cases:
+            space = ConstrainedSpace(constraint, [0.4])
+            began = time.process_time()
+            core = native.core_space(space, compile=compile)
+            setup = time.process_time() - began
+            times[label].append((per_call(core.residual), per_call(core.jacobian), setup))
+    print("| constraint in the core | residual (us CPU a row) | residual + Jacobian (us CPU a row) | core setup "
+          "(ms CPU) |")
+    print("|---|---|---|---|")
+    for label, runs in times.items():
+        residual, jacobian, setup = np.median(runs, axis=0)
+        print(f"| {label} | {residual * 1e6:.2f} | {jacobian * 1e6:.2f} | {setup * 1e3:.1f} |")
+
+
 if args.jacobians:
     jacobian_bench()
+    raise SystemExit(0)
+if args.evaluations:
+    evaluation_bench()
     raise SystemExit(0)
 if args.plan:
     callback_totals = count_callbacks()

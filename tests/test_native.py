@@ -157,10 +157,15 @@ def test_core_choice_and_python_constraints_through_callbacks(panda_task, wall):
     from manifoldgen.specs import make_sampler
     plane = PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]])
     space = ConstrainedSpace(plane, [0.5])
-    assert native.unsupported(space) is None  # a Python constraint runs in the core through callbacks
+    assert native.unsupported(space) is None  # a Python constraint runs in the core: compiled, else callbacks
     assert "no 'plane' constraint term" in native.unsupported(space, callbacks=False)  # the C++ OMPL baseline's rule
     auto = RRTConnect(space, make_sampler("project", space, 0))
-    assert auto.core is not None and auto.core.batched and auto._extras()["core"] == "native"
+    assert auto.core is not None and not auto.core.batched and auto._extras()["core"] == "native"
+    assert auto._extras()["compiled"] == ["plane"] and "compile_fallback" not in auto._extras()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(native, "COMPILE", False)
+        callbacks = RRTConnect(space, make_sampler("project", space, 0))
+    assert callbacks.core.batched and callbacks._extras()["compile_fallback"] == "plane: compilation is off"
     with pytest.raises(ManifoldgenError, match="unknown core"):
         RRTConnectSettings(core="gpu").check()
     _, python = _planner(panda_task, wall, 0, core="python")

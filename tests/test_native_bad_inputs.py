@@ -1,7 +1,8 @@
 """Bad input refused alike: every case runs through the Python space / search and through the compiled
 core (:class:`~manifoldgen.native.NativeSpace`, ``core="native"``), once with a built-in constraint (all
-C++) and once with a Python one (C++ with callbacks); both must raise the same ManifoldgenError message,
-or give the same verdict where the Python rule answers instead of raising (NaN states are invalid)."""
+C++) and once with a Python one (compiled into C++, and through callbacks); both must raise the same
+ManifoldgenError message, or give the same verdict where the Python rule answers instead of raising (NaN states
+are invalid)."""
 
 import numpy as np
 import pytest
@@ -17,19 +18,20 @@ DOWN = np.diag([1.0, -1.0, -1.0])
 
 
 def _constraint(robot, kind: str, **options) -> Constraint:
-    """The wall task's manifold as a built-in pose (C++ terms) or a Python plane (callbacks)."""
+    """The wall task's manifold as a built-in pose (C++ terms) or a Python plane (compiled or callbacks)."""
     if kind == "pose":
         return PoseConstraint(robot, options.pop("frame", "panda_hand_tcp"), DOWN, [[0.3], [0.6]], **options)
     return PlaneConstraint(robot, options.pop("frame", "panda_hand_tcp"), [[0, 0, 1]], [[0.3], [0.6]], **options)
 
 
-@pytest.fixture(scope="module", params=["pose", "plane"])
+@pytest.fixture(scope="module", params=["pose", "plane", "plane-callbacks"])
 def problem(request, panda_task):
     from manifoldgen.scene import get_scene
     scene = get_scene(panda_task, "wall")
-    space = ConstrainedSpace(_constraint(panda_task.robot, request.param), scene.condition,
-                             scene.checker(panda_task.robot))
-    return panda_task, scene, space, native.NativeSpace(space, native.core_space(space)), request.param
+    kind = request.param.split("-")[0]
+    space = ConstrainedSpace(_constraint(panda_task.robot, kind), scene.condition, scene.checker(panda_task.robot))
+    core = native.core_space(space, compile=request.param != "plane-callbacks")
+    return panda_task, scene, space, native.NativeSpace(space, core), kind
 
 
 def _outcome(call):

@@ -1,6 +1,7 @@
-"""Python constraints in the compiled core through batched callbacks, against the Python space as the
-oracle: residuals, Jacobians, verdicts (inequalities included), projection, motion and path checks, and
-a native RRT-Connect path on the user task of docs/tasks.md rechecked state by state with the Python rule.
+"""Python constraints in the compiled core through batched callbacks (compilation off: the path of a residual
+that does not trace), against the Python space as the oracle: residuals, Jacobians, verdicts (inequalities
+included), projection, motion and path checks, and a native RRT-Connect path on the user task of docs/tasks.md
+rechecked state by state with the Python rule. tests/test_native_expression.py: the same constraints compiled.
 """
 
 from pathlib import Path
@@ -45,7 +46,7 @@ def user():
     task = get_task(str(USER_TASK))
     post = Obstacle("post", "box", Pose([0.4, 0.25, 0.2]), size=[0.1, 0.1, 0.4])
     space = ConstrainedSpace(task.constraint, [0.4], CollisionChecker(task.robot, obstacles=[post.geometry_object()]))
-    return task, space, native.core_space(space)
+    return task, space, native.core_space(space, compile=False)
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +58,7 @@ def mixed(panda_task):
     pose = PoseConstraint(robot, "panda_hand_tcp", down, [[0.3], [0.5]], orientation_axes=("z",))
     constraint = ConstraintSet([pose, DownAndNear(robot, "panda_hand_tcp")])
     space = ConstrainedSpace(constraint, [0.5], get_scene(panda_task, "wall").checker(robot))
-    return panda_task, space, native.core_space(space)
+    return panda_task, space, native.core_space(space, compile=False)
 
 
 def _states(task, space, seed=3):
@@ -134,12 +135,13 @@ def test_motion_and_path_checks_equal_the_python_space(mixed):
             reference.valid, reference.reason, reference.segment, reference.states_checked)
 
 
-def test_core_auto_plans_the_user_task_natively_and_the_path_passes_the_python_rule(user):
+def test_core_auto_plans_the_user_task_natively_and_the_path_passes_the_python_rule(user, monkeypatch):
     from manifoldgen.planning import RRTConnect
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import make_sampler
     task, space, _ = user
     scene = get_scene(task, "open")
+    monkeypatch.setattr(native, "COMPILE", False)
     planner = RRTConnect(space, make_sampler("project", space, 0), seed=0)
     assert planner.core is not None and planner.core.batched
     before = planner.core.counts()

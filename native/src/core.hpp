@@ -45,6 +45,84 @@ struct Counters {
 using Residuals = std::function<void(const double* q, long B, double* F, double* J)>;
 using Inequalities = std::function<void(const double* q, long B, double* G)>;
 
+// ---------------------------------------------------------------- Compiled expressions (expression.cpp)
+// A user's residual (or inequality) traced once in Python (manifoldgen/constraints/trace.py) into straight-line
+// code on scalar registers: register i holds instruction i's value and, when derivatives are asked for, its
+// gradient over the n active coordinates (forward mode). Python reads these codes from the binding
+// (manifoldgen_core.Op); the operands a, b are as noted.
+enum class Op : int {
+  // leaves
+  Q,      // q[a]
+  CONST,  // constants[a]
+  POS,    // frame slot a's world position [b]
+  ROT,    // frame slot a's world rotation (b / 3, b % 3)
+  COM,    // the centre of mass [b]
+  // unary: f(register a)
+  NEG,
+  SQRT,
+  SIN,
+  COS,
+  TAN,
+  ASIN,
+  ACOS,
+  ATAN,
+  EXP,
+  LOG,
+  ABS,  // derivative sign(a), 0 at 0
+  TANH,
+  // binary: f(register a, register b)
+  ADD,
+  SUB,
+  MUL,
+  DIV,
+  POW,
+  ATAN2,  // atan2(a, b)
+  MAX,    // NaN if either is (numpy's maximum); derivative of a where a >= b, else of b
+  MIN,    // NaN if either is (numpy's minimum); derivative of a where a <= b, else of b
+};
+
+struct Instruction {
+  Op op;
+  int a = 0, b = 0;
+};
+
+// What an expression reads at one configuration, filled by the space from pinocchio: q (n,); per frame slot its
+// world position and rotation and, for derivatives, its Jacobian (6, n) over the active coordinates (rows: the
+// origin's linear velocity, then the angular velocity, world axes); the centre of mass and its Jacobian (3, n).
+struct Leaves {
+  const double* q = nullptr;
+  std::vector<Eigen::Vector3d> position;
+  std::vector<Eigen::Matrix3d> rotation;
+  std::vector<RowMat> jacobian;
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  RowMat com_jacobian;
+};
+
+class Expression {
+ public:
+  // code: register i is instruction i's result; constants; frames: pinocchio frame ids by slot; outputs: the
+  // registers of the result rows; n: active coordinates. Throws std::invalid_argument for an operand that is not
+  // an earlier register, a constant, a frame slot, an axis or a coordinate.
+  Expression(std::vector<Instruction> code, std::vector<double> constants, std::vector<int> frames,
+             std::vector<int> outputs, int n);
+  int rows() const { return static_cast<int>(outputs_.size()); }
+  const std::vector<int>& frames() const { return frames_; }
+  bool uses_com() const { return uses_com_; }
+  // Leaves sized for this expression (q unset).
+  Leaves leaves() const;
+  // F (rows,) at leaves; with J (rows, n) row-major when J is not null (the leaves' Jacobians are read then).
+  void evaluate(const Leaves& leaves, double* F, double* J = nullptr);
+
+ private:
+  std::vector<Instruction> code_;
+  std::vector<double> constants_;
+  std::vector<int> frames_, outputs_;
+  int n_;
+  bool uses_com_ = false;
+  std::vector<char> varies_;             // per register: its gradient can be non-zero
+  std::vector<double> value_, gradient_;  // per register: value; gradient (n each)
+};
+
 struct Projection {
   bool converged;
   int iterations;
@@ -91,11 +169,15 @@ class Space {
   void add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis);
   // linear: F = A (r, n) q - y (constraints/joint_linear.py)
   void add_linear(const RowMat& A, const Vec& y);
+  // expression: F = a compiled user residual's outputs (Expression above); its frame ids are checked here
+  void add_expression(Expression expression);
   // Inequalities G(q) <= 0, stacked in the order added (checked after the equalities, before collision).
   // com polygon: G = normals (H, 2) . com(q)[x, y] - bounds (H,) (constraints/balance.py's CoM margin)
   void add_com_polygon(const RowMat& normals, const Vec& bounds);
   // hemisphere: G = -direction . R(q) axis (constraints/orientation.py's inequality)
   void add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction);
+  // expression: G = a compiled user inequality's outputs
+  void add_expression_inequality(Expression expression);
   int g() const;                                    // built-in inequality rows
   void inequality(const double* q, double* G);      // (g,)
   bool inequalities_hold(const double* q);          // every G_i <= 0 (true when there is none)

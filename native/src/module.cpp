@@ -90,6 +90,21 @@ void add_callback(Space& s, int rows, nb::callable fn) {
   });
 }
 
+// A compiled expression from Python's lowering (manifoldgen/native.py): code as (Op, a, b) rows, constants,
+// frame ids by slot, output registers.
+mgcore::Expression expression_of(const Space& s, const std::vector<std::tuple<mgcore::Op, int, int>>& code,
+                                 const std::vector<double>& constants, const std::vector<int>& frames,
+                                 const std::vector<int>& outputs) {
+  std::vector<mgcore::Instruction> program;
+  program.reserve(code.size());
+  for (const auto& [op, a, b] : code) program.push_back({op, a, b});
+  try {
+    return mgcore::Expression(std::move(program), constants, frames, outputs, s.n());
+  } catch (const std::invalid_argument& e) {
+    throw nb::value_error(e.what());
+  }
+}
+
 void set_inequalities(Space& s, int p, nb::callable fn) {
   const int n = s.n();
   s.set_inequalities(p, [fn, p, n](const double* q, long B, double* G) {
@@ -101,6 +116,34 @@ void set_inequalities(Space& s, int p, nb::callable fn) {
 
 NB_MODULE(manifoldgen_core, m) {
   m.doc() = "manifoldgen's compiled planning core (pinocchio + coal): constrained space and RRT-Connect";
+
+  // the operations of compiled expressions (core.hpp), the one definition of their codes
+  nb::enum_<mgcore::Op>(m, "Op", "Operations of a compiled expression (register i: instruction i's result)")
+      .value("Q", mgcore::Op::Q, "q[a]")
+      .value("CONST", mgcore::Op::CONST, "constants[a]")
+      .value("POS", mgcore::Op::POS, "frame slot a's world position [b]")
+      .value("ROT", mgcore::Op::ROT, "frame slot a's world rotation (b // 3, b % 3)")
+      .value("COM", mgcore::Op::COM, "the centre of mass [b]")
+      .value("NEG", mgcore::Op::NEG)
+      .value("SQRT", mgcore::Op::SQRT)
+      .value("SIN", mgcore::Op::SIN)
+      .value("COS", mgcore::Op::COS)
+      .value("TAN", mgcore::Op::TAN)
+      .value("ASIN", mgcore::Op::ASIN)
+      .value("ACOS", mgcore::Op::ACOS)
+      .value("ATAN", mgcore::Op::ATAN)
+      .value("EXP", mgcore::Op::EXP)
+      .value("LOG", mgcore::Op::LOG)
+      .value("ABS", mgcore::Op::ABS)
+      .value("TANH", mgcore::Op::TANH)
+      .value("ADD", mgcore::Op::ADD)
+      .value("SUB", mgcore::Op::SUB)
+      .value("MUL", mgcore::Op::MUL)
+      .value("DIV", mgcore::Op::DIV)
+      .value("POW", mgcore::Op::POW)
+      .value("ATAN2", mgcore::Op::ATAN2, "atan2(a, b)")
+      .value("MAX", mgcore::Op::MAX)
+      .value("MIN", mgcore::Op::MIN);
 
   nb::class_<Space>(m, "Space")
       .def(
@@ -190,6 +233,22 @@ NB_MODULE(manifoldgen_core, m) {
             return owned(std::move(G), {B, gg});
           },
           "q"_a, "(B, g) built-in inequality values of q (B, n) (<= 0: holds).")
+      .def(
+          "add_expression",
+          [](Space& s, const std::vector<std::tuple<mgcore::Op, int, int>>& code, const std::vector<double>& constants,
+             const std::vector<int>& frames, const std::vector<int>& outputs) {
+            s.add_expression(expression_of(s, code, constants, frames, outputs));
+          },
+          "code"_a, "constants"_a, "frames"_a, "outputs"_a,
+          "A compiled residual: code [(Op, a, b)] (register i: instruction i's result), constants, pinocchio frame ids "
+          "by slot, the output registers (its rows); evaluated per configuration with forward-mode derivatives.")
+      .def(
+          "add_expression_inequality",
+          [](Space& s, const std::vector<std::tuple<mgcore::Op, int, int>>& code, const std::vector<double>& constants,
+             const std::vector<int>& frames, const std::vector<int>& outputs) {
+            s.add_expression_inequality(expression_of(s, code, constants, frames, outputs));
+          },
+          "code"_a, "constants"_a, "frames"_a, "outputs"_a, "Compiled inequalities G <= 0 (as add_expression).")
       .def("add_callback", &add_callback, "rows"_a, "residuals"_a,
            "A term of `rows` residual components from Python: residuals(q (B, n), jacobian) -> F (B, rows), or "
            "(F, J (B, rows, n)) when jacobian is True; called on batches of configurations.")

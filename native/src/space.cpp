@@ -3,8 +3,10 @@
 // closed_chain.py, the projection of constraints/projection.py, and a sphere-model collision test.
 // Whole-body (the block "Whole-body terms"): a floating base as manifoldgen.robot's six Euler
 // coordinates, orientation.py's and joint_linear.py's terms, and inequalities (balance.py's CoM margin,
-// orientation.py's hemisphere); balance.py's equalities are pose terms. Any other constraint (a user's:
-// manifoldgen/native.py ConstraintCallback) is evaluated by Python callbacks on batches of configurations.
+// orientation.py's hemisphere); balance.py's equalities are pose terms. Any other constraint (a user's) runs as a
+// compiled expression (expression.cpp: its residual and inequalities traced by manifoldgen/constraints/trace.py),
+// or, where it could not be traced, through Python callbacks on batches of configurations (manifoldgen/native.py
+// ConstraintCallback).
 #include "core.hpp"
 
 #include <pinocchio/algorithm/center-of-mass.hpp>
@@ -43,9 +45,19 @@ constexpr double HULL_MARGIN = 1e-4;  // m: convex outer shapes closer than this
 
 namespace {
 
+// A compiled user residual or inequality (Space::add_expression) and the leaves it reads, filled per state.
+struct Compiled {
+  Expression expression;
+  Leaves leaves;
+  explicit Compiled(Expression e) : expression(std::move(e)), leaves(expression.leaves()) {}
+};
+
+constexpr int CALLBACK_TERM = 5, EXPRESSION_TERM = 6;  // Term::kind
+constexpr int EXPRESSION_INEQUALITY = 2;               // Inequality::kind
+
 struct Term {
   // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius)), 3: orientation, 4: linear,
-  // 5: Python callback
+  // 5 (CALLBACK_TERM): Python callback, 6 (EXPRESSION_TERM): compiled expression
   int kind;
   pinocchio::FrameIndex frame, frame_b;
   Eigen::Matrix3d rotation;
@@ -56,24 +68,29 @@ struct Term {
   Eigen::Matrix<double, 2, 3> basis = Eigen::Matrix<double, 2, 3>::Zero();  // orientation: e1, e2
   RowMat A;                                                          // linear: (r, n)
   int callback = -1, callback_rows = 0;  // callback: its index in Impl::callbacks, its residual rows
+  std::shared_ptr<Compiled> compiled;    // expression
   int rows() const {
     return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size())
            : kind == 1 ? 6
            : kind == 3 ? 2
            : kind == 4 ? static_cast<int>(A.rows())
-           : kind == 5 ? callback_rows
+           : kind == CALLBACK_TERM ? callback_rows
+           : kind == EXPRESSION_TERM ? compiled->expression.rows()
                        : 1;
   }
 };
 
 // An inequality G(q) <= 0 (whole-body terms).
 struct Inequality {
-  int kind;  // 0: CoM support polygon, 1: hemisphere
+  int kind;  // 0: CoM support polygon, 1: hemisphere, 2 (EXPRESSION_INEQUALITY): compiled expression
   pinocchio::FrameIndex frame = 0;
   Eigen::Vector3d axis = Eigen::Vector3d::Zero(), direction = Eigen::Vector3d::Zero();
   RowMat normals;  // (H, 2)
   Vec bounds;      // (H,)
-  int rows() const { return kind == 0 ? static_cast<int>(normals.rows()) : 1; }
+  std::shared_ptr<Compiled> compiled;  // expression
+  int rows() const {
+    return kind == 0 ? static_cast<int>(normals.rows()) : kind == EXPRESSION_INEQUALITY ? compiled->expression.rows() : 1;
+  }
 };
 
 // R = Rz(yaw) Ry(pitch) Rx(roll), manifoldgen.robot's floating-base rotation.
@@ -202,7 +219,37 @@ struct Space::Impl {
     m += t.rows();
     terms.push_back(t);
     rates_stale = true;
-    native_terms = native_terms || t.kind != 5;
+    native_terms = native_terms || t.kind != CALLBACK_TERM;
+  }
+
+  // A compiled expression's rows at q (forward kinematics done; with J, the joint Jacobians too): its frames'
+  // placements (and Jacobians, mapped to the active coordinates as put_row does) and the centre of mass when it
+  // reads it, then its program. J: its first row's start, n per row (null: values only).
+  void expression_rows(Compiled& c, const double* q, double* F, double* J) {
+    Leaves& leaves = c.leaves;
+    leaves.q = q;
+    const std::vector<int>& frames = c.expression.frames();
+    const int nn = n();
+    for (std::size_t s = 0; s < frames.size(); ++s) {
+      const pinocchio::FrameIndex f = static_cast<pinocchio::FrameIndex>(frames[s]);
+      const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, f);
+      leaves.position[s] = A.translation();
+      leaves.rotation[s] = A.rotation();
+      if (!J) continue;
+      Ja.setZero();
+      pinocchio::getFrameJacobian(model, data, f, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
+      for (int r = 0; r < 6; ++r) put_row(leaves.jacobian[s].data() + static_cast<long>(r) * nn, Ja.row(r));
+    }
+    if (c.expression.uses_com()) {
+      if (J) {
+        pinocchio::jacobianCenterOfMass(model, data, false);
+        for (int r = 0; r < 3; ++r) put_row(leaves.com_jacobian.data() + static_cast<long>(r) * nn, data.Jcom.row(r));
+      } else {
+        pinocchio::centerOfMass(model, data, pinocchio::POSITION, false);
+      }
+      leaves.com = data.com[0];
+    }
+    c.expression.evaluate(leaves, F, J);
   }
   // per geometry: what a pair's mid phase tests before coal's exact test (a mesh's convex hull, built on
   // first use; a primitive itself), and whether it was looked up
@@ -252,7 +299,12 @@ struct Space::Impl {
   void fill_residual(const double* q, double* F) {
     int row = 0;
     for (const Term& t : terms) {
-      if (t.kind == 5) {  // filled by the batch's callback
+      if (t.kind == CALLBACK_TERM) {  // filled by the batch's callback
+        row += t.rows();
+        continue;
+      }
+      if (t.kind == EXPRESSION_TERM) {
+        expression_rows(*t.compiled, q, F + row, nullptr);
         row += t.rows();
         continue;
       }
@@ -286,7 +338,12 @@ struct Space::Impl {
     auto put = [&](int row, const auto& rowvec) { put_row(J + static_cast<long>(row) * nn, rowvec); };  // rowvec over nv
     int row = 0;
     for (const Term& t : terms) {
-      if (t.kind == 5) {  // filled by the batch's callback
+      if (t.kind == CALLBACK_TERM) {  // filled by the batch's callback
+        row += t.rows();
+        continue;
+      }
+      if (t.kind == EXPRESSION_TERM) {
+        expression_rows(*t.compiled, q, F + row, J + static_cast<long>(row) * nn);
         row += t.rows();
         continue;
       }
@@ -404,14 +461,16 @@ struct Space::Impl {
   void fill_inequality(const double* q, double* G) {
     if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
     else pinocchio::forwardKinematics(model, data, to_full(q));
-    inequality_rows(G);
+    inequality_rows(q, G);
   }
 
-  // G (g,) from data's kinematics (and centre of mass when the polygon needs it).
-  void inequality_rows(double* G) {
+  // G (g,) at q from data's kinematics (and centre of mass when the polygon needs it).
+  void inequality_rows(const double* q, double* G) {
     int row = 0;
     for (const Inequality& c : inequalities) {
-      if (c.kind == 0) {
+      if (c.kind == EXPRESSION_INEQUALITY) {
+        expression_rows(*c.compiled, q, G + row, nullptr);
+      } else if (c.kind == 0) {
         const Eigen::Vector2d com = data.com[0].head<2>();
         Eigen::Map<Vec>(G + row, c.normals.rows()) = c.normals * com - c.bounds;
       } else {
@@ -441,7 +500,7 @@ struct Space::Impl {
     }
     if (worst <= limit && g > 0) {
       state_G.resize(g);
-      inequality_rows(state_G.data());
+      inequality_rows(q, state_G.data());
       for (double x : state_G)
         if (x > 0) hold = false;
     }
@@ -525,6 +584,11 @@ struct Space::Impl {
     const double mass = pinocchio::computeTotalMass(model);
     for (int j = 1; j < static_cast<int>(model.njoints) && mass > 0; ++j)
       com += (model.inertias[j].mass() / mass) * point_rates(j, model.inertias[j].lever(), false);
+    for (const Inequality& c : inequalities)
+      if (c.kind == EXPRESSION_INEQUALITY) {
+        certifiable = false;
+        return;
+      }
     for (const Inequality& c : inequalities)
       for (int h = 0; h < c.rows(); ++h)
         rows.push_back(c.kind == 0 ? Vec(c.normals.row(h).norm() * com)
@@ -1251,6 +1315,16 @@ void Space::add_linear(const RowMat& A, const Vec& y) {
   p.add(t);
 }
 
+void Space::add_expression(Expression expression) {
+  Impl& p = *impl_;
+  for (int f : expression.frames())
+    if (f >= static_cast<int>(p.model.nframes)) throw std::runtime_error("expression frame id out of range");
+  Term t{EXPRESSION_TERM, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(), Eigen::Vector3d::Zero()};
+  t.compiled = std::make_shared<Compiled>(std::move(expression));
+  if (t.compiled->leaves.com_jacobian.cols() != p.n()) throw std::runtime_error("the expression is for another n");
+  p.add(t);
+}
+
 void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
   Impl& p = *impl_;
   if (normals.cols() != 2 || normals.rows() != bounds.size() || normals.rows() < 3)
@@ -1271,6 +1345,18 @@ void Space::add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::
   c.frame = static_cast<pinocchio::FrameIndex>(frame);
   c.axis = axis;
   c.direction = direction;
+  p.g += c.rows();
+  p.inequalities.push_back(c);
+  p.rates_stale = true;
+}
+
+void Space::add_expression_inequality(Expression expression) {
+  Impl& p = *impl_;
+  for (int f : expression.frames())
+    if (f >= static_cast<int>(p.model.nframes)) throw std::runtime_error("expression frame id out of range");
+  Inequality c{EXPRESSION_INEQUALITY};
+  c.compiled = std::make_shared<Compiled>(std::move(expression));
+  if (c.compiled->leaves.com_jacobian.cols() != p.n()) throw std::runtime_error("the expression is for another n");
   p.g += c.rows();
   p.inequalities.push_back(c);
   p.rates_stale = true;
@@ -1714,7 +1800,7 @@ PathCheck Space::sweep_path(const std::vector<double>& states, const std::vector
 void Space::add_callback(int rows, Residuals residuals) {
   Impl& p = *impl_;
   if (rows < 0) throw std::runtime_error("a callback term needs rows >= 0");
-  Term t{5, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(), Eigen::Vector3d::Zero()};
+  Term t{CALLBACK_TERM, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(), Eigen::Vector3d::Zero()};
   t.callback = static_cast<int>(p.callbacks.size());
   t.callback_rows = rows;
   p.callbacks.push_back(std::move(residuals));
@@ -1737,7 +1823,7 @@ void Space::Impl::fill_callbacks(const double* q, long B, Counters& counts, doub
   std::vector<double> Fc, Jc;
   for (const Term& t : terms) {
     const int rows = t.callback_rows;
-    if (t.kind == 5 && B > 0 && rows > 0) {
+    if (t.kind == CALLBACK_TERM && B > 0 && rows > 0) {
       Fc.assign(B * rows, 0.0);
       if (J) Jc.assign(B * rows * nn, 0.0);
       ++counts.callback_calls;

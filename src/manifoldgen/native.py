@@ -9,10 +9,15 @@ turned by ``y``), ``closed_chain``, ``sphere``, and the whole-body ones: ``balan
 pose terms, its CoM margin as the support polygon's inequalities on pinocchio's centre of mass), ``orientation``
 (two rows and its hemisphere inequality), ``joint_linear``, and sets of them, on fixed or floating bases (the
 base's six Euler coordinates mapped to pinocchio's free flyer as :meth:`~manifoldgen.robot.Robot.to_pinocchio`
-does). Any other constraint (a user's, ``plane``, ...) reaches the core through batched Python callbacks
-(:class:`ConstraintCallback`): its own residual, Jacobian (analytic, else central differences of its numpy
-residual: torch autograd's within ~1e-9, and ~14x cheaper on the single rows the sequential searches ask for) and
-inequalities, called on all the rows a projection iteration, a motion check or a path chunk evaluates at once.
+does). Any other constraint (a user's, ``plane``, ...) is traced once (:mod:`manifoldgen.constraints.trace`) into
+compiled expressions, its residual and its inequalities, that the core evaluates per state with forward-mode
+derivatives, no Python call per state (:func:`compiled_part`; checked against the numpy residual and central
+differences on :data:`COMPILE_ROWS` random configurations before use). A constraint whose residual does not trace,
+or whose compiled form disagrees, reaches the core through batched Python callbacks (:class:`ConstraintCallback`):
+its own residual, Jacobian (analytic, else central differences of its numpy residual: torch autograd's within
+~1e-9, and ~14x cheaper on the single rows the sequential searches ask for) and inequalities, called on all the
+rows a projection iteration, a motion check or a path chunk evaluates at once; :func:`compile_report` says which
+parts run compiled and why the others do not.
 What the core cannot take (a robot that is not a pinocchio :class:`~manifoldgen.robot.Robot`): :func:`unsupported`
 says why, and the planners fall back to Python.
 
@@ -41,12 +46,14 @@ import tempfile
 import time
 import warnings
 import weakref
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from manifoldgen.constraints import Constraint, ConstraintSet, Projection
+from manifoldgen.constraints import trace
 from manifoldgen.constraints.balance import BalanceConstraint
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
 from manifoldgen.constraints.joint_linear import JointLinearConstraint
@@ -144,6 +151,41 @@ def _balance_terms(robot: Robot, part: BalanceConstraint, y: np.ndarray) -> list
     return terms
 
 
+# Compiled expressions of Python parts (constraints/trace.py, native/src/expression.cpp).
+COMPILE = True  # Python parts that trace run as compiled expressions (False: callbacks, as before; for comparisons)
+COMPILE_ROWS = 8  # random configurations a compiled part is checked on before use
+COMPILE_AGREE = 1e-9  # its residual and inequalities against the numpy ones: within this x max(1, max |F|)
+
+
+@dataclass(frozen=True)
+class CompiledPart:
+    """A Python constraint part at its condition y, traced: its residual and inequality programs."""
+
+    residual: trace.Program
+    inequality: trace.Program
+
+
+_REPORTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # space -> its latest core's compile report
+
+
+def compiled_part(part: Constraint, y: np.ndarray, robot: Robot) -> CompiledPart | str:
+    """``part`` at the condition ``y (k,)`` traced into programs the core runs, or why not (a one-line reason:
+    something its residual uses that the tracer does not record, or an operation the core lacks). Traced anew for
+    every core (about a millisecond): a constraint changed since is traced as it is now."""
+    try:
+        residual, inequality = trace.trace(part, y, robot)
+    except trace.Untraceable as exc:
+        return f"its residual does not trace: {exc}"
+    missing = {op for op, _, _ in residual.code + inequality.code} - set(core_module().Op.__members__)
+    return f"the core has no operation {', '.join(sorted(missing))}" if missing else CompiledPart(residual, inequality)
+
+
+def compile_report(space: ConstrainedSpace) -> dict:
+    """What the latest :func:`core_space` of ``space`` compiled: ``compiled`` (the Python parts' types that run
+    as compiled expressions) and ``callbacks`` (type -> why it runs through Python callbacks instead)."""
+    return _REPORTS.get(space, {"compiled": [], "callbacks": {}})
+
+
 def constraint_terms(space: ConstrainedSpace) -> list[dict]:
     """``space``'s built-in constraint at its condition as the C++ terms (JSON-ready), in residual order:
     ``pose`` (frame_id, row-major rotation, position_axes, orientation_axes, y), ``chain`` (frame_a_id,
@@ -154,21 +196,30 @@ def constraint_terms(space: ConstrainedSpace) -> list[dict]:
     Inequality terms add no residual rows. The compiled core and the C++ OMPL baseline both build from these;
     a part that is not built in is refused (one line)."""
     terms = []
-    for kind, item in _layout(space):
+    for kind, item in _layout(space, compile=False):
         if kind == "callback":
             raise ManifoldgenError(unsupported(space, callbacks=False))
         terms.append(item)
     return terms
 
 
-def _layout(space: ConstrainedSpace) -> list[tuple[str, object]]:
+def _layout(space: ConstrainedSpace, compile: bool = True, refused: dict | None = None) -> list[tuple[str, object]]:
     """``space``'s constraint in residual order: ("term", a built-in part's C++ term, see
-    :func:`constraint_terms`) and ("callback", a :class:`ConstraintCallback` for a run of consecutive parts
-    that are not built in)."""
+    :func:`constraint_terms`), ("expression", (part, y, its :class:`CompiledPart`)) for a part that is not built in
+    and compiles (``compile``, and not in ``refused``: id(part) -> why not, to which it adds the parts that do not
+    trace) and ("callback", a :class:`ConstraintCallback` for a run of consecutive parts that are not built in and
+    do not)."""
     robot, out, offset = space.robot, [], 0
+    refused = {} if refused is None else refused
     for part in _parts(space):
         y = space.y[offset:offset + part.condition.k]
         offset += part.condition.k
+        if type(part) not in BUILT_IN and compile and id(part) not in refused:
+            compiled = compiled_part(part, y, robot)
+            if isinstance(compiled, CompiledPart):
+                out.append(("expression", (part, y, compiled)))
+                continue
+            refused[id(part)] = compiled
         if type(part) not in BUILT_IN:
             if out and out[-1][0] == "callback":
                 out[-1][1].parts.append((part, y))
@@ -283,15 +334,11 @@ def _joined(blocks: list[np.ndarray]) -> np.ndarray:
     return np.ascontiguousarray(blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1), dtype=float)
 
 
-def _python_inequalities(space: ConstrainedSpace):
-    """(p, G) for the parts that are not built in and have inequalities: G(q (B, n)) -> (B, p) as the core
-    calls it; None when there are none (the built-in inequalities run in C++)."""
-    parts, offset = [], 0
-    for part in _parts(space):
-        y = space.y[offset:offset + part.condition.k]
-        offset += part.condition.k
-        if type(part) not in BUILT_IN and part.inequality(space.robot.lower[None], y[None]).shape[1]:
-            parts.append((part, y))
+def _python_inequalities(space: ConstrainedSpace, layout: list[tuple[str, object]]):
+    """(p, G) for the parts of ``layout``'s callbacks that have inequalities: G(q (B, n)) -> (B, p) as the core
+    calls it; None when there are none (the built-in and compiled inequalities run in C++)."""
+    parts = [(part, y) for kind, item in layout if kind == "callback" for part, y in item.parts
+             if part.inequality(space.robot.lower[None], y[None]).shape[1]]
     if not parts:
         return None
 
@@ -301,23 +348,60 @@ def _python_inequalities(space: ConstrainedSpace):
     return inequalities(space.robot.lower[None]).shape[1], inequalities
 
 
-def core_space(space: ConstrainedSpace):
+def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
     """A ``manifoldgen_core.Space`` for ``space`` (see the module docstring); a one-line error when the
-    core is not built or cannot take the space."""
+    core is not built or cannot take the space. ``compile`` (default :data:`COMPILE`): Python parts that trace
+    and pass :func:`_disagreements`' check run as compiled expressions, the others through callbacks
+    (:func:`compile_report` says which did, and why not)."""
     core = core_module()
     if core is None:
         raise ManifoldgenError(f"the compiled core manifoldgen_core is not installed; {BUILD_HINT}")
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
+    compiling = COMPILE if compile is None else compile
+    refused: dict[int, str] = {}  # id(part) -> why it is not compiled
+    layout = _layout(space, compile=compiling, refused=refused)
+    failed = _disagreements(space, [term for kind, term in layout if kind == "expression"])
+    if failed:
+        for part, why in failed:
+            refused[id(part)] = why
+            warnings.warn(f"constraint '{part.spec()['type']}': {why}; it runs through Python callbacks instead",
+                          stacklevel=2)
+        layout = _layout(space, compile=compiling, refused=refused)
+    out = _build_core(space, layout)
+    compiled = {id(term[0]) for kind, term in layout if kind == "expression"}
+    _REPORTS[space] = {"compiled": [part.spec()["type"] for part in _parts(space) if id(part) in compiled],
+                       "callbacks": {part.spec()["type"]: refused.get(id(part), "compilation is off")
+                                     for part in _parts(space) if type(part) not in BUILT_IN
+                                     and id(part) not in compiled}}
+    return out
+
+
+def _empty_core(space: ConstrainedSpace, geometry: bool = True):
+    """A ``manifoldgen_core.Space`` of ``space``'s robot, limits and settings without constraint terms; with its
+    collision model (``geometry``), else with none."""
     robot = space.robot
     with tempfile.TemporaryDirectory(prefix="manifoldgen-core-") as folder:
-        model_file, geometry_file = write_models(space, Path(folder))
-        out = core.Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
-                         robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
-    for kind, term in _layout(space):
+        if geometry:
+            model_file, geometry_file = write_models(space, Path(folder))
+        else:
+            model_file, geometry_file = Path(folder) / "model.bin", Path(folder) / "geometry.bin"
+            robot.model.saveToBinary(str(model_file))
+            pin.GeometryModel().saveToBinary(str(geometry_file))
+        return core_module().Space(str(model_file), str(geometry_file), robot.reference, active_coordinates(robot),
+                                   robot.lower, robot.upper, space.settings.margin, space.settings.resolution)
+
+
+def _build_core(space: ConstrainedSpace, layout: list[tuple[str, object]]):
+    """The core for ``space`` with the constraint as ``layout`` has it (:func:`_layout`)."""
+    out = _empty_core(space)
+    for kind, term in layout:
         if kind == "callback":
             out.add_callback(term.rows, term.residuals)
+            continue
+        if kind == "expression":
+            _add_compiled(out, term[2])
             continue
         kind = term["type"]
         if kind == "pose":
@@ -331,10 +415,76 @@ def core_space(space: ConstrainedSpace):
             out.add_chain(term["frame_a_id"], term["frame_b_id"], np.reshape(term["rotation"], (3, 3)),
                           np.asarray(term["offset"], float))
     out.set_tolerance(np.asarray(space.constraint.tolerance, float))
-    python_inequalities = _python_inequalities(space)
+    python_inequalities = _python_inequalities(space, layout)
     if python_inequalities:
         out.set_inequalities(*python_inequalities)
     return out
+
+
+def _add_compiled(core, compiled: CompiledPart) -> tuple[slice, slice]:
+    """Add a compiled part's residual and inequalities to ``core``: their rows (slices of its residual and of its
+    inequality)."""
+    m, g = core.m, core.g
+    core.add_expression(*_lowered(compiled.residual))
+    if compiled.inequality.rows:
+        core.add_expression_inequality(*_lowered(compiled.inequality))
+    return slice(m, core.m), slice(g, core.g)
+
+
+def _lowered(program: trace.Program) -> tuple:
+    """A program as ``add_expression`` takes it: code with the core's ``Op`` codes, constants, frames, outputs."""
+    op = core_module().Op
+    return ([(getattr(op, name), a, b) for name, a, b in program.code], list(program.constants),
+            list(program.frames), list(program.outputs))
+
+
+def _disagreements(space: ConstrainedSpace, compiled: list[tuple]) -> list[tuple[Constraint, str]]:
+    """The compiled parts ((part, y, :class:`CompiledPart`)) whose residual, inequalities or Jacobian, in a core of
+    their own, differ from the part's own on :data:`COMPILE_ROWS` random configurations, and why. Residual and
+    inequalities: the numpy ones within :data:`COMPILE_AGREE`; the Jacobian: :func:`central_difference` of the
+    numpy residual within :data:`FD_AGREE`, else the part's ``jacobian`` (autograd unless it has its own: central
+    differences cross the kinks of a non-smooth residual) within :data:`COMPILE_AGREE`; each relative to
+    max(1, max |.|). A part whose own evaluation raises there is left to Python too."""
+    if not compiled:
+        return []
+    core = _empty_core(space, geometry=False)
+    rows = [_add_compiled(core, c) for _, _, c in compiled]
+    q = space.robot.sample_uniform(COMPILE_ROWS, np.random.default_rng(0))
+    F, J = core.jacobian(q)
+    G = core.inequality(q)
+    failed = []
+    for (part, y, _), (residual_rows, inequality_rows) in zip(compiled, rows):
+        ys = np.broadcast_to(y, (len(q), len(y)))
+        try:
+            what, error = "residual", _error(F[:, residual_rows], part.residual(q, ys), COMPILE_AGREE)
+            if error is None:
+                what, error = "inequality", _error(G[:, inequality_rows], part.inequality(q, ys), COMPILE_AGREE)
+            ours = J[:, residual_rows]
+            if error is None and _error(ours, central_difference(part.residual, q, ys)[1], FD_AGREE) is not None:
+                what, error = "Jacobian", _error(ours, part.jacobian(q, ys)[1], COMPILE_AGREE)
+        except Exception as exc:  # the part's own evaluation refuses a random configuration: left to Python
+            failed.append((part, f"its numpy residual raised on random configurations ({type(exc).__name__}: {exc})"))
+            continue
+        if error is not None:
+            failed.append((part, f"its compiled {what} differs from its numpy {what} by {error:.1e} on random "
+                                 "configurations"))
+    return failed
+
+
+def _error(ours: np.ndarray, theirs, agree: float) -> float | None:
+    """max |ours - theirs| when it exceeds ``agree`` x max(1, max |theirs|), else None."""
+    theirs = np.asarray(theirs, dtype=float)
+    error = _difference(ours, theirs)
+    return error if error > agree * max(1.0, float(np.max(np.abs(np.nan_to_num(theirs)), initial=0.0))) else None
+
+
+def _difference(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b|, NaN where both are NaN counting as equal (inf where only one is, or the shapes differ)."""
+    if a.shape != b.shape:
+        return np.inf
+    both = np.isnan(a) & np.isnan(b)
+    d = np.where(both, 0.0, np.abs(a - b))
+    return float(np.max(np.nan_to_num(d, nan=np.inf), initial=0.0))
 
 
 WHOLE_BODY = ("orientation", "linear", "com_polygon", "hemisphere")

@@ -459,6 +459,8 @@ class Robot:
         """World position (B, 3) and rotation (B, 3, 3) of ``frame``."""
         if is_tensor(q):
             return self.torch_kinematics.frame_pose(q, frame)
+        if is_traced(q):
+            return q.traced_frame_pose(self, frame)
         q = as_batch(q, self.n)
         chain = self._chains.get(frame) if isinstance(frame, str) else None
         if chain is None:
@@ -580,6 +582,8 @@ class Robot:
         takes the differentiable torch path (no Jacobian: autograd gives it)."""
         if is_tensor(q):
             return self.torch_kinematics.com(q)
+        if is_traced(q) and not jacobian:
+            return q.traced_com(self)
         q = as_batch(q, self.n)
         if not jacobian:
             return _in_chunks(_tree_com, self._tree, q, self._tree.columns.size) / self.mass
@@ -598,6 +602,11 @@ class Robot:
 def is_tensor(x) -> bool:
     """True for a torch tensor (checked without importing torch)."""
     return type(x).__module__.startswith("torch")
+
+
+def is_traced(x) -> bool:
+    """True for a traced array (:mod:`manifoldgen.constraints.trace`): its kinematics are recorded, not computed."""
+    return hasattr(type(x), "traced_frame_pose")
 
 
 def as_batch(q: np.ndarray, n: int) -> np.ndarray:

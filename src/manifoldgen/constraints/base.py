@@ -24,7 +24,8 @@ from array_api_compat import array_namespace
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.registry import Registry
-from manifoldgen.robot import Robot, as_batch, is_tensor
+from manifoldgen.constraints import trace
+from manifoldgen.robot import Robot, as_batch, is_tensor, is_traced
 
 INEQUALITY_SCALE = 0.01  # G (metres or radians) per unit of the training penalty, like a tolerance
 
@@ -150,6 +151,8 @@ class Constraint(ABC):
         """Promote q to (B, n) and broadcast y to (B, k), numpy or torch like ``q``."""
         k = self.condition.k
         rows = (-1, k) if k else (1, 0)  # (-1, 0) is ambiguous
+        if is_traced(q):  # recorded for the compiled core (constraints/trace.py)
+            return trace.batch(q, y, self.robot.n, k)
         if is_tensor(q):
             import torch
             q = q if q.ndim == 2 else q[None]

@@ -24,7 +24,8 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
     search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and can take the space, a
-    Python constraint through callbacks, else Python; the result's ``extras['core']`` says which,
+    Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace, through
+    callbacks (``extras['compile_fallback']``: why), else Python; the result's ``extras['core']`` says which,
     ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an error when the core cannot
     run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
@@ -72,6 +73,7 @@ class RRTConnect(Planner):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.core, self.fallback = None, ""
+        self.compiled = {"compiled": [], "callbacks": {}}  # Python parts compiled in the core, and why not the others
         self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
         wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
         if wanted != "python":
@@ -81,6 +83,7 @@ class RRTConnect(Planner):
                 raise ManifoldgenError(f"{reason}; {native.BUILD_HINT}" if native.core_module() is None
                                        else f"{reason}; use core='python' or 'auto'")
             self.core = None if reason else native.core_space(self.space)
+            self.compiled = native.compile_report(self.space) if self.core is not None else self.compiled
             if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:
                 spheres = native.space_spheres(self.space)
                 native.set_spheres(self.core, spheres)
@@ -135,6 +138,9 @@ class RRTConnect(Planner):
                 "sweep_checks": now["sweep_checks"] - then["sweep_checks"],
                 "cut_edges": self.cut_edges, "reattached": self.reattached, "verified_states": self.verified_states,
                 **({"callbacks": callbacks} if callbacks["calls"] else {}),
+                **({"compiled": list(self.compiled["compiled"])} if self.compiled["compiled"] else {}),
+                **({"compile_fallback": "; ".join(f"{kind}: {why}" for kind, why in self.compiled["callbacks"].items())}
+                   if self.compiled["callbacks"] else {}),
                 **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
 
     def _target(self) -> np.ndarray:
