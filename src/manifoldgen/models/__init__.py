@@ -11,6 +11,7 @@ from pathlib import Path
 
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.base import ConditionalSampler, read_model_dir
+from manifoldgen.models.cfm import ConditionalFlowMatching
 from manifoldgen.models.cvae import CVAE
 from manifoldgen.models.flow import ConditionalFlow
 from manifoldgen.models.cgan import CGAN
@@ -18,7 +19,7 @@ from manifoldgen.models.wgan import WGANGP
 from manifoldgen.registry import Registry
 
 MODELS: Registry[ConditionalSampler] = Registry("model", ConditionalSampler)
-for _cls in (CVAE, CGAN, WGANGP, ConditionalFlow):
+for _cls in (CVAE, CGAN, WGANGP, ConditionalFlow, ConditionalFlowMatching):
     MODELS.register(_cls.name)(_cls)
 
 
@@ -47,5 +48,5 @@ def pretrained_model_dir(name: str = "panda-pose-cvae") -> Path:
     return path
 
 
-__all__ = ["CGAN", "CVAE", "MODELS", "WGANGP", "ConditionalFlow", "ConditionalSampler", "get_model_class",
-           "load_model", "pretrained_model_dir"]
+__all__ = ["CGAN", "CVAE", "MODELS", "WGANGP", "ConditionalFlow", "ConditionalFlowMatching", "ConditionalSampler",
+           "get_model_class", "load_model", "pretrained_model_dir"]
