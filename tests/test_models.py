@@ -33,6 +33,8 @@ def _hyper(name: str) -> dict:
     extra = {"critic_hidden": [32, 32]} if name in ("cgan", "wgan") else {}
     if name == "flow":
         extra = {"transforms": 2, "bins": 4}
+    if name == "cfm":
+        extra = {"steps": 4, "penalty_fraction": 1.0, "lr": 0.01}
     return {**TINY, **extra}
 
 
@@ -68,10 +70,10 @@ def test_model_contract(name, trained, tiny, task):
     other = model.sample([0.5], 50, torch.Generator().manual_seed(0))
     assert np.abs(other - q).max() > 1e-3
     # training reduced the loss: the constraint residual of samples (every model), and the
-    # validation score of the likelihood models (a GAN's adversarial losses need not fall)
+    # validation score of the likelihood and regression models (a GAN's adversarial losses need not fall)
     residual = [h["train"]["residual"] for h in log.history]
     assert residual[-1] < residual[0]
-    if name in ("cvae", "flow"):
+    if name in ("cvae", "flow", "cfm"):
         vals = [h["val"] for h in log.history]
         assert min(vals[1:]) < vals[0]
     # training is deterministic for a seed
@@ -86,8 +88,8 @@ def test_model_contract(name, trained, tiny, task):
 @pytest.mark.parametrize("name", MODELS.names())
 def test_native_decoder_is_the_models_network(name, trained):
     """The core's copy of the sampling network decodes latent rows as torch does (float32 rounding apart; a
-    velocity field integrated in Heun steps as the model samples), draws them from the model's law, and is
-    deterministic for a seed; a flow has none (torch samples it)."""
+    velocity field integrated as the model samples it: Heun steps, then one Euler step), draws them from the
+    model's law, and is deterministic for a seed; a flow has none (torch samples it)."""
     model = trained[name][0]
     decoder = model.native_decoder()
     if name == "flow":
@@ -110,10 +112,11 @@ def test_native_decoder_is_the_models_network(name, trained):
         x = torch.from_numpy(z[:2000])
         if steps:
             h = 1.0 / steps
-            for i in range(steps):
+            for i in range(steps - 1):
                 t0, t1 = torch.full((2000, 1), i * h), torch.full((2000, 1), (i + 1) * h)
                 v = net(torch.cat([x, yn, t0], 1))
                 x = x + 0.5 * h * (v + net(torch.cat([x + h * v, yn, t1], 1)))
+            x = x + h * net(torch.cat([x, yn, torch.full((2000, 1), 1.0 - h)], 1))
         else:
             x = net(torch.cat([x, yn], 1))
         expected = (x * model._q_std + model._q_mean).double().numpy()
@@ -124,6 +127,21 @@ def test_native_decoder_is_the_models_network(name, trained):
     assert np.abs(decoder.sample(y, 300, 12) - q).max() > 1e-3
     with pytest.raises(ValueError, match="latent rows must have"):
         decoder.decode(np.zeros((2, 99), np.float32), y)
+
+
+def test_cfm_covers_both_modes():
+    """On two-mode data (the sphere task's polar caps, nothing between them) flow matching samples both caps,
+    at a trained radius and between the two trained, each with at least a quarter of the samples, and few
+    in the empty band between them: neither collapse onto one cap nor an average of the two."""
+    full = collect(get_task("sphere"), 1500, seed=0, conditions=[[0.9], [1.1]], progress=False)
+    caps = np.abs(full.q[:, 2]) > 0.6 * full.y[:, 0]
+    assert 0.45 < np.mean(full.q[caps, 2] > 0) < 0.55
+    model = MODELS.get("cfm")(hidden=[128, 128], batch=64, lr=3e-3)
+    model.fit(Dataset(full.q[caps], full.y[caps], full.meta), epochs=30, seed=0, progress=False)
+    for radius in (0.9, 1.0):
+        height = model.sample([radius], 2000, torch.Generator().manual_seed(0))[:, 2] / radius
+        assert np.mean(height > 0.5) >= 0.25 and np.mean(height < -0.5) >= 0.25
+        assert np.mean(np.abs(height) < 0.3) < 0.15
 
 
 def test_penalty_is_constraint_residual(task):

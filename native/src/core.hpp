@@ -319,7 +319,8 @@ NearestAnswers nearest_queries(const RowMat& points, const std::vector<char>& al
 // latent rows z (B, latent), N(0, I) or U(-1, 1), then Linear layers with SiLU between them on [z, normalised y];
 // the output is de-normalised (q_mean + out * q_std) and clipped to the joint limits. float32, as torch runs it.
 // With steps > 0 the network is a velocity field v([x, normalised y, t]) (models/cfm.py; latent = d) and a decode
-// integrates dx/dt = v from x = z at t = 0 to t = 1 in that many Heun steps before de-normalising.
+// integrates dx/dt = v from x = z at t = 0 to t = 1 in that many steps (steps - 1 Heun steps, then one Euler
+// step) before de-normalising.
 class Decoder {
  public:
   using MatF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;

@@ -108,12 +108,12 @@ RowMat Decoder::decode(const MatF& z, const Vec& y) const {
     in.leftCols(latent_) = z;
     in.rightCols(k) = yn.replicate(B, 1);
     x = forward(in);
-  } else {  // Heun steps of dx/dt = v([x, y, t]) from t = 0 to 1, as models/cfm.py samples
+  } else {  // dx/dt = v([x, y, t]) from t = 0 to 1 as models/cfm.py samples: steps - 1 Heun steps, one Euler step
     const float h = 1.0f / static_cast<float>(steps_);
     MatF in(B, latent_ + k + 1);
     in.middleCols(latent_, k) = yn.replicate(B, 1);
     x = z;
-    for (int i = 0; i < steps_; ++i) {
+    for (int i = 0; i + 1 < steps_; ++i) {
       in.leftCols(latent_) = x;
       in.col(latent_ + k).setConstant(static_cast<float>(i) * h);
       const MatF v = forward(in);
@@ -121,6 +121,9 @@ RowMat Decoder::decode(const MatF& z, const Vec& y) const {
       in.col(latent_ + k).setConstant(static_cast<float>(i + 1) * h);
       x += (0.5f * h) * (v + forward(in));
     }
+    in.leftCols(latent_) = x;
+    in.col(latent_ + k).setConstant(1.0f - h);
+    x += h * forward(in);
   }
   const Eigen::RowVectorXf mean = q_mean_.transpose(), std = q_std_.transpose();
   x = (x.array().rowwise() * std.array()).rowwise() + mean.array();

@@ -409,7 +409,7 @@ NB_MODULE(manifoldgen_core, m) {
           "steps"_a = 0,
           "A sampling network: float32 weights (out, in) and biases (out,) of Linear layers with SiLU between them, the "
           "latent size, uniform (U(-1, 1) latent rows, else N(0, I)), the model's normalisation and joint limits; "
-          "steps > 0: a velocity field v([x, y, t]) integrated from the latent rows in that many Heun steps.")
+          "steps > 0: a velocity field v([x, y, t]) integrated from the latent rows in that many steps (Heun, the last Euler).")
       .def(
           "latent_rows", [](const Decoder& d, long count, std::uint64_t seed) { return array_of(d.latent_rows(count, seed)); },
           "count"_a, "seed"_a, "(count, latent) float32 latent rows drawn from seed.")
