@@ -134,7 +134,8 @@ def test_a_model_records_the_refinement_its_samples_need(tiny, tmp_path):
     y = np.array([0.3])
     rows = loaded.sample(y, 512, torch.Generator().manual_seed(9))
     rate = tiny.task().constraint.satisfied(project(tiny.task().constraint, rows, y, max_iters=loaded.refine).q, y)
-    assert rate.mean() >= REFINE_SHARE - 0.1 or loaded.refine == REFINE_LADDER[-1]
+    top = tiny.task().constraint.satisfied(project(tiny.task().constraint, rows, y, max_iters=REFINE_LADDER[-1]).q, y)
+    assert rate.mean() >= REFINE_SHARE * top.mean() - 0.1  # the held-out conditions' rate, here at one condition
 
 
 def test_auto_trains_every_candidate_and_keeps_the_rule_s_choice(tiny, tmp_path):

@@ -40,7 +40,7 @@ MAX_MODEL_BYTES = 4 * 2**30  # training memory a model's layers may take (float3
 VALIDATION = 0.1  # the share of a dataset's rows training holds out (early stopping; the default model's choice)
 CHECKED_ROWS = 256  # dataset rows rechecked against the task before training
 REFINE_LADDER = (REFINE, 5, 10, 20)  # projection iterations tried for a model's samples (see needed_refine)
-REFINE_SHARE = 0.9  # ... until this share of them is within tolerance
+REFINE_SHARE = 0.95  # ... until this share of what the last rung brings within tolerance is
 REFINE_CONDITIONS, REFINE_SAMPLES = 4, 256  # condition values and samples at each it is measured on
 DIMENSION_ROWS = 16  # dataset rows whose constraint Jacobian gives the manifold's dimension (the largest rank wins)
 
@@ -98,9 +98,10 @@ def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
 
 
 def needed_refine(model: ConditionalSampler, task: Task, y: np.ndarray, seed: int) -> int:
-    """The fewest projection iterations of :data:`REFINE_LADDER` that bring :data:`REFINE_SHARE` of the model's
-    samples within tolerance at the condition values of ``y (N, k)`` (at most :data:`REFINE_CONDITIONS` of
-    them; the last rung when none does): what a model sampler refines its rows by default."""
+    """The fewest projection iterations of :data:`REFINE_LADDER` that bring within tolerance :data:`REFINE_SHARE`
+    of the model's samples that the ladder's top brings, at the condition values of ``y (N, k)`` (at most
+    :data:`REFINE_CONDITIONS` of them): what a model sampler refines its rows by default. (Rows no projection
+    saves, outside the limits or the inequalities, do not push it to the top.)"""
     from manifoldgen.constraints import project
 
     values = np.unique(y, axis=0)
@@ -108,12 +109,9 @@ def needed_refine(model: ConditionalSampler, task: Task, y: np.ndarray, seed: in
     with torch.no_grad():
         rows = [(model.sample(v, REFINE_SAMPLES, torch.Generator().manual_seed(seed + i)), v)
                 for i, v in enumerate(values)]
-    for refine in REFINE_LADDER:
-        within = np.mean([task.constraint.satisfied(project(task.constraint, q, v, max_iters=refine).q, v).mean()
-                          for q, v in rows])
-        if within >= REFINE_SHARE:
-            return refine
-    return REFINE_LADDER[-1]
+    within = [np.mean([task.constraint.satisfied(project(task.constraint, q, v, max_iters=refine).q, v).mean()
+                       for q, v in rows]) for refine in REFINE_LADDER]
+    return next(refine for refine, rate in zip(REFINE_LADDER, within) if rate >= REFINE_SHARE * within[-1])
 
 
 def split(rows: int, validation: float, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
