@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -12,6 +14,8 @@ from manifoldgen.collision import CollisionChecker, touch_links
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import Attached, Obstacle, Pose, Scene, get_scene
 from manifoldgen.tasks import builtin_tasks, get_task
+
+BUILTIN_SCENES = Path(__file__).resolve().parents[1] / "src" / "manifoldgen" / "tasks" / "scenes"
 
 NAMED = [(t, r, n) for t, robots in builtin_tasks().items() for r in robots for n in get_task(t, r).scenes]
 
@@ -163,3 +167,16 @@ def test_scene_lookup_errors(tmp_path, panda_task):
                           ("balance", "centauro", "reach"), ("balance", "talos", "reach"), ("drinkcan", "centauro", "drinkcan"),
                           ("sphere", "point", "sphere"),
                           *(("dualarm", r, n) for r in ("pr2", "baxter") for n in ("tray-over", "tray-shelf"))}
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda d: d.update(obstacels=d.pop("obstacles")), "unknown key 'obstacels'; did you mean 'obstacles'?"),
+    (lambda d: d["obstacles"][0].update(sise=[1, 1, 1]), "unknown key 'sise'; did you mean 'size'?"),
+    (lambda d: d["obstacles"][0]["pose"].update(quaternoin=[0, 0, 0, 1]), "did you mean 'quaternion'?"),
+    (lambda d: d.update(format_version=7), "format_version 7 is not one this version reads"),
+])
+def test_a_misspelt_key_or_unknown_version_is_refused_naming_the_nearest(edit, needle):
+    data = json.loads((BUILTIN_SCENES / "panda-wall.json").read_text())
+    edit(data)
+    with pytest.raises(ManifoldgenError, match=re.escape(needle)):
+        Scene.from_json(json.dumps(data), "wall.json")

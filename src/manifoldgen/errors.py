@@ -17,6 +17,15 @@ def unknown_name(kind: str, name: str, known: list[str]) -> ManifoldgenError:
     return ManifoldgenError(f"unknown {kind} '{name}'; {hint}known {kind}s: {', '.join(known)}")
 
 
+def check_keys(data: dict, known, what: str) -> None:
+    """Refuse a key of ``data`` that is not in ``known`` (a misspelt key would silently drop what it names)."""
+    for key in data:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), list(known), n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            raise ManifoldgenError(f"{what}: unknown key '{key}'; {hint}known keys: {', '.join(known)}")
+
+
 DAMAGED = (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError, OverflowError, RecursionError)
 
 

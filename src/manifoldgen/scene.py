@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.collision import CollisionChecker, touch_links
-from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.errors import ManifoldgenError, check_keys, file_reader
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot
 from manifoldgen.targets import parse_target, resolve_query
@@ -27,6 +27,9 @@ from manifoldgen.tasks import Task
 
 OBSTACLE_TYPES = ("box", "sphere", "cylinder", "mesh")
 FORMAT_VERSION = 1
+SCENE_KEYS = ("format_version", "name", "robot", "obstacles", "attached", "start", "goal", "condition")
+OBSTACLE_KEYS = ("name", "type", "pose", "size", "radius", "length", "mesh", "scale")
+HELD_KEYS = ("attached_to", "touch_links", "parent_joint")  # a held object's keys beside its shape's
 MAX_METRES = 1e3  # largest position coordinate or extent accepted (coal's bounding boxes overflow near 1e308)
 
 
@@ -85,6 +88,7 @@ class Pose:
     def from_dict(cls, data, what: str) -> Pose:
         if not isinstance(data, dict) or "position" not in data:
             raise ManifoldgenError(f"{what}: pose needs 'position' [x, y, z] (and 'quaternion' [x, y, z, w])")
+        check_keys(data, ("position", "quaternion"), f"{what} pose")
         return cls(data["position"], data.get("quaternion", [0.0, 0.0, 0.0, 1.0]))
 
 
@@ -184,6 +188,7 @@ class Obstacle:
         if not isinstance(data, dict):
             raise ManifoldgenError(f"obstacle {index} must be a JSON object with 'type' and 'pose'")
         name = str(data.get("name", f"obstacle{index}"))
+        check_keys(data, OBSTACLE_KEYS, f"obstacle '{name}'")
         if "type" not in data:
             raise ManifoldgenError(f"obstacle '{name}' has no 'type'; known types: {', '.join(OBSTACLE_TYPES)}")
         return cls(name, data["type"], Pose.from_dict(data.get("pose"), f"obstacle '{name}'"),
@@ -227,7 +232,7 @@ class Attached:
         if not isinstance(data, dict) or "attached_to" not in data:
             raise ManifoldgenError("the attached tool needs 'attached_to' (a robot frame), 'type' and 'pose' "
                                    "(its placement in that frame)")
-        shape = Obstacle.from_dict({k: v for k, v in data.items() if k not in ("attached_to", "touch_links")})
+        shape = Obstacle.from_dict({k: v for k, v in data.items() if k not in HELD_KEYS})
         links = data.get("touch_links")
         return cls(shape, str(data["attached_to"]), None if links is None else [str(x) for x in links])
 
@@ -295,6 +300,10 @@ class Scene:
             raise ManifoldgenError(f"{source} is not valid JSON ({exc}); fix the file") from exc
         if not isinstance(data, dict):
             raise ManifoldgenError(f"{source} must be a JSON object with 'obstacles', 'start', 'goal', 'condition'")
+        check_keys(data, SCENE_KEYS, source)
+        if data.get("format_version", FORMAT_VERSION) != FORMAT_VERSION:
+            raise ManifoldgenError(f"{source}: format_version {data['format_version']!r} is not one this version reads "
+                                   f"({FORMAT_VERSION}); write the scene in that format")
         missing = [k for k in ("obstacles", "start", "goal", "condition") if k not in data]
         if missing:
             raise ManifoldgenError(f"{source} lacks {', '.join(missing)}; a scene needs obstacles, start, goal "
