@@ -157,6 +157,8 @@ def test_penalty_is_constraint_residual(task):
 def test_unknown_hyper_parameter_and_untrained():
     with pytest.raises(ManifoldgenError, match="unknown hyper-parameter"):
         MODELS.get("cvae")(width=3)
+    with pytest.raises(ManifoldgenError, match=r"penalty_fraction=1.5 of model 'cfm' must be in \(0, 1\]"):
+        MODELS.get("cfm")(penalty_fraction=1.5)
     with pytest.raises(ManifoldgenError, match="not trained"):
         MODELS.get("cvae")().sample([0.3], 2)
 

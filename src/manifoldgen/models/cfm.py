@@ -1,8 +1,8 @@
 """Conditional flow matching (rectified flow): a velocity field integrated from noise to configurations.
 
 Training regresses a velocity MLP ``v(x_t, t, y)`` onto ``x1 - x0`` along straight interpolants
-``x_t = (1 - t) x0 + t x1`` between ``x0 ~ N(0, I)`` and a normalised data row ``x1``; no encoder or
-critic can collapse it onto one IK branch. Sampling integrates ``dx/dt = v`` from noise: ``steps - 1``
+``x_t = (1 - t) x0 + t x1`` between ``x0 ~ N(0, I)`` and a normalised data row ``x1``: a plain regression,
+with no encoder or critic to collapse onto one IK branch. Sampling integrates ``dx/dt = v`` from noise: ``steps - 1``
 Heun steps, then one Euler step, which is the one-step endpoint estimate ``x_t + (1 - t) v``.
 
 Beyond the plain objective, ``residual_weight`` weighs the constraint residual of that last step for
@@ -36,9 +36,10 @@ class ConditionalFlowMatching(SingleLossSampler):
     def _build(self) -> None:
         self.nets["velocity"] = mlp(self.d + self.k + 1, self.config["hidden"], self.d)
 
-    def _velocity(self, x: torch.Tensor, t: float, y: torch.Tensor) -> torch.Tensor:
-        """v (B, d) at states x (B, d), time t, conditions y (B, k)."""
-        return self.nets["velocity"](torch.cat([x, y, torch.full((len(x), 1), t)], dim=1))
+    def _velocity(self, x: torch.Tensor, t: torch.Tensor | float, y: torch.Tensor) -> torch.Tensor:
+        """v (B, d) at states x (B, d), times t ((B, 1) or one for all), conditions y (B, k)."""
+        t = t if torch.is_tensor(t) else torch.full((len(x), 1), t)
+        return self.nets["velocity"](torch.cat([x, y, t], dim=1))
 
     def _before_last(self, y: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
         """States (B, d) at t = 1 - 1/steps: noise (B, d) carried by ``steps - 1`` Heun steps."""
@@ -69,8 +70,7 @@ class ConditionalFlowMatching(SingleLossSampler):
     def _losses(self, q, y, y_free, generator) -> dict[str, torch.Tensor]:
         x0 = torch.randn(q.shape, generator=generator)
         t = torch.rand(len(q), 1, generator=generator)
-        v = self.nets["velocity"](torch.cat([(1.0 - t) * x0 + t * q, y, t], dim=1))
-        match = (v - (q - x0)).pow(2).sum(dim=1).mean()
+        match = (self._velocity((1.0 - t) * x0 + t * q, t, y) - (q - x0)).pow(2).sum(dim=1).mean()
         residual = torch.zeros(())
         if self.residual_fn is not None and self.config["residual_weight"] > 0:
             y_pen = y_free[: max(1, round(self.config["penalty_fraction"] * len(y_free)))]
