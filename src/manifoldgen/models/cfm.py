@@ -3,7 +3,8 @@
 Training regresses a velocity MLP ``v(x_t, t, y)`` onto ``x1 - x0`` along straight interpolants
 ``x_t = (1 - t) x0 + t x1`` between ``x0 ~ N(0, I)`` and a normalised data row ``x1``: a plain regression,
 with no encoder or critic to collapse onto one IK branch. Sampling integrates ``dx/dt = v`` from noise: ``steps - 1``
-Heun steps, then one Euler step, which is the one-step endpoint estimate ``x_t + (1 - t) v``.
+Heun steps, then one Euler step, which is the one-step endpoint estimate ``x_t + (1 - t) v``. The compiled
+core integrates it the same way (:meth:`native_decoder`, ``steps`` of ``manifoldgen_core.Decoder``).
 
 Beyond the plain objective, ``residual_weight`` weighs the constraint residual of that last step for
 samples (``penalty_fraction`` of a batch) at conditions drawn across the trained range: the earlier steps
