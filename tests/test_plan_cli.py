@@ -110,7 +110,7 @@ def test_bad_scene_file_time_and_planner(tmp_path, panda_task):
     result = _plan(tmp_path, "--scene", _scene_file(tmp_path, panda_task, obstacles=cone))
     assert result.exit_code == 2 and "must be three positive extents" in result.output
     result = _plan(tmp_path, "--time", "0")
-    assert result.exit_code == 2 and "--time must be a positive number of seconds, got 0.0" in result.output
+    assert result.exit_code == 2 and "--time must be from 0.001 to 86400, got 0" in result.output
     result = _plan(tmp_path, "--planner", "rrtconect")
     assert result.exit_code == 2
     assert "unknown planner 'rrtconect'; did you mean rrtconnect? known planners: rrtconnect, rrt, prm, kpiece, " \
