@@ -83,8 +83,11 @@ def spacing(rows: np.ndarray, seed: int = 0, count: int = 1000) -> float:
     """Median distance from a row of ``rows (R, n)`` to its nearest other row (on at most ``count`` rows)."""
     if len(rows) < 2:
         return float("inf")
-    sub = rows[np.random.default_rng(seed).choice(len(rows), min(len(rows), count), replace=False)]
-    return float(np.median([np.sqrt(np.partition(np.sum((sub - r) ** 2, axis=1), 1)[1]) for r in sub]))
+    sub = rows if len(rows) <= count else rows[np.random.default_rng(seed).choice(len(rows), count, replace=False)]
+    squares = np.sum(sub**2, axis=1)
+    d2 = squares[:, None] + squares[None] - 2.0 * sub @ sub.T
+    np.fill_diagonal(d2, np.inf)
+    return float(np.sqrt(max(float(np.median(d2.min(axis=1))), 0.0)))
 
 
 def missed(gap: np.ndarray, reference: np.ndarray) -> np.ndarray:

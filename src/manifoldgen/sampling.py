@@ -205,16 +205,16 @@ class ModelSampler(Sampler):
         against the rows' own spacing (median nearest-neighbour distance); a miss (see
         :func:`manifoldgen.coverage.missed`) makes every batch of this query :data:`MIX_MISSED` projected
         uniform rows. Returns one line saying so, or "" when the model covers both ends."""
-        from manifoldgen.coverage import gaps, missed
+        from manifoldgen.coverage import gaps, missed, spacing
 
         rows = self._decode(CHECK_ROWS)
-        spacing = float(np.median(gaps_within(rows)))
+        own = spacing(rows)
         ends = gaps(rows, np.stack([start, goal]))
-        self.missed, self.drawn = bool(missed(ends, spacing).any()), 0
+        self.missed, self.drawn = bool(missed(ends, own).any()), 0
         if not self.missed:
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
-                f"(their own spacing: {spacing:.2f} rad): it misses an IK branch of this query, so {MIX_MISSED:.0%} "
+                f"(their own spacing: {own:.2f} rad): it misses an IK branch of this query, so {MIX_MISSED:.0%} "
                 f"of its rows are projected uniform samples; name the scene in the task file, recollect (collect "
                 f"seeds around every scene's start and goal) and retrain")
 
@@ -249,13 +249,6 @@ class ModelSampler(Sampler):
         q = self.space.project(q, max_iters=refine).q if refine else q
         self.stats.refined += count if refine else 0
         return q
-
-
-def gaps_within(rows: np.ndarray) -> np.ndarray:
-    """(R,) distance from each of ``rows (R, n)`` to its nearest other row."""
-    d = np.sum((rows[:, None] - rows[None]) ** 2, axis=2)
-    np.fill_diagonal(d, np.inf)
-    return np.sqrt(d.min(axis=1))
 
 
 def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = REFINE,
