@@ -13,7 +13,7 @@ import copy
 import math
 import numbers
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -355,36 +355,10 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     else:
         space = _space("plan", task, scene)[2]
         made, label = _sampler_for("plan", "sampler", space, sampler, seed, None, None)
-    return QueryResult(*_run(task, scene, space, made, label, planner, seed, time_limit, local, bool(smooth), values))
+    from manifoldgen.planning.query import plan_query
 
-
-def _run(task, scene, space, made, label, planner, seed, time_limit, local, smooth, values) -> tuple[PlanResult, dict]:
-    """``run_query`` for a sampler object (``run_query`` takes a spec string): the same steps and meta."""
-    import numpy as np
-
-    from manifoldgen.planning.query import PATH_FORMAT_VERSION, get_planner, task_settings, unsolved_validation
-    from manifoldgen.planning.result import path_length
-    from manifoldgen.planning.smoothing import shortcut
-
-    planner_type = get_planner(planner)
-    solver = planner_type(space, made, local=local, seed=seed,
-                          settings=planner_type.settings_type(**task_settings(task, planner, values)))
-    result = solver.solve(scene.start, scene.goal, time_limit)
-    if result.solved and smooth:
-        result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
-        result.length = path_length(result.path)
-    report = space.validate_path(result.path) if result.solved else None
-    if report is not None and not report.valid:  # the planners only return validated paths
-        raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
-    meta = {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
-            "condition": space.y.tolist(), "condition_names": list(task.condition.names),
-            "scene_name": scene.name, "scene": scene.to_meta(task.robot),
-            "start": scene.start.tolist(), "goal": scene.goal.tolist(),
-            "planner": planner, "planner_settings": asdict(solver.settings), "sampler": label,
-            "local": solver.local.name, "seed": seed,
-            "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
-            "validation": report.to_dict() if report else unsolved_validation(space.settings.resolution)}
-    return result, meta
+    return QueryResult(*plan_query(task, scene, space, made, label, planner, seed=seed, time_limit=time_limit,
+                                   local=local, smooth=bool(smooth), settings=values))
 
 
 def check_path(task: Task | PathLike, scene: Scene | PathLike, path: Any, *,

@@ -46,10 +46,20 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     if not np.isfinite(time_limit) or time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
     seed = check_seed(seed)
-    planner_type = get_planner(planner)
+    get_planner(planner)  # an unknown planner is refused before the space is built
     y = task.condition.check(scene.condition)[0]
     space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))
-    solver = planner_type(space, make_sampler(sampler, space, seed), local=local, seed=seed,
+    return plan_query(task, scene, space, make_sampler(sampler, space, seed), sampler, planner, seed=seed,
+                      time_limit=time_limit, local=local, smooth=smooth, settings=settings)
+
+
+def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label: str, planner: str, *, seed: int,
+               time_limit: float, local: str = DEFAULT_LOCAL, smooth: bool = False, settings: dict | None = None,
+               ) -> tuple[PlanResult, dict]:
+    """:func:`run_query` with a sampler object made for ``space`` (the scene's condition and checker); ``label``
+    names the sampler in the path file's ``meta``."""
+    planner_type = get_planner(planner)
+    solver = planner_type(space, sampler, local=local, seed=seed,
                           settings=planner_type.settings_type(**task_settings(task, planner, settings)))
     result = solver.solve(scene.start, scene.goal, time_limit)
     if result.solved and smooth:
@@ -59,10 +69,10 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
     meta = {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
-            "condition": y.tolist(), "condition_names": list(task.condition.names),
+            "condition": space.y.tolist(), "condition_names": list(task.condition.names),
             "scene_name": scene.name, "scene": scene.to_meta(task.robot),
             "start": scene.start.tolist(), "goal": scene.goal.tolist(),
-            "planner": planner, "planner_settings": asdict(solver.settings), "sampler": sampler,
+            "planner": planner, "planner_settings": asdict(solver.settings), "sampler": label,
             "local": solver.local.name, "seed": seed,
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
             "validation": report.to_dict() if report else unsolved_validation(space.settings.resolution)}
