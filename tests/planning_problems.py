@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from manifoldgen.constraints import Condition, Constraint
+from manifoldgen.constraints import Condition, Constraint, array_namespace
 from manifoldgen.robot import as_batch
 
 
@@ -105,3 +105,22 @@ def corridor_problem():
     start at (-1, 0), goal at (1, 0): the answer must pass through the opening."""
     wall = [([-0.05, -2.0, -0.5], [0.05, 1.6, 0.5])]
     return PlaneConstraint(), np.array([0.0]), BoxChecker(wall), np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])
+
+
+class DownAndNear(Constraint):
+    """A test's own constraint: the frame's z axis points down (residual (B, 2)) and the frame stays within
+    ``reach`` of the base along x (inequality (B, 1)); nothing conditioned."""
+
+    def __init__(self, robot, frame, reach=0.6):
+        self.robot, self.frame, self.reach = robot, frame, reach
+        self.condition = Condition((), (), np.zeros((1, 0)))
+        self.tolerance = np.full(2, 0.01)
+
+    def residual(self, q, y):
+        q, _ = self.batch(q, y)
+        return self.robot.frame_pose(q, self.frame)[1][:, :2, 2]
+
+    def inequality(self, q, y):
+        q, _ = self.batch(q, y)
+        p = self.robot.frame_pose(q, self.frame)[0]
+        return array_namespace(q).concat([p[:, :1] - self.reach], axis=1)

@@ -11,32 +11,15 @@ import pytest
 
 from manifoldgen import native
 from manifoldgen.collision import CollisionChecker
-from manifoldgen.constraints import Condition, Constraint, ConstraintSet, PoseConstraint, array_namespace
+from manifoldgen.constraints import ConstraintSet, PoseConstraint
 from manifoldgen.scene import Obstacle, Pose
 from manifoldgen.space import ConstrainedSpace, densify
+
+from planning_problems import DownAndNear
 
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
 
 USER_TASK = Path(__file__).resolve().parent.parent / "examples" / "user_task" / "tool-down-xarm7.toml"
-
-
-class DownAndNear(Constraint):
-    """A test's own constraint: the frame's z axis points down (residual (B, 2)) and the frame stays within
-    ``reach`` of the base along x (inequality (B, 1)); nothing conditioned."""
-
-    def __init__(self, robot, frame, reach=0.6):
-        self.robot, self.frame, self.reach = robot, frame, reach
-        self.condition = Condition((), (), np.zeros((1, 0)))
-        self.tolerance = np.full(2, 0.01)
-
-    def residual(self, q, y):
-        q, _ = self.batch(q, y)
-        return self.robot.frame_pose(q, self.frame)[1][:, :2, 2]
-
-    def inequality(self, q, y):
-        q, _ = self.batch(q, y)
-        p = self.robot.frame_pose(q, self.frame)[0]
-        return array_namespace(q).concat([p[:, :1] - self.reach], axis=1)
 
 
 @pytest.fixture(scope="module")

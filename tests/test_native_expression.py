@@ -18,6 +18,8 @@ from manifoldgen.constraints import trace
 from manifoldgen.scene import Obstacle, Pose
 from manifoldgen.space import ConstrainedSpace, densify
 
+from planning_problems import DownAndNear
+
 core_module = pytest.importorskip("manifoldgen_core",
                                   reason="the compiled core is not built (scripts/setup.sh builds it)")
 
@@ -171,29 +173,11 @@ def test_the_cases_use_every_operation_the_core_has(robots):
     assert used == set(trace.OPS)
 
 
-class DownAndNear(Constraint):
-    """The frame's z axis points down (residual (B, 2)); its x stays below ``reach`` (inequality (B, 1))."""
-
-    def __init__(self, robot, frame, reach=0.2):
-        self.robot, self.frame, self.reach = robot, frame, reach
-        self.condition = Condition((), (), np.zeros((1, 0)))
-        self.tolerance = np.full(2, 0.01)
-
-    def residual(self, q, y):
-        q, _ = self.batch(q, y)
-        return self.robot.frame_pose(q, self.frame)[1][:, :2, 2]
-
-    def inequality(self, q, y):
-        q, _ = self.batch(q, y)
-        p = self.robot.frame_pose(q, self.frame)[0]
-        return array_namespace(q).concat([p[:, :1] - self.reach], axis=1)
-
-
 def test_compiled_inequalities_give_the_python_verdicts(robots):
     robot = robots["xarm7"]
     post = Obstacle("post", "box", Pose([0.4, 0.25, 0.2]), size=[0.1, 0.1, 0.4])
     checker = CollisionChecker(robot, obstacles=[post.geometry_object()])
-    space = ConstrainedSpace(DownAndNear(robot, "link_eef"), [], checker)
+    space = ConstrainedSpace(DownAndNear(robot, "link_eef", reach=0.2), [], checker)
     core = native.core_space(space)
     assert not core.batched and core.p == 0 and core.g == 1  # compiled inequality: none left to Python
     q = robot.sample_uniform(60, np.random.default_rng(3))
@@ -308,7 +292,7 @@ def test_compiled_and_callback_parts_of_one_set_keep_their_rows(robots):
     """A set of a part that compiles (with an inequality) and one that does not: rows in order, each part's way."""
     from manifoldgen.constraints import ConstraintSet
     robot = robots["xarm7"]
-    constraint = ConstraintSet([Synthetic(robot, "where", _where), DownAndNear(robot, "link_eef")])
+    constraint = ConstraintSet([Synthetic(robot, "where", _where), DownAndNear(robot, "link_eef", reach=0.2)])
     space = ConstrainedSpace(constraint, [0.4])
     core = native.core_space(space)
     report = native.compile_report(space)
