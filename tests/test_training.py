@@ -163,11 +163,29 @@ def _saved(dataset: Dataset, folder) -> str:
 def test_candidates_trained_in_parallel_are_the_sequential_ones(tiny, tmp_path):
     from manifoldgen.selection import select_model
 
-    _, one = select_model(tiny, tmp_path / "one", seed=4, epochs=1, progress=False, workers=1)
-    _, two = select_model(tiny, tmp_path / "two", seed=4, epochs=1, progress=False, workers=2)
+    _, one, _ = select_model(tiny, tmp_path / "one", seed=4, epochs=1, progress=False, workers=1,
+                             race_scenes=False)
+    _, two, _ = select_model(tiny, tmp_path / "two", seed=4, epochs=1, progress=False, workers=2,
+                             race_scenes=False)
     assert [{k: v for k, v in row.items() if k != "seconds"} for row in one] == \
         [{k: v for k, v in row.items() if k != "seconds"} for row in two]
     for name in ("cvae", "cfm"):
         a, b = (load_model(tmp_path / run / "candidates" / name) for run in ("one", "two"))
         for key, value in a.state_tensors().items():
             torch.testing.assert_close(b.state_tensors()[key], value, rtol=0, atol=0)
+
+
+def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_path):
+    from manifoldgen.selection import PROJECTION, RACE_SEEDS, select_model
+    from manifoldgen.tasks import get_task
+
+    task = get_task("sphere")
+    data = collect(task, 400, seed=3, progress=False)
+    model, _, raced = select_model(data, tmp_path / "m", seed=1, epochs=2, progress=False, workers=1, task=task)
+    assert [row["label"] for row in raced] == ["cvae", "cfm", PROJECTION]
+    assert all(row["runs"] == RACE_SEEDS * len(task.scenes) for row in raced)
+    winner = max(raced, key=lambda r: (r["solved"], -r["cpu"]))
+    assert winner["chosen"] and sum(row["chosen"] for row in raced) == 1
+    saved = load_model(tmp_path / "m")
+    assert saved.name == winner["model"] and saved.mix == winner["mix"]
+    assert json.loads((tmp_path / "m" / "selection.json").read_text())["race"] == raced

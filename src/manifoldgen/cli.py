@@ -354,11 +354,17 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     data = Dataset.load(dataset)
     task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
     if model == "auto":
-        net, table = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
+        net, table, raced = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
         for row in table:
             console.print(f"{'chosen' if row['chosen'] else 'tried '} {row['model']}: {row['epochs']} epochs in "
                           f"{row['seconds']:.0f} s; on held-out rows {row['accuracy']:.1%} of raw samples within "
                           f"tolerance, recall {row['recall']:.2f}", markup=False)
+        for row in raced:
+            console.print(f"{'chosen' if row['chosen'] else 'raced '} {row['label']} on the task's scenes: "
+                          f"{row['solved']}/{row['runs']} solved, median CPU {row['cpu']:.3f} s", markup=False)
+        if raced and net.mix == 1.0:
+            console.print("plain projection planned this task's scenes fastest: the model's sampler draws projected "
+                          "uniform rows only (see selection.json)", markup=False)
         console.print(f"trained {net.name} on {dataset} -> {output} (model.json, model.safetensors, loss.png, "
                       f"{SELECTION_FILE}, candidates/)")
     else:

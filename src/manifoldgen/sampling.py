@@ -14,6 +14,8 @@ A model sampler is never left worse than projection: at the start of a query (:m
 it measures how far its samples lie from the start and the goal, and when the model misses either (an IK
 branch it never learned) it mixes projected uniform rows into every batch at once; otherwise it starts mixing
 them only when a query has drawn :data:`MIX_AFTER` rows without solving, up to :data:`MIX_MAX` of each batch.
+A model's own ``mix`` (set when ``train`` races the candidates on the task's scenes, see
+:mod:`manifoldgen.selection`) is the least share it ever mixes in: 1 where plain projection planned fastest.
 """
 
 from __future__ import annotations
@@ -173,17 +175,20 @@ class ModelSampler(Sampler):
     they are returned. The model's network runs in the compiled core where it can
     (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
 
-    def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, batch: int = 1024,
-                 seed: int | np.random.Generator = 0, max_batches: int = 10_000):
+    def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, mix: float | None = None,
+                 batch: int = 1024, seed: int | np.random.Generator = 0, max_batches: int = 10_000):
         super().__init__(space, batch=batch, seed=seed, max_batches=max_batches)
         refine = (model.refine if model.refine is not None else REFINE) if refine is None else refine
         if refine < 0:
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
+        mix = (model.mix or 0.0) if mix is None else mix
+        if not 0.0 <= mix <= 1.0:
+            raise ManifoldgenError(f"mix must be a share of projected uniform rows in [0, 1], got {mix}")
         check_made_for(model.meta, space.constraint, "the model")
         model.check_condition(space.y)
         import torch
 
-        self.model, self.refine = model, int(refine)
+        self.model, self.refine, self.floor = model, int(refine), float(mix)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
         self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
         self.missed = False  # the latest query's start or goal lies far from every model sample
@@ -195,10 +200,16 @@ class ModelSampler(Sampler):
         return min(self.batch, FIRST_ROWS << min(self.stats.batches, 20))
 
     @property
+    def mostly_uniform(self) -> bool:
+        """Rows are mostly uniform seeds (the query's ends are missed, or the model's ``mix`` says so): they are
+        projected lazily, as the projection sampler's are."""
+        return self.missed or self.floor >= MIX_MISSED
+
+    @property
     def lazy_refine(self) -> int:
-        """Projection iterations per raw row: ``refine``, or the projection sampler's when the query's ends are
-        missed (its rows are then mostly uniform seeds, projected lazily as the projection sampler's are)."""
-        return PROJECT_ITERS if self.missed else self.refine
+        """Projection iterations per raw row: ``refine``, or the projection sampler's when rows are mostly
+        uniform seeds."""
+        return PROJECT_ITERS if self.mostly_uniform else self.refine
 
     def begin_query(self, start: np.ndarray, goal: np.ndarray) -> str:
         """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of :data:`CHECK_ROWS` model rows
@@ -207,10 +218,13 @@ class ModelSampler(Sampler):
         uniform rows. Returns one line saying so, or "" when the model covers both ends."""
         from manifoldgen.coverage import gaps, missed, spacing
 
+        self.drawn = 0
+        if self.floor >= MIX_MISSED:  # its rows are mostly projected uniform ones whatever the gaps
+            return ""
         rows = self._decode(CHECK_ROWS)
         own = spacing(rows)
         ends = gaps(rows, np.stack([start, goal]))
-        self.missed, self.drawn = bool(missed(ends, own).any()), 0
+        self.missed = bool(missed(ends, own).any())
         if not self.missed:
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
@@ -221,8 +235,8 @@ class ModelSampler(Sampler):
     def mix(self) -> float:
         """The share of projected uniform rows in the next batch (see the module doc)."""
         if self.missed:
-            return MIX_MISSED
-        return MIX_MAX * float(np.clip(self.drawn / MIX_AFTER - 1.0, 0.0, 1.0))
+            return max(MIX_MISSED, self.floor)
+        return max(self.floor, MIX_MAX * float(np.clip(self.drawn / MIX_AFTER - 1.0, 0.0, 1.0)))
 
     def _decode(self, count: int) -> np.ndarray:
         if self.decoder:
@@ -233,11 +247,11 @@ class ModelSampler(Sampler):
         share = self.mix()
         mixed = int(self.rng.binomial(count, share)) if share else 0
         self.drawn += count
-        rows = self._decode(count - mixed)
+        rows = self._decode(count - mixed) if count > mixed else np.empty((0, self.space.robot.n))
         if not mixed:
             return rows
         uniform = self.space.robot.sample_uniform(mixed, self.rng)
-        if not self.missed:  # a query refining rows by `refine` iterations only gets these projected now
+        if not self.mostly_uniform:  # a query refining rows by `refine` iterations only gets these projected now
             uniform = self.space.project(uniform, max_iters=PROJECT_ITERS).q
             self.stats.refined += mixed
         self.stats.mixed += mixed

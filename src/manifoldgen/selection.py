@@ -1,14 +1,21 @@
-"""The default model, chosen on held-out rows: ``manifoldgen train DATASET`` (``--model auto``).
+"""The default model, chosen on held-out rows and on the task's own scenes: ``manifoldgen train DATASET``
+(``--model auto``).
 
 Each candidate model (:data:`CANDIDATES`, every size from the data: :meth:`ConditionalSampler.size_for`)
 is trained with the same seed into ``OUT/candidates/NAME``; on the rows training held out (the same split
 for all) each is scored at every condition value there: ``accuracy``, the share of its raw samples within
 tolerance, and ``recall``, the share of held-out rows that some sample comes near (k-NN recall,
-:func:`manifoldgen.bench.metrics.prdc`). The chosen model is the most accurate of those whose recall is within
+:func:`manifoldgen.bench.metrics.prdc`). The rule's model is the most accurate of those whose recall is within
 :data:`RECALL_SLACK` of the best recall (a model that misses an IK branch fails queries there; a less accurate
-one only refines more), and its files are copied to ``OUT``; ``OUT/selection.json`` holds the table. The
-candidates train side by side, one process each (as many as there are CPUs), each as it would alone: the
-same bytes as a sequential run.
+one only refines more). The candidates train side by side, one process each (as many as there are CPUs), each
+as it would alone: the same bytes as a sequential run.
+
+Held-out rows do not price what planning pays: a flow-matching model covers more but decodes a row in tens to
+hundreds of microseconds, and on a codimension-one manifold projected uniform rows are as good and cost nothing.
+So when the task names scenes, :func:`race` plans them (:data:`RACE_SEEDS` seeds each, seeds no benchmark uses)
+with every candidate's sampler and with projected uniform rows only (``project``: the rule's model at ``mix``
+1), and the chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
+copied to ``OUT`` with its ``mix``; ``OUT/selection.json`` holds both tables. Without scenes the rule decides.
 """
 
 from __future__ import annotations
@@ -17,6 +24,8 @@ import json
 import multiprocessing
 import os
 import shutil
+import statistics
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -39,16 +48,23 @@ SAMPLES = 1000  # samples drawn per scored condition value
 K = 5  # neighbours of the k-NN recall
 SELECTION_FILE = "selection.json"
 PARALLEL_ROWS = 2000  # from this many rows on, candidates train in parallel (below, starting processes costs more)
+RACE_SCENES = 3  # at most this many of the task's scenes are raced
+RACE_SEEDS = 3  # planning runs per scene and sampler in the race
+RACE_SEED = 10_000  # the race's first seed (benchmarks use seeds from 0)
+RACE_TIME = 5.0  # seconds a race run may plan (an unsolved run counts this much CPU)
+PROJECTION = "project"  # the race's entry for projected uniform rows only
 
 
 def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: int | None = None,
                  resume: bool = False, progress: bool = True, task: Task | None = None,
-                 workers: int | None = None) -> tuple[ConditionalSampler, list[dict]]:
-    """Train every candidate, score it on the held-out rows, write the chosen one to ``out``; returns it and
-    the table (one dict per candidate: ``model``, ``accuracy``, ``recall``, ``epochs``, ``seconds``,
-    ``chosen``). A candidate already trained in ``out/candidates`` is reused; one interrupted resumes with
+                 workers: int | None = None, race_scenes: bool = True,
+                 ) -> tuple[ConditionalSampler, list[dict], list[dict]]:
+    """Train every candidate, score it on the held-out rows, race it on the task's scenes (:func:`race`), write
+    the chosen one to ``out``; returns it, the table (one dict per candidate: ``model``, ``accuracy``,
+    ``recall``, ``epochs``, ``seconds``, ``chosen``) and the race's (see :func:`race`, plus ``chosen``). A candidate already trained in ``out/candidates`` is reused; one interrupted resumes with
     ``resume``. ``workers``: processes training side by side (default: one per CPU and candidate for datasets
-    of :data:`PARALLEL_ROWS` rows or more, else 1; 1 where the task runs user code, which a child cannot load)."""
+    of :data:`PARALLEL_ROWS` rows or more, else 1; 1 where the task runs user code, which a child cannot load);
+    ``race_scenes`` False: the rule alone chooses."""
     task = task or check_dataset(dataset)
     out = Path(out)
     if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
@@ -77,14 +93,67 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
         table.append({"model": name, **score(models[name], task, dataset.q[held_out], dataset.y[held_out], seed),
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1)})
     best_recall = max(row["recall"] for row in table)
-    chosen = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
+    ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
+    raced = race(models, ruled["model"], task, progress=progress) if race_scenes else []
+    winner = max(raced, key=lambda r: (r["solved"], -r["cpu"])) if raced else None
+    name = winner["model"] if winner else ruled["model"]
     for row in table:
-        row["chosen"] = row is chosen
-    for file in (WEIGHTS_FILE, CONFIG_FILE, "training.json", "loss.png"):
-        shutil.copyfile(out / "candidates" / chosen["model"] / file, out / file)
-    atomic_write_text(out / SELECTION_FILE, json.dumps({"rule": f"most accurate within {RECALL_SLACK} of the best "
-                                                                f"recall", "candidates": table}, indent=1))
-    return models[chosen["model"]], table
+        row["chosen"] = row["model"] == name
+    for row in raced:
+        row["chosen"] = row is winner
+    model = models[name]
+    model.mix = winner["mix"] if winner else None
+    model.save(out)
+    for file in ("training.json", "loss.png"):
+        shutil.copyfile(out / "candidates" / name / file, out / file)
+    atomic_write_text(out / SELECTION_FILE, json.dumps({
+        "rule": f"most accurate within {RECALL_SLACK} of the best recall; then, where the task names scenes, the "
+                f"race's winner (most of {RACE_SEEDS} runs per scene solved, then least median CPU)",
+        "candidates": table, "race": raced}, indent=1))
+    return model, table, raced
+
+
+def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, *, progress: bool = False) -> list[dict]:
+    """Plan up to :data:`RACE_SCENES` of ``task``'s scenes :data:`RACE_SEEDS` times each (RRT-Connect, its task
+    settings, :data:`RACE_TIME` seconds) with each model's sampler and with projected uniform rows only (the
+    ``ruled`` model at mix 1, :data:`PROJECTION`); one row per entry: ``label``, ``model``, ``mix``, ``solved``,
+    ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No scenes: []."""
+    from manifoldgen.planning.query import get_planner, task_settings
+    from manifoldgen.progress import progress_bar
+    from manifoldgen.sampling import ModelSampler
+    from manifoldgen.scene import get_scene
+    from manifoldgen.space import ConstrainedSpace
+
+    entries = [(name, name, 0.0) for name in models] + [(PROJECTION, ruled, 1.0)]
+    scenes = []
+    for name in list(task.scenes)[:RACE_SCENES]:
+        try:
+            scenes.append(get_scene(task, name))
+        except ManifoldgenError:  # collect already warned that this scene cannot be set up
+            continue
+    if not scenes:
+        return []
+    runs = {label: [] for label, _, _ in entries}
+    planner_type = get_planner("rrtconnect")
+    settings = planner_type.settings_type(**task_settings(task, "rrtconnect"))
+    with progress_bar("racing samplers on the task's scenes", len(entries) * len(scenes) * RACE_SEEDS,
+                      progress) as bar:
+        for scene in scenes:
+            space = ConstrainedSpace(task.constraint, task.condition.check(scene.condition)[0],
+                                     scene.checker(task.robot))
+            for label, name, mix in entries:
+                for seed in range(RACE_SEED, RACE_SEED + RACE_SEEDS):
+                    sampler = ModelSampler(space, models[name], mix=mix, seed=seed)
+                    planner = planner_type(space, sampler, seed=seed, settings=settings)
+                    begin = time.process_time()
+                    result = planner.solve(scene.start, scene.goal, RACE_TIME)
+                    cpu = time.process_time() - begin  # the search alone, as `bench` times it
+                    solved = result.solved and space.validate_path(result.path).valid
+                    runs[label].append((solved, cpu if solved else max(cpu, RACE_TIME)))
+                    bar.advance()
+    return [{"label": label, "model": name, "mix": mix, "solved": sum(ok for ok, _ in runs[label]),
+             "runs": len(runs[label]), "cpu": round(statistics.median(cpu for _, cpu in runs[label]), 4)}
+            for label, name, mix in entries]
 
 
 def _train_candidate(job: tuple, *, task: Task | None = None, progress: bool = False) -> None:

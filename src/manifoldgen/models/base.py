@@ -78,6 +78,7 @@ class ConditionalSampler(ABC):
         self.config: dict = {**self.defaults, **hyper}
         self.given = frozenset(hyper)  # set by the user: never resized (see size_for)
         self.refine: int | None = None  # projection iterations its samples need (training measures it), if known
+        self.mix: float | None = None  # share of projected uniform rows its sampler mixes in (the race sets it)
         for key, value in self.config.items():
             _check_hyper(self.name, key, value, self.defaults[key])
         self.meta: dict = {}
@@ -236,7 +237,8 @@ class ConditionalSampler(ABC):
         """The JSON document saved as model.json (without the weights' hash)."""
         return {"format_version": MODEL_FORMAT_VERSION, "model": self.name, "config": self.config,
                 "dims": {"d": self.d, "k": self.k}, "normalisation": self.norm, "meta": self.meta,
-                **({"refine": self.refine} if self.refine is not None else {})}
+                **({"refine": self.refine} if self.refine is not None else {}),
+                **({"mix": self.mix} if self.mix is not None else {})}
 
     def save(self, path: str | Path) -> None:
         """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first)."""
@@ -272,6 +274,11 @@ class ConditionalSampler(ABC):
         if refine is not None and (isinstance(refine, bool) or not isinstance(refine, int) or not 0 <= refine <= 1000):
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid refine {refine!r}; retrain or restore it")
         model.refine = refine
+        mix = doc.get("mix")
+        if mix is not None and (isinstance(mix, bool) or not isinstance(mix, (int, float)) or not 0 <= mix <= 1):
+            raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid mix {mix!r} (a share in [0, 1]); retrain "
+                                   "or restore it")
+        model.mix = mix
         model.d, model.k = doc["dims"]["d"], doc["dims"]["k"]
         model._set_tensors()
         try:
