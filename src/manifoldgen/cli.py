@@ -356,7 +356,8 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     if model == "auto":
         net, table, raced = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
         for row in table:
-            console.print(f"{'chosen' if row['chosen'] else 'tried '} {row['model']}: {row['epochs']} epochs in "
+            verdict = ("kept  " if raced else "chosen") if row["chosen"] else "tried "  # raced: the race chooses
+            console.print(f"{verdict} {row['model']}: {row['epochs']} epochs in "
                           f"{row['seconds']:.0f} s; on held-out rows {row['accuracy']:.1%} of raw samples within "
                           f"tolerance, recall {row['recall']:.2f}", markup=False)
         for row in raced:
