@@ -75,7 +75,8 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
         pipeline["train"] = (wall, cpu)
         if code:
             raise SystemExit(f"train failed for {entry}; see {log}")
-    kind = json.loads((model / "model.json").read_text())["model"]
+    doc = json.loads((model / "model.json").read_text())
+    kind = "projection only" if doc.get("mix") == 1 else doc["model"]  # train's race chose plain projection
     sampler = f"model:{model}"
     wall, cpu, _ = timed(["plan", str(task), "--scene", scene, "--sampler", sampler, "--seed", str(seed),
                           "-o", str(folder / "first-path.npz")], log)
