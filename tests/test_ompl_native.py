@@ -4,6 +4,7 @@ paths pass our dense check. Tests that need the built program skip, saying why, 
 import numpy as np
 import pytest
 
+from manifoldgen import native
 from manifoldgen.constraints import PlaneConstraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.space import ConstrainedSpace, densify
@@ -88,7 +89,9 @@ def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
     with pytest.raises(ManifoldgenError, match="baseline failed: ompl_native: cannot read problem file; rebuild"):
         ompl_native.NativeOmplPlanner(space).solve(scene.start, scene.goal, 1.0)
     plane = PlaneConstraint(task.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])
-    with pytest.raises(ManifoldgenError, match="cannot take this task .the compiled core has no .plane. constraint"):
+    monkeypatch.setattr(native, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
+    with pytest.raises(ManifoldgenError, match="cannot take this task .the compiled core has no .plane. constraint "
+                                               "term .* does not compile .its residual does not trace: a test"):
         ompl_native.NativeOmplPlanner(ConstrainedSpace(plane, [0.4]))
     with pytest.raises(ManifoldgenError, match="unknown native OMPL space"):
         ompl_native.NativeOmplPlanner(space, ompl_space="curved")
@@ -115,3 +118,18 @@ def test_bench_charges_the_baseline_its_program_and_our_dense_check_not_the_harn
     extras = record["extras"]
     assert record["solved"] and extras["dense_cpu_s"] > 0 and record["harness_cpu_s"] >= 0
     assert record["cpu_s"] == pytest.approx(extras["native_cpu_s"] + extras["dense_cpu_s"])
+
+
+@needs_binary
+def test_a_compiled_python_constraint_runs_in_the_baseline(maze):
+    """A user's Python constraint that compiles reaches C++ Atlas as the core's expression term: every waypoint
+    of the path it returns satisfies the Python constraint, and the path passes the space's dense check."""
+    task, scene, _ = maze
+    plane = PlaneConstraint(task.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])
+    space = ConstrainedSpace(plane, [0.4])
+    start, goal = (space.project(space.robot.sample_uniform(200, np.random.default_rng(s)), max_iters=50).q
+                   for s in (1, 2))
+    ok = [q for q in np.concatenate([start, goal]) if space.valid(q[None])[0]]
+    result = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=0).solve(ok[0], ok[-1], 20.0)
+    assert result.solved and space.validate_path(result.path).valid
+    assert plane.satisfied(result.path, np.full((len(result.path), 1), 0.4)).all()

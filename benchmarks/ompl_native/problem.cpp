@@ -57,6 +57,20 @@ Eigen::Vector3d vector3_of(const json::value& v) {
   return r;
 }
 
+// A compiled Python constraint (manifoldgen.native.constraint_terms: code [[Op value, a, b]], constants, frames,
+// outputs), as the core's binding builds it.
+mgcore::Expression expression_of(const json::object& to, int n) {
+  std::vector<mgcore::Instruction> code;
+  for (const auto& instruction : to.at("code").as_array()) {
+    const std::vector<int> oab = ints_of(instruction);
+    code.push_back({static_cast<mgcore::Op>(oab.at(0)), oab.at(1), oab.at(2)});
+  }
+  std::vector<double> constants;
+  for (const auto& c : to.at("constants").as_array()) constants.push_back(c.to_number<double>());
+  return mgcore::Expression(std::move(code), std::move(constants), ints_of(to.at("frames")), ints_of(to.at("outputs")),
+                            n);
+}
+
 // The whole-body terms (orientation, linear; inequalities com_polygon, hemisphere); false: not one of them.
 bool add_whole_body(mgcore::Space& space, const std::string& kind, const json::object& to) {
   if (kind == "orientation") {
@@ -129,9 +143,16 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
       const Eigen::VectorXd center = vector_of(to.at("center"));
       p.space->add_sphere(static_cast<int>(to.at("frame_id").to_number<long>()),
                           Eigen::Vector3d(center[0], center[1], center[2]), to.at("radius").to_number<double>());
+    } else if (kind == "expression" || kind == "expression_inequality") {
+      mgcore::Expression expression = expression_of(to, p.space->n());
+      if (kind == "expression") {
+        p.space->add_expression(std::move(expression));
+      } else {
+        p.space->add_expression_inequality(std::move(expression));
+      }
     } else if (!add_whole_body(*p.space, kind, to)) {
-      throw std::runtime_error("unknown constraint term type '" + kind +
-                               "' (known: pose, chain, sphere, orientation, linear, com_polygon, hemisphere)");
+      throw std::runtime_error("unknown constraint term type '" + kind + "' (known: pose, chain, sphere, orientation, "
+                               "linear, com_polygon, hemisphere, expression, expression_inequality)");
     }
   }
   p.tolerance = vector_of(c.at("tolerance"));

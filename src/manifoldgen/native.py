@@ -118,14 +118,8 @@ BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereCon
             OrientationConstraint, JointLinearConstraint)
 
 
-def unsupported(space: ConstrainedSpace, *, callbacks: bool = True) -> str | None:
-    """Why the core cannot take ``space`` (a one-line reason), or None when it can; ``callbacks=False``: a
-    constraint that is not built in counts as unsupported too (the C++ OMPL baseline has no callbacks)."""
-    for part in _parts(space):
-        if type(part) not in BUILT_IN and not callbacks:
-            return (f"the compiled core has no '{part.spec()['type']}' constraint term (built in: pose, rotation, "
-                    "closed_chain, sphere, balance, orientation, joint_linear); a Python constraint reaches the "
-                    "core through callbacks only")
+def unsupported(space: ConstrainedSpace) -> str | None:
+    """Why the core cannot take ``space`` (a one-line reason), or None when it can."""
     if not isinstance(space.robot, Robot):
         return "the compiled core needs a pinocchio Robot"
     return None
@@ -187,20 +181,39 @@ def compile_report(space: ConstrainedSpace) -> dict:
 
 
 def constraint_terms(space: ConstrainedSpace) -> list[dict]:
-    """``space``'s built-in constraint at its condition as the C++ terms (JSON-ready), in residual order:
+    """``space``'s constraint at its condition as the C++ terms (JSON-ready), in residual order:
     ``pose`` (frame_id, row-major rotation, position_axes, orientation_axes, y), ``chain`` (frame_a_id,
     frame_b_id, rotation, offset = d x axis) and ``sphere`` (frame_id, center, radius); a rotation
     constraint is a pose term without position axes, its target turned by y; ``orientation`` (frame_id, axis,
     basis (2, 3) rows) with its ``hemisphere`` inequality (frame_id, axis, direction), ``linear`` (A (r, n), y),
-    a balance constraint as pose terms and a ``com_polygon`` inequality (normals (H, 2), bounds (H,)).
-    Inequality terms add no residual rows. The compiled core and the C++ OMPL baseline both build from these;
-    a part that is not built in is refused (one line)."""
+    a balance constraint as pose terms and a ``com_polygon`` inequality (normals (H, 2), bounds (H,)); a Python
+    part that compiles as ``expression`` (code [[Op value, a, b]], constants, frames, outputs), its inequalities
+    as ``expression_inequality``. Inequality terms add no residual rows. The compiled core and the C++ OMPL
+    baseline both build from these; a part that neither is built in nor compiles is refused (one line)."""
     terms = []
-    for kind, item in _layout(space, compile=False):
+    layout, refused = checked_layout(space, compile=True)
+    for kind, item in layout:
         if kind == "callback":
-            raise ManifoldgenError(unsupported(space, callbacks=False))
+            part = item.parts[0][0]
+            raise ManifoldgenError(f"the compiled core has no '{part.spec()['type']}' constraint term (built in: "
+                                   "pose, rotation, closed_chain, sphere, balance, orientation, joint_linear) and it "
+                                   f"does not compile ({refused[id(part)]}); such a constraint reaches the core "
+                                   "through Python callbacks only")
+        if kind == "expression":
+            compiled = item[2]
+            terms.append({"type": "expression", **_program_json(compiled.residual)})
+            if compiled.inequality.rows:
+                terms.append({"type": "expression_inequality", **_program_json(compiled.inequality)})
+            continue
         terms.append(item)
     return terms
+
+
+def _program_json(program: trace.Program) -> dict:
+    """A compiled program as the C++ OMPL baseline reads it: the core's ``Op`` values in place of their names."""
+    op = core_module().Op
+    return {"code": [[getattr(op, name).value, a, b] for name, a, b in program.code],
+            "constants": list(program.constants), "frames": list(program.frames), "outputs": list(program.outputs)}
 
 
 def _layout(space: ConstrainedSpace, compile: bool = True, refused: dict | None = None) -> list[tuple[str, object]]:
@@ -359,16 +372,7 @@ def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
-    compiling = COMPILE if compile is None else compile
-    refused: dict[int, str] = {}  # id(part) -> why it is not compiled
-    layout = _layout(space, compile=compiling, refused=refused)
-    failed = _disagreements(space, [term for kind, term in layout if kind == "expression"])
-    if failed:
-        for part, why in failed:
-            refused[id(part)] = why
-            warnings.warn(f"constraint '{part.spec()['type']}': {why}; it runs through Python callbacks instead",
-                          stacklevel=2)
-        layout = _layout(space, compile=compiling, refused=refused)
+    layout, refused = checked_layout(space, COMPILE if compile is None else compile)
     out = _build_core(space, layout)
     compiled = {id(term[0]) for kind, term in layout if kind == "expression"}
     _REPORTS[space] = {"compiled": [part.spec()["type"] for part in _parts(space) if id(part) in compiled],
@@ -376,6 +380,21 @@ def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
                                      for part in _parts(space) if type(part) not in BUILT_IN
                                      and id(part) not in compiled}}
     return out
+
+
+def checked_layout(space: ConstrainedSpace, compile: bool) -> tuple[list[tuple[str, object]], dict[int, str]]:
+    """:func:`_layout` with the compiled parts that fail :func:`_disagreements`' check moved to callbacks (each
+    with a warning), and ``refused``: id(part) -> why it is not compiled."""
+    refused: dict[int, str] = {}
+    layout = _layout(space, compile=compile, refused=refused)
+    failed = _disagreements(space, [term for kind, term in layout if kind == "expression"])
+    if failed:
+        for part, why in failed:
+            refused[id(part)] = why
+            warnings.warn(f"constraint '{part.spec()['type']}': {why}; it runs through Python callbacks instead",
+                          stacklevel=3)
+        layout = _layout(space, compile=compile, refused=refused)
+    return layout, refused
 
 
 def _empty_core(space: ConstrainedSpace, geometry: bool = True):

@@ -11,7 +11,8 @@ pinocchio's own serialization from the very objects this space checks with (robo
 scene obstacles, the exact collision pairs: SRDF-pruned or the sampled matrix), the locked joints'
 reference, the joint limits (a floating base's six coordinates within the task's ``base_bounds``: OMPL's
 state-space bounds), the constraint terms of the compiled core (pose, rotation, closed chain, sphere,
-orientation, joint_linear, balance; tolerances), start, goal, seed and OMPL settings. OMPL plans at native
+orientation, joint_linear, balance, and a user's Python constraint compiled from its traced expression;
+tolerances), start, goal, seed and OMPL settings. OMPL plans at native
 speed: the equalities are OMPL's constraint, and they, their Jacobian and the validity test (joint limits,
 then the inequalities (balance's CoM margin, orientation's hemisphere), then collision, as
 :meth:`~manifoldgen.space.ConstrainedSpace.valid` with ``equality=False``, like the Python bridge) are C++ calls.
@@ -68,12 +69,16 @@ def native_binary() -> Path:
 
 def _terms(space: ConstrainedSpace) -> list[dict]:
     """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`, the compiled
-    core's); anything else (a user's Python constraint) is refused."""
-    reason = unsupported(space, callbacks=False)
-    if reason:
-        raise ManifoldgenError(f"the C++ OMPL baseline cannot take this task ({reason}); use the Python-callback "
-                               "ompl-SPACE-PLANNER methods")
-    return constraint_terms(space)
+    core's: built-in terms and compiled Python constraints); a Python constraint that does not compile is
+    refused."""
+    try:
+        reason = unsupported(space)
+        if reason:
+            raise ManifoldgenError(reason)
+        return constraint_terms(space)
+    except ManifoldgenError as exc:
+        raise ManifoldgenError(f"the C++ OMPL baseline cannot take this task ({exc}); use the Python-callback "
+                               "ompl-SPACE-PLANNER methods") from None
 
 
 def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray, folder: Path, *,
