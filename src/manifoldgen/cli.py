@@ -14,13 +14,12 @@ import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.text import Text  # noqa: E402
 
-from manifoldgen.coverage import gap_lines  # noqa: E402
 from manifoldgen.errors import ManifoldgenError  # noqa: E402
 from manifoldgen.io import check_output_path  # noqa: E402
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Constrained motion planning with learned samplers.")
-bench_app = typer.Typer(no_args_is_help=True, help="Experiments behind the paper's tables.")
+bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Experiments behind the paper's tables.")
 app.add_typer(bench_app, name="bench")
 console = Console(soft_wrap=True)
 
@@ -162,6 +161,7 @@ def _coverage_lines(report: dict) -> str:
     for value, shares in report["modes"].items():
         if len(shares) > 1:
             lines.append(f"  at {value}: " + ", ".join(f"{s:.0%}" for s in shares) + " of the rows")
+    from manifoldgen.coverage import gap_lines
     lines += gap_lines(report.get("anchors", []), "row")
     if any(a["missed"] for a in report.get("anchors", [])):
         lines.append("no row comes near a MISSED start or goal: collect more rows (--per-condition), or check that "
@@ -173,7 +173,7 @@ def _model_gap_lines(net, seed: int) -> str:
     """For every scene start and goal the model's dataset recorded: how near the model's samples come."""
     import torch
 
-    from manifoldgen.coverage import anchors_from_meta, model_gaps
+    from manifoldgen.coverage import anchors_from_meta, gap_lines, model_gaps
     anchors = anchors_from_meta(net.meta)
     if anchors is None:
         return ""
