@@ -5,7 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 
 runner = CliRunner()
 

@@ -50,7 +50,7 @@ def test_a_task_file_loads_like_a_builtin(tmp_path):
 
 
 def test_a_task_files_planner_table_sets_defaults_that_set_overrides(tmp_path):
-    from manifoldgen.planning.query import run_query, task_settings
+    from manifoldgen.query import run_query, task_settings
 
     path = tmp_path / "mine.toml"
     path.write_text(GOOD + "[planner]\nreach = 0.3\nrange = 1\n")

@@ -121,8 +121,8 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     branches) they fall in and how near they come to every scene's start and goal."""
     import time
 
-    from manifoldgen.coverage import task_anchors
     from manifoldgen.data import collect as run_collect, default_rows
+    from manifoldgen.scene import task_anchors
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     check_output_path(output, [_file(task)])
@@ -248,7 +248,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
-    from manifoldgen.planning.query import planner_settings, run_query, save_path
+    from manifoldgen.planning import planner_settings
+    from manifoldgen.query import run_query, save_path
     from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
@@ -339,7 +340,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
           trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Train a conditional generative model (checkpoints every epoch; --resume continues). Sizes not set are
     taken from the data (latent: the manifold's dimension; width: from the joint count)."""
-    from manifoldgen.data import Dataset
+    from manifoldgen.dataset import Dataset
     from manifoldgen.models import get_model_class
     from manifoldgen.selection import SELECTION_FILE, select_model
     from manifoldgen.settings import parse_settings
@@ -469,8 +470,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR
     paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS
-    from manifoldgen.planning import PLANNERS
-    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.planning import PLANNERS, planner_settings
     from manifoldgen.settings import parse_settings
     known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
     experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,

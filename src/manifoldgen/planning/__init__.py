@@ -3,13 +3,15 @@ package, ``manifoldgen.planners`` entry points of other packages, ``module:Class
 
 Every planner takes ``(space, sampler, *, local, seed, settings)`` (a
 :class:`~manifoldgen.space.ConstrainedSpace`, a :class:`~manifoldgen.sampling.Sampler` at the
-same condition) and answers ``solve(start, goal, time_limit) -> PlanResult``. The planner modules are
-imported when first named, so listing the names imports neither torch nor the compiled core.
+same condition) and answers ``solve(start, goal, time_limit) -> PlanResult``; :func:`planner_settings` lists
+a planner's settings. The planner modules are imported when first named, so listing the names imports neither
+torch nor the compiled core.
 """
 
 from __future__ import annotations
 
 import importlib
+from dataclasses import asdict
 from typing import TYPE_CHECKING
 
 from manifoldgen.registry import Registry
@@ -34,4 +36,9 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["PLANNERS", *_HOMES]
+def planner_settings(planner: str) -> dict:
+    """The settings ``planner`` takes (field -> default), for ``--set`` checking."""
+    return asdict(PLANNERS.get(planner).settings_type())
+
+
+__all__ = ["PLANNERS", "planner_settings", *_HOMES]
