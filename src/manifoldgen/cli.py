@@ -2,58 +2,18 @@
 
 from __future__ import annotations
 
-import functools
-import warnings
 from pathlib import Path
 
-from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, check_seed, limit_threads, set_torch_threads
+import typer
 
-limit_threads()  # before numpy and torch start their pools: on a busy machine, spinning threads slowed collect 18x
+from manifoldgen.cli_common import (MADE_FOR_HELP, ROBOT_HELP, TASK_HELP, TRUST_HELP, app, console, friendly,
+                                    load_task, made_for)  # the first of ours: it limits the thread pools
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import check_output_path
+from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, set_torch_threads
 
-import typer  # noqa: E402
-from rich.console import Console  # noqa: E402
-from rich.text import Text  # noqa: E402
-
-from manifoldgen.errors import ManifoldgenError  # noqa: E402
-from manifoldgen.io import check_output_path  # noqa: E402
-
-app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=None,
-                  help="Constrained motion planning with learned samplers.")
 bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Experiments behind the paper's tables.")
 app.add_typer(bench_app, name="bench")
-console = Console(soft_wrap=True)
-
-
-def friendly(command):
-    """Turn ManifoldgenError (and an OS error no library call turned into one) into a one-line error and
-    exit code 2; warnings print in yellow. Every command's ``seed`` is range-checked here."""
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        def show(message, category, filename, lineno, file=None, line=None):
-            console.print(Text.assemble(("warning: ", "yellow"), str(message)))
-        warnings.showwarning = show
-        try:
-            if "seed" in kwargs:
-                check_seed(kwargs["seed"])
-            return command(*args, **kwargs)
-        except ManifoldgenError as exc:
-            console.print(Text.assemble(("error: ", "red"), str(exc)))  # verbatim: no markup
-            raise typer.Exit(2) from None
-        except OSError as exc:
-            where = f"{exc.filename}: " if exc.filename else ""
-            console.print(Text.assemble(("error: ", "red"), f"{where}{exc.strerror or exc}; check the path and its "
-                                        "permissions"))
-            raise typer.Exit(2) from None
-    return wrapper
-
-
-TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"
-ROBOT_HELP = "Robot of a built-in task (default: the task's default robot)"
-MADE_FOR_HELP = ("The task the input file was made for (refused unless it matches the file's); needed when the file "
-                 "names a user's module:Class constraint, whose module is then imported from this task file: "
-                 + TASK_HELP)
-TRUST_HELP = ("Import a module:Class constraint the input file names from PYTHONPATH without its task file: this "
-              "EXECUTES that module's code; only for files you trust (prefer --task)")
 
 
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
@@ -86,16 +46,6 @@ def _file(name: str | None) -> Path | None:
     return Path(name) if name and Path(name).exists() else None
 
 
-def _task(task: str, robot: str | None):
-    from manifoldgen.tasks import get_task
-    return get_task(task, robot)
-
-
-def _made_for(task: str | None, robot: str | None = None):
-    """The task given for an input file (``--task``), or None: the file's own, from its meta."""
-    return None if task is None else _task(task, robot)
-
-
 def _check_conditions(task_obj, condition: list[float] | None, strict: bool):
     if condition is None:
         return None
@@ -126,7 +76,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     check_output_path(output, [_file(task)])
-    task_obj = _task(task, robot)
+    task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     set_torch_threads()
     start = time.perf_counter()
@@ -268,7 +218,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         if out is not None:
             check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
-    task_obj = _task(task, robot)
+    task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values)
@@ -316,7 +266,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
         check_output_path(output, [path])
-    result = check_path_file(path, settings, feet=feet, progress=True, task=_made_for(task), trust_code=trust_code)
+    result = check_path_file(path, settings, feet=feet, progress=True, task=made_for(task), trust_code=trust_code)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
         atomic_write_text(output, to_json(result))
@@ -353,7 +303,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
                                "--model cvae)")
     set_torch_threads(_bounded("--threads", threads))
     data = Dataset.load(dataset)
-    task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
+    task_obj = task_from_meta(data.meta, task=made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
     if model == "auto":
         net, table, raced = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
         for row in table:
@@ -402,7 +352,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     _bounded("--refine", refine)
     net = load_model(model_dir)
     check_output_path(output, [model_dir, _file(task)])
-    task_obj = task_from_meta(net.meta, task=_made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
+    task_obj = task_from_meta(net.meta, task=made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
@@ -446,7 +396,7 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=max(1, threads), seen=_condition_rows(seen),
-                       unseen=_condition_rows(unseen), task=_made_for(task), trust_code=trust_code)
+                       unseen=_condition_rows(unseen), task=made_for(task), trust_code=trust_code)
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 
