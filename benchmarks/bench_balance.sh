@@ -67,7 +67,7 @@ for r in $robots; do
       "$py" - "$cvae" "$out/sampling-$r" "$near" <<'PY'
 import json, sys
 import numpy as np, torch
-from manifoldgen.bench.metrics import accuracy, coverage_metrics
+from manifoldgen.metrics import accuracy, coverage_metrics
 from manifoldgen.data import collect
 from manifoldgen.models import load_model
 from manifoldgen.tasks import task_from_meta

@@ -55,10 +55,9 @@ def ensure_model(out: Path) -> Path:
     from manifoldgen.data import collect
     from manifoldgen.models import get_model_class
     from manifoldgen.tasks import get_task
-    from manifoldgen.training import train
 
     data = collect(get_task("sphere"), ROWS, 0, out / "data.npz")
-    train(get_model_class("cvae")(), data, seed=0, out=model)
+    get_model_class("cvae")().fit(data, seed=0, out=model)
     return model
 
 
@@ -119,7 +118,7 @@ def main() -> None:
     if args.runs <= 0 or not args.time > 0:
         raise SystemExit("--runs and --time must be positive")
     set_torch_threads()
-    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.planning import planner_settings
     from manifoldgen.tasks import get_task
 
     args.out.mkdir(parents=True, exist_ok=True)

@@ -109,7 +109,8 @@ def plan_bench():
     from dataclasses import replace
 
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
-    from manifoldgen.scene import Obstacle, Pose, get_scene
+    from manifoldgen.scene import get_scene
+    from manifoldgen.shapes import Obstacle, Pose
     from manifoldgen.space import ConstrainedSpace
     from manifoldgen.specs import make_sampler
 

@@ -19,13 +19,14 @@ from typer.testing import CliRunner
 
 from manifoldgen.bench.sampling import run_sampling_bench
 from manifoldgen.cli import app
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_output_path
 from manifoldgen.models import CVAE, load_model
 from manifoldgen.models.base import document_checksum
 from manifoldgen.sampling import sample_to_file
-from manifoldgen.planning.query import run_query
+from manifoldgen.query import run_query
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.specs import parse_spec
 from manifoldgen.tasks import BUILTIN_DIR, get_task, load_task_file, task_from_meta

@@ -249,7 +249,7 @@ def test_outside_checker_rechecks_balance_paths(talos, open_scene, tmp_path):
     """examples/check_path.py (pinocchio + coal only) rechecks feet, the CoM against the support polygon with
     pinocchio's centerOfMass, limits and collisions from the path file alone; a path that slides the robot off
     its feet is refused with its unstable states counted."""
-    from manifoldgen.planning.query import run_query
+    from manifoldgen.query import run_query
     from manifoldgen.scene import get_scene
     from manifoldgen.stability import path_stability
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from manifoldgen.data import Dataset, collect
-from manifoldgen.tasks import get_task
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
+from manifoldgen.tasks import get_task, task_from_meta
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -208,7 +209,7 @@ def test_limits_collisions_and_inequalities_are_rechecked(folder, datasets):
     from manifoldgen.collision import CollisionChecker
 
     path, dataset = datasets["pose"]
-    task = dataset.task()
+    task = task_from_meta(dataset.meta)
     corrupt(dataset, folder / "over.npz", [0], 3, task.robot.upper[3] - dataset.q[0, 3] + 0.01)
     q = task.robot.sample_uniform(400, np.random.default_rng(0))
     clash = q[CollisionChecker(task.robot).in_collision(q)][0]
@@ -274,7 +275,7 @@ def test_recomputed_residuals_equal_manifoldgen_residuals(datasets):
 
     for kind in BUILTIN:
         path, dataset = datasets[kind]
-        task = dataset.task()
+        task = task_from_meta(dataset.meta)
         q = np.clip(dataset.q + 0.05 * np.random.default_rng(1).normal(size=dataset.q.shape), task.robot.lower,
                     task.robot.upper)
         checker = Checker(json.loads(json.dumps(dataset.meta)), dataset.y.shape[1])
@@ -298,7 +299,7 @@ def _path_file(folder, datasets, name: str, scene: dict, rotate: float = 0.8) ->
     from manifoldgen.scene import Scene
 
     path, dataset = datasets["orientation"]
-    task = dataset.task()
+    task = task_from_meta(dataset.meta)
     start = dataset.q[0]
     goal = start.copy()
     goal[6] = np.clip(goal[6] + rotate, task.robot.lower[6], task.robot.upper[6] - 0.01)
@@ -315,7 +316,7 @@ def _path_file(folder, datasets, name: str, scene: dict, rotate: float = 0.8) ->
 
 def test_paths_with_obstacles_and_a_held_tool(folder, datasets):
     path, dataset = datasets["orientation"]
-    task = dataset.task()
+    task = task_from_meta(dataset.meta)
     hand = task.robot.frame_pose(dataset.q[0], "panda_hand_tcp")[0][0]
     far = {"name": "crate", "type": "box", "size": [0.2, 0.2, 0.2], "pose": {"position": [2.0, 2.0, 0.1]}}
     tool = {"name": "cup", "type": "cylinder", "radius": 0.03, "length": 0.12, "attached_to": "panda_hand_tcp",

@@ -5,7 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 
 runner = CliRunner()
 
@@ -61,3 +61,16 @@ def test_tasks_lists_every_robot_with_its_range():
     for robot in ("pr2", "baxter"):
         line = next(line for line in result.output.splitlines() if line.startswith("dualarm") and f" {robot} " in line)
         assert "distance in [0.2, 0.7] m, pitch in [-0.785398, 1.5708] rad" in line
+
+
+def test_the_command_line_starts_without_torch_numpy_or_the_compiled_core():
+    """``manifoldgen --help`` and the model and planner names it lists import none of the heavy libraries."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from manifoldgen.cli import app\n"
+            "try:\n    app(['train', '--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted({'torch', 'numpy', 'manifoldgen_core', 'pinocchio'} & set(sys.modules)))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert "cvae, cgan, wgan, flow, cfm" in done.stdout

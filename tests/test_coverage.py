@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manifoldgen.coverage import Anchors, gaps, missed, modes, spacing, task_anchors
+from manifoldgen.coverage import Anchors, gaps, missed, modes, spacing
+from manifoldgen.scene import task_anchors
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import load_model, pretrained_model_dir

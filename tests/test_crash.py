@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.models import CVAE
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -35,7 +36,8 @@ KILLER = textwrap.dedent("""
         if seen[0] == -k:
             os.kill(os.getpid(), signal.SIGKILL)
     os.replace = killing
-    from manifoldgen.data import Dataset, collect
+    from manifoldgen.data import collect
+    from manifoldgen.dataset import Dataset
     from manifoldgen.models import CVAE
     from manifoldgen.tasks import get_task
     if job == "collect":

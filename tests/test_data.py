@@ -10,7 +10,8 @@ import pytest
 
 import manifoldgen.data as data_module
 from manifoldgen.collision import CollisionChecker
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,7 +16,8 @@ import pytest
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.scene import Attached, Scene, task_checker
+from manifoldgen.scene import Scene, task_checker
+from manifoldgen.shapes import Attached
 from manifoldgen.space import ConstrainedSpace, densify
 from manifoldgen.tasks import get_task, load_task_file, task_from_spec
 
@@ -185,7 +186,7 @@ def test_a_planned_tray_path_is_valid_state_by_state_and_outside(tmp_path):
     """The tray carried along the table (the tray-over scene without its block, so that it plans in a second):
     the path holds the chain and the tray's rotation at every state, inside and outside manifoldgen; the same
     path with a post in the tray's way is refused for the tray's collision alone."""
-    from manifoldgen.planning.query import run_query, save_path
+    from manifoldgen.query import run_query, save_path
     from manifoldgen.scene import get_scene
 
     task = get_task("dualarm", "pr2")

@@ -62,7 +62,7 @@ def test_stride_one_checks_every_state_at_once_and_coarse_checks_keep_the_search
 
 def test_a_bad_stride_is_refused_in_one_line(panda_task):
     from manifoldgen.planning import RRTConnectSettings
-    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.planning import planner_settings
     from manifoldgen.settings import check_settings
     for bad in (0, -2, 1.5, True):
         with pytest.raises(ManifoldgenError, match="lazy_stride must be a whole number >= 1") as error:

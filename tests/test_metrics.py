@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from manifoldgen.bench.metrics import accuracy, coverage_metrics, mmd, prdc
+from manifoldgen.metrics import accuracy, coverage_metrics, mmd, prdc
 from manifoldgen.bench.sampling import default_conditions, run_sampling_bench
 from manifoldgen.data import collect
 from manifoldgen.models import CGAN, CVAE

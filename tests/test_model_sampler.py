@@ -9,7 +9,8 @@ from typer.testing import CliRunner
 
 from manifoldgen.cli import app
 from manifoldgen.collision import CollisionChecker
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CVAE, load_model
 from manifoldgen.robot import resolve_robot
@@ -52,7 +53,7 @@ def test_model_sampler_refuses_another_robot(model_dir):
 
 def test_a_model_is_refused_for_another_constraint_value_not_for_last_bits(model_dir, panda_task):
     """Numbers of the constraint's spec computed from kinematics may differ in their last bits between versions."""
-    from manifoldgen.tasks import check_made_for
+    from manifoldgen.provenance import check_made_for
     meta = load_model(model_dir).meta
     spec = meta["constraint"]
     key = next(k for k, v in spec.items() if isinstance(v, list) and v and isinstance(v[0], list))  # e.g. rotation

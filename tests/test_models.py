@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import MODELS, load_model, pretrained_model_dir
 from manifoldgen.models.base import document_checksum

@@ -199,7 +199,7 @@ def test_a_mesh_that_cannot_be_sphere_fitted_falls_back_to_exact_checks_and_says
     from manifoldgen.collision import CollisionChecker
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.robot import Robot
-    from manifoldgen.scene import Obstacle, Pose
+    from manifoldgen.shapes import Obstacle, Pose
     from manifoldgen.space import densify
     from manifoldgen.specs import make_sampler
     # l2's mesh has a vertex at NaN (a broken export): coal loads it, no sphere can cover it; l2's box stays

@@ -12,7 +12,7 @@ import pytest
 from manifoldgen import native
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import ConstraintSet, PoseConstraint
-from manifoldgen.scene import Obstacle, Pose
+from manifoldgen.shapes import Obstacle, Pose
 from manifoldgen.space import ConstrainedSpace, densify
 
 from planning_problems import DownAndNear

@@ -15,7 +15,7 @@ from manifoldgen import native
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.constraints import Condition, Constraint, array_namespace, as_like
 from manifoldgen.constraints import trace
-from manifoldgen.scene import Obstacle, Pose
+from manifoldgen.shapes import Obstacle, Pose
 from manifoldgen.space import ConstrainedSpace, densify
 
 from planning_problems import DownAndNear

@@ -17,7 +17,8 @@ import pytest
 
 import manifoldgen.io
 from manifoldgen import collision
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_output_path
 from manifoldgen.models import CVAE
@@ -41,10 +42,11 @@ def _interrupt_at(monkeypatch, module, name: str, call: int):
 # ---------------------------------------------------------------------------------------- collect resume
 def test_resume_with_other_settings_is_refused_naming_them(panda_task, tmp_path, monkeypatch):
     import manifoldgen.data as data
+    import manifoldgen.dataset as dataset
     whole = tmp_path / "whole.npz"
     collect(panda_task, 6, seed=3, out=whole, conditions=[[0.3], [0.5]], batch=16, progress=False)
     out = tmp_path / "cut.npz"
-    _interrupt_at(monkeypatch, data, "save_npz", 3)
+    _interrupt_at(monkeypatch, dataset, "save_npz", 1)  # writing the dataset, after its two batches
     with pytest.raises(KeyboardInterrupt):
         collect(panda_task, 6, seed=3, out=out, conditions=[[0.3], [0.5]], batch=16, progress=False)
     monkeypatch.undo()

@@ -12,7 +12,8 @@ import pytest
 
 from manifoldgen.collision import CollisionChecker, touch_links
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.scene import Attached, Obstacle, Pose, Scene, get_scene
+from manifoldgen.scene import Scene, get_scene
+from manifoldgen.shapes import Attached, Obstacle, Pose
 from manifoldgen.tasks import builtin_tasks, get_task
 
 BUILTIN_SCENES = Path(__file__).resolve().parents[1] / "src" / "manifoldgen" / "tasks" / "scenes"

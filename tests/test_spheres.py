@@ -9,7 +9,7 @@ import pytest
 
 from manifoldgen import spheres
 from manifoldgen.collision import CollisionChecker, cache_dir
-from manifoldgen.scene import Obstacle, Pose, held_checker
+from manifoldgen.shapes import Obstacle, Pose, held_checker
 from manifoldgen.tasks import get_task
 
 
@@ -142,7 +142,7 @@ def test_pr2_held_tray_and_self_pairs_are_conservative_with_exact_fallback(pr2, 
     geom = robot.collision_model
     ids = [i for i, g in enumerate(geom.geometryObjects) if g.name in PR2_LINKS]
     model = spheres.fit_model(geom, ids)
-    from manifoldgen.scene import Attached
+    from manifoldgen.shapes import Attached
     checker = held_checker(robot, Attached.from_dict(pr2.attached),
                            [o.geometry_object() for o in _random_scene(rng, 6)])
     with pytest.warns(UserWarning, match="use coal's exact check"):

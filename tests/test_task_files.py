@@ -50,7 +50,7 @@ def test_a_task_file_loads_like_a_builtin(tmp_path):
 
 
 def test_a_task_files_planner_table_sets_defaults_that_set_overrides(tmp_path):
-    from manifoldgen.planning.query import run_query, task_settings
+    from manifoldgen.query import run_query, task_settings
 
     path = tmp_path / "mine.toml"
     path.write_text(GOOD + "[planner]\nreach = 0.3\nrange = 1\n")
@@ -129,7 +129,8 @@ def test_settings_are_checked_against_the_known_keys(tmp_path):
 
 def test_registries_read_entry_points_and_module_class_names(monkeypatch):
     """A package announces a constraint through the manifoldgen.constraints entry point group."""
-    from manifoldgen import registry
+    import importlib.metadata
+
     from manifoldgen.constraints import CONSTRAINTS, JointLinearConstraint
 
     class EntryPoint:
@@ -138,9 +139,9 @@ def test_registries_read_entry_points_and_module_class_names(monkeypatch):
         def load(self):
             return JointLinearConstraint
 
-    monkeypatch.setattr(registry, "entry_points", lambda group: [EntryPoint()] if group == "manifoldgen.constraints" else [])
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: [EntryPoint()] if group == "manifoldgen.constraints" else [])
     monkeypatch.setattr(CONSTRAINTS, "_classes", dict(CONSTRAINTS._classes))
-    monkeypatch.setattr(CONSTRAINTS, "_entry_points_loaded", False)
+    monkeypatch.setattr(CONSTRAINTS, "_entry_points", None)
     assert "coupled" in CONSTRAINTS.names() and CONSTRAINTS.get("coupled") is JointLinearConstraint
     assert CONSTRAINTS.get("manifoldgen.constraints.plane:PlaneConstraint").__name__ == "PlaneConstraint"
     with pytest.raises(ManifoldgenError, match="unknown constraint 'coupld'; did you mean coupled"):

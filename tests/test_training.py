@@ -11,9 +11,11 @@ import torch
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
-from manifoldgen.data import Dataset, collect
+from manifoldgen.data import collect
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CVAE, load_model
+from manifoldgen.tasks import task_from_meta
 from manifoldgen.training import check_dataset, manifold_dimension, train
 
 TINY = {"hidden": [16, 16], "batch": 16, "patience": 100}
@@ -26,23 +28,24 @@ def tiny(panda_task) -> Dataset:
 
 
 def test_bad_datasets_are_refused(tiny):
+    task = task_from_meta(tiny.meta)
     nan = Dataset(tiny.q.copy(), tiny.y.copy(), tiny.meta)
     nan.q[3, 2] = np.nan
     with pytest.raises(ManifoldgenError, match="NaN"):
-        check_dataset(nan)
+        check_dataset(nan, task)
     single = Dataset(tiny.q, np.full_like(tiny.y, 0.3), tiny.meta)
     with pytest.raises(ManifoldgenError, match="single condition value"):
         CVAE(**TINY).fit(single, epochs=1, progress=False)
     with pytest.raises(ManifoldgenError, match="at least"):
-        check_dataset(Dataset(tiny.q[:3], tiny.y[:3], tiny.meta))
+        check_dataset(Dataset(tiny.q[:3], tiny.y[:3], tiny.meta), task)
     with pytest.raises(ManifoldgenError, match="epochs must be positive"):
         CVAE(**TINY).fit(tiny, epochs=0, progress=False)
     reversed_joints = Dataset(tiny.q, tiny.y, {**tiny.meta, "joints": tiny.meta["joints"][::-1]})
     with pytest.raises(ManifoldgenError, match="not its task's planning group"):
-        check_dataset(reversed_joints)
+        check_dataset(reversed_joints, task)
     extra = Dataset(tiny.q, np.concatenate([tiny.y, tiny.y], axis=1), tiny.meta)
     with pytest.raises(ManifoldgenError, match="2 condition columns but its task has 1"):
-        check_dataset(extra)
+        check_dataset(extra, task)
     off = Dataset(tiny.q + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3]), tiny.y, tiny.meta)
     with pytest.raises(ManifoldgenError, match="does not satisfy its task's constraint"):
         CVAE(**TINY).fit(off, epochs=1, progress=False)
@@ -87,7 +90,8 @@ def test_interrupted_run_resumes_to_the_same_model(tiny, tmp_path, monkeypatch):
     for key, value in a.state_tensors().items():
         torch.testing.assert_close(b.state_tensors()[key], value, rtol=0, atol=0)
     with pytest.raises(ManifoldgenError, match="no checkpoint"):
-        train(CVAE(**TINY), tiny, epochs=4, seed=2, progress=False, out=tmp_path / "cut", resume=True)
+        train(CVAE(**TINY), tiny, task=task_from_meta(tiny.meta), epochs=4, seed=2, progress=False,
+              out=tmp_path / "cut", resume=True)
 
 
 def test_train_command(tiny, tmp_path):
@@ -106,7 +110,7 @@ def test_train_command(tiny, tmp_path):
 
 
 def test_a_latent_below_the_manifold_dimension_is_warned(tiny):
-    assert manifold_dimension(check_dataset(tiny), tiny.q[:3], tiny.y[:3]) == 3  # panda, 7 joints - 4 pose rows
+    assert manifold_dimension(task_from_meta(tiny.meta), tiny.q[:3], tiny.y[:3]) == 3  # panda, 7 joints - 4 pose rows
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         CVAE(**TINY).fit(tiny, epochs=1, progress=False)  # latent 3 = the dimension: no warning
@@ -133,8 +137,9 @@ def test_a_model_records_the_refinement_its_samples_need(tiny, tmp_path):
     assert loaded.refine == model.refine and loaded.refine in REFINE_LADDER
     y = np.array([0.3])
     rows = loaded.sample(y, 512, torch.Generator().manual_seed(9))
-    rate = tiny.task().constraint.satisfied(project(tiny.task().constraint, rows, y, max_iters=loaded.refine).q, y)
-    top = tiny.task().constraint.satisfied(project(tiny.task().constraint, rows, y, max_iters=REFINE_LADDER[-1]).q, y)
+    constraint = task_from_meta(tiny.meta).constraint
+    rate = constraint.satisfied(project(constraint, rows, y, max_iters=loaded.refine).q, y)
+    top = constraint.satisfied(project(constraint, rows, y, max_iters=REFINE_LADDER[-1]).q, y)
     assert rate.mean() >= REFINE_SHARE * top.mean() - 0.1  # the held-out conditions' rate, here at one condition
 
 

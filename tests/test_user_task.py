@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 from manifoldgen.io import load_npz
 from manifoldgen.robot import resolve_robot
 

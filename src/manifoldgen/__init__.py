@@ -20,7 +20,7 @@ import importlib
 # name -> module that defines it; resolved lazily by __getattr__
 _LAZY = {
     "ManifoldgenError": "manifoldgen.errors",
-    "Dataset": "manifoldgen.data",
+    "Dataset": "manifoldgen.dataset",
     "Task": "manifoldgen.tasks",
     "Scene": "manifoldgen.scene",
     "PathReport": "manifoldgen.space",

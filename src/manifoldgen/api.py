@@ -22,7 +22,7 @@ from manifoldgen.errors import ManifoldgenError
 if TYPE_CHECKING:
     import numpy as np
 
-    from manifoldgen.data import Dataset
+    from manifoldgen.dataset import Dataset
     from manifoldgen.models.base import ConditionalSampler
     from manifoldgen.planning.result import PlanResult
     from manifoldgen.sampling import Sampler
@@ -156,7 +156,7 @@ def train(dataset: Dataset | PathLike, model: str = "cvae", seed: int = 0, out: 
     hyper-parameters (``latent=6``, ``hidden=[256, 256]``, ...; an unknown one lists the known ones). With
     ``out`` the model directory (``model.json`` + ``model.safetensors``) is written there. Results are
     reproducible for a seed and a torch thread count (``manifoldgen.runtime.set_torch_threads``)."""
-    from manifoldgen.data import Dataset
+    from manifoldgen.dataset import Dataset
     from manifoldgen.io import check_output_path
     from manifoldgen.models import get_model_class
     from manifoldgen.training import OUTPUT_FILES
@@ -212,12 +212,12 @@ def _space(function: str, task: Any, scene: Any) -> tuple[Task, Scene, Constrain
 def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: Any, seed: int, refine: int | None,
                  batch: int | None) -> tuple[Sampler, str]:
     """The sampler ``model`` names or is, for ``space``, and its description for a path file's meta."""
-    from manifoldgen.data import Dataset
+    from manifoldgen.dataset import Dataset
     from manifoldgen.models.base import ConditionalSampler
+    from manifoldgen.provenance import check_made_for
     from manifoldgen.runtime import REFINE
     from manifoldgen.sampling import DatasetSampler, ModelSampler
     from manifoldgen.specs import make_sampler
-    from manifoldgen.tasks import check_made_for
 
     refine = None if refine is None else _integer(function, "refine", refine)
     batch = None if batch is None else _integer(function, "batch", batch)
@@ -293,7 +293,7 @@ class QueryResult:
 
     def save(self, file: PathLike) -> Path:
         """Write the path file (``path (K, n)`` + ``meta``; atomic), as ``manifoldgen plan -o`` does."""
-        from manifoldgen.planning.query import save_path
+        from manifoldgen.query import save_path
 
         file = _optional_path("QueryResult.save", "file", file)
         if file is None:
@@ -303,7 +303,7 @@ class QueryResult:
 
 
 def _settings(planner: str, settings: Any) -> dict:
-    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.planning import planner_settings
 
     if settings is None:
         return {}
@@ -327,7 +327,7 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     (``{"range": 0.8}``; the task file's ``[planner]`` defaults apply first). ``time_limit`` in seconds."""
     import numpy as np
 
-    from manifoldgen.planning.query import run_query
+    from manifoldgen.query import run_query
     from manifoldgen.sampling import Sampler
 
     task = _task("plan", task)
@@ -355,7 +355,7 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     else:
         space = _space("plan", task, scene)[2]
         made, label = _sampler_for("plan", "sampler", space, sampler, seed, None, None)
-    from manifoldgen.planning.query import plan_query
+    from manifoldgen.query import plan_query
 
     return QueryResult(*plan_query(task, scene, space, made, label, planner, seed=seed, time_limit=time_limit,
                                    local=local, smooth=bool(smooth), settings=values))

@@ -2,59 +2,18 @@
 
 from __future__ import annotations
 
-import functools
-import warnings
 from pathlib import Path
 
-from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, check_seed, limit_threads, set_torch_threads
+import typer
 
-limit_threads()  # before numpy and torch start their pools: on a busy machine, spinning threads slowed collect 18x
+from manifoldgen.cli_common import (MADE_FOR_HELP, ROBOT_HELP, TASK_HELP, TRUST_HELP, app, console, friendly,
+                                    load_task, made_for)  # the first of ours: it limits the thread pools
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import check_output_path
+from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, set_torch_threads
 
-import typer  # noqa: E402
-from rich.console import Console  # noqa: E402
-from rich.text import Text  # noqa: E402
-
-from manifoldgen.coverage import gap_lines  # noqa: E402
-from manifoldgen.errors import ManifoldgenError  # noqa: E402
-from manifoldgen.io import check_output_path  # noqa: E402
-
-app = typer.Typer(add_completion=False, no_args_is_help=True,
-                  help="Constrained motion planning with learned samplers.")
-bench_app = typer.Typer(no_args_is_help=True, help="Experiments behind the paper's tables.")
+bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Experiments behind the paper's tables.")
 app.add_typer(bench_app, name="bench")
-console = Console(soft_wrap=True)
-
-
-def friendly(command):
-    """Turn ManifoldgenError (and an OS error no library call turned into one) into a one-line error and
-    exit code 2; warnings print in yellow. Every command's ``seed`` is range-checked here."""
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        def show(message, category, filename, lineno, file=None, line=None):
-            console.print(Text.assemble(("warning: ", "yellow"), str(message)))
-        warnings.showwarning = show
-        try:
-            if "seed" in kwargs:
-                check_seed(kwargs["seed"])
-            return command(*args, **kwargs)
-        except ManifoldgenError as exc:
-            console.print(Text.assemble(("error: ", "red"), str(exc)))  # verbatim: no markup
-            raise typer.Exit(2) from None
-        except OSError as exc:
-            where = f"{exc.filename}: " if exc.filename else ""
-            console.print(Text.assemble(("error: ", "red"), f"{where}{exc.strerror or exc}; check the path and its "
-                                        "permissions"))
-            raise typer.Exit(2) from None
-    return wrapper
-
-
-TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"
-ROBOT_HELP = "Robot of a built-in task (default: the task's default robot)"
-MADE_FOR_HELP = ("The task the input file was made for (refused unless it matches the file's); needed when the file "
-                 "names a user's module:Class constraint, whose module is then imported from this task file: "
-                 + TASK_HELP)
-TRUST_HELP = ("Import a module:Class constraint the input file names from PYTHONPATH without its task file: this "
-              "EXECUTES that module's code; only for files you trust (prefer --task)")
 
 
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
@@ -87,16 +46,6 @@ def _file(name: str | None) -> Path | None:
     return Path(name) if name and Path(name).exists() else None
 
 
-def _task(task: str, robot: str | None):
-    from manifoldgen.tasks import get_task
-    return get_task(task, robot)
-
-
-def _made_for(task: str | None, robot: str | None = None):
-    """The task given for an input file (``--task``), or None: the file's own, from its meta."""
-    return None if task is None else _task(task, robot)
-
-
 def _check_conditions(task_obj, condition: list[float] | None, strict: bool):
     if condition is None:
         return None
@@ -122,12 +71,12 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     branches) they fall in and how near they come to every scene's start and goal."""
     import time
 
-    from manifoldgen.coverage import task_anchors
     from manifoldgen.data import collect as run_collect, default_rows
+    from manifoldgen.scene import task_anchors
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     check_output_path(output, [_file(task)])
-    task_obj = _task(task, robot)
+    task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     set_torch_threads()
     start = time.perf_counter()
@@ -162,6 +111,7 @@ def _coverage_lines(report: dict) -> str:
     for value, shares in report["modes"].items():
         if len(shares) > 1:
             lines.append(f"  at {value}: " + ", ".join(f"{s:.0%}" for s in shares) + " of the rows")
+    from manifoldgen.coverage import gap_lines
     lines += gap_lines(report.get("anchors", []), "row")
     if any(a["missed"] for a in report.get("anchors", [])):
         lines.append("no row comes near a MISSED start or goal: collect more rows (--per-condition), or check that "
@@ -173,7 +123,7 @@ def _model_gap_lines(net, seed: int) -> str:
     """For every scene start and goal the model's dataset recorded: how near the model's samples come."""
     import torch
 
-    from manifoldgen.coverage import anchors_from_meta, model_gaps
+    from manifoldgen.coverage import anchors_from_meta, gap_lines, model_gaps
     anchors = anchors_from_meta(net.meta)
     if anchors is None:
         return ""
@@ -248,7 +198,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
-    from manifoldgen.planning.query import planner_settings, run_query, save_path
+    from manifoldgen.planning import planner_settings
+    from manifoldgen.query import run_query, save_path
     from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
@@ -267,7 +218,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         if out is not None:
             check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
-    task_obj = _task(task, robot)
+    task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values)
@@ -315,7 +266,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
         check_output_path(output, [path])
-    result = check_path_file(path, settings, feet=feet, progress=True, task=_made_for(task), trust_code=trust_code)
+    result = check_path_file(path, settings, feet=feet, progress=True, task=made_for(task), trust_code=trust_code)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
         atomic_write_text(output, to_json(result))
@@ -339,7 +290,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
           trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Train a conditional generative model (checkpoints every epoch; --resume continues). Sizes not set are
     taken from the data (latent: the manifold's dimension; width: from the joint count)."""
-    from manifoldgen.data import Dataset
+    from manifoldgen.dataset import Dataset
     from manifoldgen.models import get_model_class
     from manifoldgen.selection import SELECTION_FILE, select_model
     from manifoldgen.settings import parse_settings
@@ -352,7 +303,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
                                "--model cvae)")
     set_torch_threads(_bounded("--threads", threads))
     data = Dataset.load(dataset)
-    task_obj = task_from_meta(data.meta, task=_made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
+    task_obj = task_from_meta(data.meta, task=made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
     if model == "auto":
         net, table, raced = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
         for row in table:
@@ -402,7 +353,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     _bounded("--refine", refine)
     net = load_model(model_dir)
     check_output_path(output, [model_dir, _file(task)])
-    task_obj = task_from_meta(net.meta, task=_made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
+    task_obj = task_from_meta(net.meta, task=made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
     console.print(f"wrote {output}: {n} {info['rows']} rows at {y.tolist()} | within tolerance: raw "
@@ -446,7 +397,7 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     set_torch_threads(threads)
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=max(1, threads), seen=_condition_rows(seen),
-                       unseen=_condition_rows(unseen), task=_made_for(task), trust_code=trust_code)
+                       unseen=_condition_rows(unseen), task=made_for(task), trust_code=trust_code)
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 
@@ -470,8 +421,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR
     paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS
-    from manifoldgen.planning import PLANNERS
-    from manifoldgen.planning.query import planner_settings
+    from manifoldgen.planning import PLANNERS, planner_settings
     from manifoldgen.settings import parse_settings
     known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
     experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,

@@ -1,4 +1,4 @@
-"""The ``view`` and ``trajectory`` commands (registered on :data:`manifoldgen.cli.app`)."""
+"""The ``view`` and ``trajectory`` commands (registered on :data:`manifoldgen.cli_common.app`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from manifoldgen.cli import MADE_FOR_HELP, TRUST_HELP, app, console, friendly
+from manifoldgen.cli_common import MADE_FOR_HELP, TRUST_HELP, app, console, friendly, made_for
 from manifoldgen.errors import ManifoldgenError
 
 TRAJECTORY_FORMATS = (".json", ".csv")
@@ -70,13 +70,12 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
                task: str = typer.Option(None, help=MADE_FOR_HELP),
                trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Time-parameterise a path with TOPP-RA within joint limits; every sample is rechecked."""
-    from manifoldgen.cli import _made_for
     from manifoldgen.io import check_output_path
     from manifoldgen.trajectory import trajectory_of_file
     if output.suffix.lower() not in TRAJECTORY_FORMATS:
         raise ManifoldgenError(f"-o must end in .json or .csv, got {output.name}")
     check_output_path(output, [path_file])
-    traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt, task=_made_for(task), trust_code=trust_code)
+    traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt, task=made_for(task), trust_code=trust_code)
     info, check = traj.info, traj.info["check"]
     if check["first_invalid"] is not None:
         bad = check["first_invalid"]

@@ -1,21 +1,18 @@
 """Where a task will be queried, and how well a set of configurations covers it.
 
 A task's *anchors* are the start and goal configurations of its scenes (end-effector targets solved onto
-the manifold at the scene's condition): the regions a planner needs samples in. Collection seeds around
-them (:func:`anchor_seeds`); a *gap* (the distance from an anchor to the nearest of a set of rows: a
-dataset's, a model's samples) tells a user, before planning, that the rows miss an IK branch. *Modes* are
-the clusters of a set of rows (single linkage on a subsample, cut where neighbours are several typical
-neighbour distances apart): IK branches separated by a gap in joint space.
+the manifold at the scene's condition; :func:`manifoldgen.scene.task_anchors` gathers them): the regions a
+planner needs samples in. Collection seeds around them (:func:`anchor_seeds`); a *gap* (the distance from an
+anchor to the nearest of a set of rows: a dataset's, a model's samples) tells a user, before planning, that the
+rows miss an IK branch. *Modes* are the clusters of a set of rows (single linkage on a subsample, cut where
+neighbours are several typical neighbour distances apart): IK branches separated by a gap in joint space.
 """
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
-
-from manifoldgen.errors import ManifoldgenError
 
 ANCHOR_SPREAD = 0.5  # rad: standard deviation of the seeds drawn around an anchor
 MODE_ROWS = 1500  # rows clustered into modes (a subsample: single linkage is quadratic)
@@ -40,26 +37,6 @@ class Anchors:
         """JSON-ready: ``[{"label", "q", "condition"}, ...]`` (what a dataset's meta records)."""
         return [{"label": label, "q": q.tolist(), "condition": y.tolist()}
                 for label, q, y in zip(self.labels, self.q, self.y)]
-
-
-def task_anchors(task) -> Anchors:
-    """The start and goal of every scene of ``task`` (targets solved as ``plan`` solves them). A scene that
-    cannot be set up is left out with a warning (``plan`` reports it in full); no scenes: no anchors."""
-    from manifoldgen.scene import get_scene
-
-    qs, ys, labels = [], [], []
-    for name in task.scenes:
-        try:
-            scene = get_scene(task, name)
-        except ManifoldgenError as exc:
-            warnings.warn(f"scene {name} left out of the query anchors: {exc}", stacklevel=2)
-            continue
-        for end in ("start", "goal"):
-            qs.append(np.asarray(getattr(scene, end), float))
-            ys.append(np.asarray(scene.condition, float))
-            labels.append(f"{name} {end}")
-    n, k = task.robot.n, task.condition.k
-    return Anchors(np.reshape(qs, (-1, n)), np.reshape(ys, (-1, k)), labels)
 
 
 def anchor_seeds(anchors: Anchors, count: int, rng: np.random.Generator, robot) -> np.ndarray:

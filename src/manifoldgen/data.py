@@ -1,8 +1,7 @@
-"""Datasets of constraint-satisfying configurations: collection and the .npz format.
+"""Collecting datasets of constraint-satisfying configurations (:class:`~manifoldgen.dataset.Dataset`).
 
-File: ``q (N, n) float64``, ``y (N, k) float64`` and ``meta`` (JSON string) with
-``format_version``, ``robot``, ``joints``, ``locked``, ``constraint``, ``seed`` (see
-:meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch;
+A collected file's ``meta`` holds ``format_version``, ``robot``, ``joints``, ``locked``, ``constraint``, ``seed``
+(see :meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch;
 batch ``b`` of condition ``c`` draws from ``default_rng([seed, c, b])``, and every
 finished batch is saved under ``<out>.partial/``, so an interrupted run resumes where it
 stopped and produces the same file as an uninterrupted one. Given query anchors (the start and
@@ -19,20 +18,20 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from manifoldgen.constraints import project
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
-from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.dataset import Dataset
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import task_checker
 from manifoldgen.space import ConstrainedSpace
-from manifoldgen.tasks import Task, task_from_meta
+from manifoldgen.tasks import Task
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
@@ -45,49 +44,6 @@ def default_rows(conditions: int) -> int:
     return max(MIN_PER_CONDITION, -(-DEFAULT_ROWS // max(1, conditions)))
 
 
-@dataclass
-class Dataset:
-    """Configurations ``q (N, n)`` satisfying the constraint at conditions ``y (N, k)``."""
-
-    q: np.ndarray
-    y: np.ndarray
-    meta: dict
-
-    def __len__(self) -> int:
-        return len(self.q)
-
-    def save(self, path: str | Path) -> None:
-        save_npz(path, self.meta, q=self.q, y=self.y)
-
-    @classmethod
-    @file_reader
-    def load(cls, path: str | Path) -> Dataset:
-        """Read and validate a dataset file (clear errors for truncated or foreign files)."""
-        meta, arrays = load_npz(path, ("q", "y"))
-        if any(arrays[k].dtype.kind not in "fiu" for k in ("q", "y")):
-            raise ManifoldgenError(f"{path}: q and y must be arrays of numbers, got {arrays['q'].dtype} and "
-                                   f"{arrays['y'].dtype}; regenerate the file")
-        q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
-        for key in ("format_version", "robot", "joints", "constraint"):
-            if key not in meta:
-                raise ManifoldgenError(f"{path}: meta lacks '{key}'; not a manifoldgen dataset")
-        if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
-            raise ManifoldgenError(f"{path}: inconsistent shapes q {q.shape}, y {y.shape} for "
-                                   f"{len(meta['joints'])} joints")
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(y))):
-            raise ManifoldgenError(f"{path}: contains NaN or infinite values; recollect it")
-        return cls(q, y, meta)
-
-    def task(self) -> Task:
-        """The task this dataset was collected for, rebuilt from its meta alone."""
-        return task_from_meta(self.meta)
-
-    def summary(self) -> dict:
-        values, counts = np.unique(self.y, axis=0, return_counts=True)
-        return {"rows": len(self), "robot": self.meta["robot"], "joints": len(self.meta["joints"]),
-                "conditions": {json.dumps(v.tolist()): int(c) for v, c in zip(values, counts)}}
-
-
 @locks_output("out")  # one writer per output: a second collect into the same file is refused
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
@@ -96,7 +52,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     """Collect ``per_condition`` valid rows at each condition value (default: the task's).
 
     The seeds projected onto the manifold are uniform in the joint limits; with ``anchors`` (see
-    :func:`manifoldgen.coverage.task_anchors`; what ``manifoldgen collect`` passes for a task with scenes)
+    :func:`manifoldgen.scene.task_anchors`; what ``manifoldgen collect`` passes for a task with scenes)
     half of them are normal around the anchors instead; with ``near_home > 0`` all are
     normal around the task's home with that standard deviation (rad, clipped to the limits): rows on
     the home's IK branch (for a task whose manifold has many branches, such as baxter's dual-arm tray,

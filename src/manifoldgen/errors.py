@@ -1,5 +1,5 @@
-"""The one exception type the library raises for bad input, its message for unknown names, and the guard
-every file reader wears (:func:`file_reader`)."""
+"""The one exception type the library raises for bad input, its message for unknown names, the guard
+every file reader wears (:func:`file_reader`), and :class:`SamplerFailed`, which ends a search unsolved."""
 
 import difflib
 import functools
@@ -8,6 +8,10 @@ import os
 
 class ManifoldgenError(ValueError):
     """Bad input: the message names the problem and how to fix it."""
+
+
+class SamplerFailed(Exception):
+    """The sampler could not produce a configuration: the query ends unsolved."""
 
 
 def unknown_name(kind: str, name: str, known: list[str]) -> ManifoldgenError:

@@ -14,10 +14,12 @@ import re
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from manifoldgen.errors import ManifoldgenError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def _umask() -> int:
@@ -215,11 +217,15 @@ def locks_output(parameter: str):
 
 def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:
     """Atomically write ``arrays`` (any names, ``path`` included) and ``meta`` (a JSON string) to an .npz."""
+    import numpy as np
+
     _atomic(Path(file), lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
 
 
 def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[str, np.ndarray]]:
     """Read an .npz written by :func:`save_npz`; clear errors for missing, truncated or foreign files."""
+    import numpy as np
+
     path = Path(path)
     if not path.is_file():
         raise ManifoldgenError(f"file not found: {path}")

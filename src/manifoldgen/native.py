@@ -61,7 +61,7 @@ from manifoldgen.constraints.orientation import OrientationConstraint
 from manifoldgen.constraints.pose import PoseConstraint
 from manifoldgen.constraints.rotation import RotationConstraint
 from manifoldgen.constraints.sphere import SphereConstraint
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
 
@@ -637,8 +637,6 @@ def valid_query_state(space: ConstrainedSpace, core, q: np.ndarray) -> np.ndarra
 def _draw(sampler, raw: bool):
     """The search's callback: ``count`` -> (count, n) rows of ``sampler``, raw (:meth:`~manifoldgen.sampling.Sampler.raw_many`,
     lazy samples) or checked (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""
-    from manifoldgen.planning.base import SamplerFailed
-
     take = sampler.raw_many if raw else sampler.sample_many
 
     def draw(count: int) -> np.ndarray:

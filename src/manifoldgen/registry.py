@@ -1,15 +1,16 @@
 """One registry mechanism for constraints, models and planners.
 
-A :class:`Registry` maps names to classes registered in the package, to classes that
-other packages announce through a Python entry point group (``manifoldgen.constraints``,
-``manifoldgen.models``, ``manifoldgen.planners``), and resolves ``module:Class`` names
-(as task files write a user's own class) by importing the module.
+A :class:`Registry` maps names to classes registered in the package (by a decorator, or listed as
+``module:Class`` paths that are imported only when the name is first used, so listing the names for a
+command's ``--help`` imports neither torch nor the compiled core), to classes that other packages announce
+through a Python entry point group (``manifoldgen.constraints``, ``manifoldgen.models``,
+``manifoldgen.planners``), and resolves ``module:Class`` names (as task files write a user's own class)
+by importing the module.
 """
 
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import entry_points
 from typing import Generic, TypeVar
 
 from manifoldgen.errors import ManifoldgenError, unknown_name
@@ -18,12 +19,21 @@ T = TypeVar("T")
 
 
 class Registry(Generic[T]):
-    """Names -> subclasses of ``base`` for one ``kind`` (its entry point group: ``manifoldgen.<kind>s``)."""
+    """Names -> subclasses of ``base`` (a class, or its ``module:Class`` path) for one ``kind`` (its entry point
+    group: ``manifoldgen.<kind>s``); ``built_in``: name -> ``module:Class`` of the package's own classes."""
 
-    def __init__(self, kind: str, base: type):
-        self.kind, self.base = kind, base
+    def __init__(self, kind: str, base: type | str, built_in: dict[str, str] | None = None):
+        self.kind, self._base = kind, base
+        self._paths = dict(built_in or {})
         self._classes: dict[str, type[T]] = {}
-        self._entry_points_loaded = False
+        self._entry_points: dict | None = None
+
+    @property
+    def base(self) -> type:
+        if isinstance(self._base, str):
+            module, _, attr = self._base.partition(":")
+            self._base = getattr(importlib.import_module(module), attr)
+        return self._base
 
     def register(self, name: str):
         """Class decorator: register under ``name``."""
@@ -32,35 +42,41 @@ class Registry(Generic[T]):
             return cls
         return wrap
 
-    def _load_entry_points(self) -> None:
-        if self._entry_points_loaded:
-            return
-        self._entry_points_loaded = True
-        for ep in entry_points(group=f"manifoldgen.{self.kind}s"):
-            if ep.name not in self._classes:
-                self._classes[ep.name] = _require_subclass(ep.load(), self.base, self.kind,
-                                                           f"entry point {ep.name} = {ep.value}")
+    def _announced(self) -> dict:
+        """Other packages' entry points of this group, by name (not loaded)."""
+        if self._entry_points is None:
+            from importlib.metadata import entry_points
+
+            self._entry_points = {ep.name: ep for ep in entry_points(group=f"manifoldgen.{self.kind}s")}
+        return self._entry_points
 
     def names(self) -> list[str]:
-        """Every registered name, the package's first."""
-        self._load_entry_points()
-        return list(self._classes)
+        """Every registered name, the package's first (nothing is imported)."""
+        own = list(self._paths) + [name for name in self._classes if name not in self._paths]
+        return own + [name for name in self._announced() if name not in own]
 
     def get(self, name: str) -> type[T]:
         """The class registered as ``name``, or the class ``module:Class`` names."""
         if ":" in name:
             return import_class(name, self.base, self.kind)
-        self._load_entry_points()
-        if name not in self._classes:
-            raise unknown_name(self.kind, name, list(self._classes))
+        if name in self._classes:
+            return self._classes[name]
+        if name in self._paths:
+            self._classes[name] = import_class(self._paths[name], self.base, self.kind)
+        elif name in self._announced():
+            ep = self._announced()[name]
+            self._classes[name] = _require_subclass(ep.load(), self.base, self.kind, f"entry point {name} = {ep.value}")
+        else:
+            raise unknown_name(self.kind, name, self.names())
         return self._classes[name]
 
     def name_of(self, cls: type) -> str:
         """The name ``cls`` is registered under, else its ``module:Class`` path."""
+        path = f"{cls.__module__}:{cls.__qualname__}"
         for name, registered in self._classes.items():
             if registered is cls:
                 return name
-        return f"{cls.__module__}:{cls.__qualname__}"
+        return next((name for name, known in self._paths.items() if known == path), path)
 
 
 def import_class(path: str, base: type, kind: str) -> type:

@@ -28,9 +28,9 @@ import numpy as np
 
 from manifoldgen.constraints import Constraint, project
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.provenance import check_made_for
 from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.space import ConstrainedSpace
-from manifoldgen.tasks import check_made_for
 
 PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # the projection sampler's iterations
 FIRST_ROWS = 64  # a model sampler's first batch; each next one doubles, up to its batch size

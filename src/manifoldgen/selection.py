@@ -5,7 +5,7 @@ Each candidate model (:data:`CANDIDATES`, every size from the data: :meth:`Condi
 is trained with the same seed into ``OUT/candidates/NAME``; on the rows training held out (the same split
 for all) each is scored at every condition value there: ``accuracy``, the share of its raw samples within
 tolerance, and ``recall``, the share of held-out rows that some sample comes near (k-NN recall,
-:func:`manifoldgen.bench.metrics.prdc`). The rule's model is the most accurate of those whose recall is within
+:func:`manifoldgen.metrics.prdc`). The rule's model is the most accurate of those whose recall is within
 :data:`RECALL_SLACK` of the best recall (a model that misses an IK branch fails queries there; a less accurate
 one only refines more). The candidates train side by side, one process each (as many as there are CPUs), each
 as it would alone: the same bytes as a sequential run.
@@ -32,12 +32,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from manifoldgen.bench.metrics import joint_features, prdc
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text
+from manifoldgen.metrics import joint_features, prdc
 from manifoldgen.models import get_model_class, load_model
-from manifoldgen.models.base import CONFIG_FILE, WEIGHTS_FILE, ConditionalSampler
+from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_task
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.tasks import Task, code_types
 from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, split
@@ -65,7 +65,9 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     ``resume``. ``workers``: processes training side by side (default: one per CPU and candidate for datasets
     of :data:`PARALLEL_ROWS` rows or more, else 1; 1 where the task runs user code, which a child cannot load);
     ``race_scenes`` False: the rule alone chooses."""
-    task = task or check_dataset(dataset)
+    if task is None:
+        task = dataset_task(dataset)
+        check_dataset(dataset, task)
     out = Path(out)
     if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
         raise ManifoldgenError(f"no checkpoint in {out}/candidates to resume (training finished or never started); "
@@ -118,8 +120,8 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, *, progr
     settings, :data:`RACE_TIME` seconds) with each model's sampler and with projected uniform rows only (the
     ``ruled`` model at mix 1, :data:`PROJECTION`); one row per entry: ``label``, ``model``, ``mix``, ``solved``,
     ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No scenes: []."""
-    from manifoldgen.planning.query import get_planner, task_settings
     from manifoldgen.progress import progress_bar
+    from manifoldgen.query import get_planner, task_settings
     from manifoldgen.sampling import ModelSampler
     from manifoldgen.scene import get_scene
     from manifoldgen.space import ConstrainedSpace

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.provenance import check_made_for
 from manifoldgen.sampling import DatasetSampler, ProjectionSampler, Sampler, UniformSampler
 from manifoldgen.space import ConstrainedSpace
-from manifoldgen.tasks import check_made_for
 
 SPEC_HELP = ("uniform, project, pg:DATASET.npz, or MODEL:DIR (e.g. cvae:runs/cvae, or model:DIR for whichever model "
              "DIR holds; options: ,refine=N,batch=B)")

@@ -1,12 +1,15 @@
 """Training loop for every ConditionalSampler: split, early stopping, checkpoints, resume.
 
-``train(model, dataset, seed=s)`` is deterministic for a seed: the split, the initial
+``train(model, dataset, task=t, seed=s)`` is deterministic for a seed: the split, the initial
 weights, the batch order and every noise draw come from generators seeded with ``s``.
 With ``out``, a checkpoint (weights, optimiser state, generator state, history, best
 weights: one safetensors file whose header carries the JSON state) is written atomically after
 every epoch, so an interrupted run continued with
 ``resume=True`` ends exactly where the uninterrupted run would have. When training ends the
-best-validation weights are saved to ``out`` with ``loss.png`` and ``training.json``.
+best-validation weights are saved to ``out`` with ``training.json`` (a model's ``fit`` adds ``loss.png``).
+
+Training takes the model and the task by their interfaces (:class:`Trainable`, :class:`TaskLike`): the models
+import this module, and the caller gives the task the dataset was made for.
 """
 
 from __future__ import annotations
@@ -16,22 +19,23 @@ import json
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import safetensors.torch
 import torch
 
-from manifoldgen.data import Dataset
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import REFINE, check_seed
-from manifoldgen.tasks import Task, task_from_meta
 
-if TYPE_CHECKING:  # the models call train(); training needs them only as a type
-    from manifoldgen.models.base import ConditionalSampler
+if TYPE_CHECKING:
+    from manifoldgen.constraints import Condition, Constraint
+    from manifoldgen.robot import Robot
 
 CHECKPOINT = "checkpoint.safetensors"  # one file: a kill leaves the previous epoch's or this one's, never a mix
 OUTPUT_FILES = ("model.safetensors", "model.json", "training.json", "loss.png", CHECKPOINT)
@@ -43,6 +47,39 @@ REFINE_LADDER = (REFINE, 5, 10, 20)  # projection iterations tried for a model's
 REFINE_SHARE = 0.95  # ... until this share of what the last rung brings within tolerance is
 REFINE_CONDITIONS, REFINE_SAMPLES = 4, 256  # condition values and samples at each it is measured on
 DIMENSION_ROWS = 16  # dataset rows whose constraint Jacobian gives the manifold's dimension (the largest rank wins)
+
+
+class Trainable(Protocol):
+    """What training drives: a :class:`~manifoldgen.models.base.ConditionalSampler`, by its interface."""
+
+    name: str
+    config: dict
+    k: int
+    nets: torch.nn.ModuleDict
+    refine: int | None
+    residual_fn: Callable | None
+
+    def size_for(self, joints: int, dimension: int) -> None: ...
+    def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None: ...
+    def normalise_q(self, q: torch.Tensor) -> torch.Tensor: ...
+    def normalise_y(self, y: torch.Tensor) -> torch.Tensor: ...
+    def state_tensors(self) -> dict[str, torch.Tensor]: ...
+    def sample(self, y: np.ndarray, n: int, generator: torch.Generator | None = None) -> np.ndarray: ...
+    def save(self, path: str | Path) -> None: ...
+    def _optimizers(self) -> list[torch.optim.Optimizer]: ...
+    def _train_step(self, q: torch.Tensor, y: torch.Tensor, y_free: torch.Tensor,
+                    optimizers: list[torch.optim.Optimizer], generator: torch.Generator) -> dict[str, float]: ...
+    def _validation_loss(self, q: torch.Tensor, y: torch.Tensor, generator: torch.Generator) -> float: ...
+
+
+class TaskLike(Protocol):
+    """What training reads of a :class:`~manifoldgen.tasks.Task`."""
+
+    robot: Robot
+    constraint: Constraint
+
+    @property
+    def condition(self) -> Condition: ...
 
 
 @dataclass
@@ -66,10 +103,9 @@ class TrainingLog:
         return {**asdict(self), "seconds": self.seconds}
 
 
-def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
-    """Refuse datasets a conditional model cannot learn from, or that do not hold their own task
-    (joint order, condition columns, rows on the constraint); returns the task (``task``, when given,
-    once the dataset is found made for it)."""
+def check_rows(dataset: Dataset) -> None:
+    """Refuse datasets a conditional model cannot learn from, whatever their task: inconsistent shapes, NaN,
+    too few rows, a single condition value."""
     q, y = np.asarray(dataset.q), np.asarray(dataset.y)
     if q.ndim != 2 or y.ndim != 2 or len(q) != len(y):
         raise ManifoldgenError(f"dataset has inconsistent shapes q {q.shape}, y {y.shape}")
@@ -80,7 +116,13 @@ def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
     if len(np.unique(y, axis=0)) < 2:
         raise ManifoldgenError(f"dataset has a single condition value {y[0].tolist()}; a conditional model "
                                "needs rows at two or more values (collect with several --condition values)")
-    task = task_from_meta(dataset.meta, task=task, what="the dataset")
+
+
+def check_dataset(dataset: Dataset, task: TaskLike) -> None:
+    """:func:`check_rows`, then refuse a dataset that does not hold ``task`` (the task it was made for): joint
+    order, condition columns, rows on the constraint."""
+    check_rows(dataset)
+    q, y = np.asarray(dataset.q), np.asarray(dataset.y)
     if list(dataset.meta["joints"]) != task.robot.joints:
         raise ManifoldgenError(f"dataset joints {dataset.meta['joints']} are not its task's planning group "
                                f"{task.robot.joints} in that order; recollect the dataset")
@@ -94,10 +136,9 @@ def check_dataset(dataset: Dataset, task: Task | None = None) -> Task:
         raise ManifoldgenError(f"dataset row {i} does not satisfy its task's constraint (worst residual "
                                f"{task.constraint.violation(q[i], y[i])[0]:.3g} x tolerance, or outside the limits); "
                                f"{len(bad)} of {len(rows)} rows checked fail: recollect the dataset")
-    return task
 
 
-def needed_refine(model: ConditionalSampler, task: Task, y: np.ndarray, seed: int) -> int:
+def needed_refine(model: Trainable, task: TaskLike, y: np.ndarray, seed: int) -> int:
     """The fewest projection iterations of :data:`REFINE_LADDER` that bring within tolerance :data:`REFINE_SHARE`
     of the model's samples that the ladder's top brings, at the condition values of ``y (N, k)`` (at most
     :data:`REFINE_CONDITIONS` of them): what a model sampler refines its rows by default. (Rows no projection
@@ -128,14 +169,14 @@ def _fingerprint(dataset: Dataset) -> str:
     return digest.hexdigest()[:16]
 
 
-def manifold_dimension(task, q: np.ndarray, y: np.ndarray) -> int:
+def manifold_dimension(task: TaskLike, q: np.ndarray, y: np.ndarray) -> int:
     """Dimension of ``task``'s constraint manifold at rows q (B, n), y (B, k): n minus the largest rank of the
     constraint's Jacobian over the rows (the equalities' rank; 1e-6 tolerance)."""
     _, J = task.constraint.jacobian(np.asarray(q, float), np.asarray(y, float))
     return task.robot.n - max(int(np.linalg.matrix_rank(j, tol=1e-6)) for j in J)
 
 
-def _check_size(model: ConditionalSampler, width: int) -> None:
+def _check_size(model: Trainable, width: int) -> None:
     """Refuse, before anything is allocated, hidden layers whose weights, gradients and optimiser state would take
     more than :data:`MAX_MODEL_BYTES` (float32; ``width``: joints + condition values, about a layer's in or out)."""
     layers = [v for k, v in model.config.items() if k.endswith("hidden") and isinstance(v, list)]
@@ -146,7 +187,7 @@ def _check_size(model: ConditionalSampler, width: int) -> None:
                                f"{MAX_MODEL_BYTES / 2**30:.0f} GiB (e.g. --set 'hidden=[256,256]')")
 
 
-def _check_latent(model: ConditionalSampler, dimension: int) -> None:
+def _check_latent(model: Trainable, dimension: int) -> None:
     """Warn when the model's latent is smaller than the manifold's ``dimension``: its samples then cover at
     most a latent-dimensional sheet of the manifold."""
     latent = model.config.get("latent")
@@ -156,12 +197,13 @@ def _check_latent(model: ConditionalSampler, dimension: int) -> None:
                       f"dimensional sheet of it; train with --set latent={dimension}", stacklevel=3)
 
 
-def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = None, seed: int = 0,
+def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
-          validation: float = VALIDATION, task: Task | None = None) -> TrainingLog:
+          validation: float = VALIDATION) -> TrainingLog:
     """Fit ``model`` on ``dataset`` with a held-out ``validation`` fraction and early stopping; ``task``: the
-    task the dataset was made for, when its meta names a user's constraint type (see :func:`check_dataset`)."""
-    task = check_dataset(dataset, task)
+    task the dataset was made for (the caller's to find, see :func:`manifoldgen.models.base.dataset_task`;
+    checked here with :func:`check_dataset`)."""
+    check_dataset(dataset, task)
     epochs = int(model.config["epochs"] if epochs is None else epochs)
     if epochs <= 0:
         raise ManifoldgenError(f"--epochs must be positive, got {epochs}")
@@ -254,14 +296,12 @@ def train(model: ConditionalSampler, dataset: Dataset, *, epochs: int | None = N
     if out is not None:
         model.save(out)
         atomic_write_text(out / "training.json", json.dumps(log.to_dict(), indent=1))
-        from manifoldgen.viz.losses import plot_training
-        plot_training(log, out / "loss.png")
         (out / CHECKPOINT).unlink(missing_ok=True)
     return log
 
 
 # ---------------------------------------------------------------------- checkpoints
-def _save_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optimizers: list,
+def _save_checkpoint(out: Path, identity: dict, model: Trainable, optimizers: list,
                      gen: torch.Generator, log: TrainingLog, best_state: dict, bad: int) -> None:
     tensors = {f"model.{k}": v for k, v in model.state_tensors().items()}
     tensors |= {f"best.{k}": v for k, v in best_state.items()}
@@ -283,7 +323,7 @@ def _save_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optim
     atomic_write_bytes(out / CHECKPOINT, safetensors.torch.save(tensors, metadata={"state": json.dumps(doc)}))
 
 
-def _load_checkpoint(out: Path, identity: dict, model: ConditionalSampler, optimizers: list,
+def _load_checkpoint(out: Path, identity: dict, model: Trainable, optimizers: list,
                      gen: torch.Generator, log: TrainingLog) -> tuple[dict, int]:
     damaged = (f"the checkpoint {out / CHECKPOINT} is damaged ({{}}); delete it and train from scratch, "
                "or choose another directory")

@@ -19,14 +19,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from manifoldgen.bench.metrics import accuracy, coverage_metrics
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, locks_output
+from manifoldgen.metrics import accuracy, coverage_metrics
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
+from manifoldgen.provenance import check_made_for
 from manifoldgen.runtime import check_seed, set_torch_threads
-from manifoldgen.tasks import Task, check_made_for, task_from_meta
+from manifoldgen.tasks import Task, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
 MIN_ROWS = 20  # samples and reference rows per condition: the k-NN metrics need more than k (5) of each

@@ -15,7 +15,7 @@ from rich.console import Console
 
 from manifoldgen.data import collect
 from manifoldgen.models import get_model_class
-from manifoldgen.planning.query import run_query, save_path
+from manifoldgen.query import run_query, save_path
 from manifoldgen.runtime import REFINE
 from manifoldgen.sampling import generate
 from manifoldgen.training import CHECKPOINT

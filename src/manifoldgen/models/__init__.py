@@ -2,25 +2,36 @@
 
 ``MODELS`` is their registry (names in the package, ``manifoldgen.models`` entry points of
 other packages, ``module:Class``); :func:`load_model` reads any saved model directory
-(validated, never unpickled); :func:`pretrained_model_dir` locates the shipped models.
+(validated, never unpickled); :func:`pretrained_model_dir` locates the shipped models. The model
+classes are imported (with torch) when first named, so listing the names costs nothing.
 """
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from manifoldgen.errors import ManifoldgenError, file_reader
-from manifoldgen.models.base import ConditionalSampler, read_model_dir
-from manifoldgen.models.cfm import ConditionalFlowMatching
-from manifoldgen.models.cvae import CVAE
-from manifoldgen.models.flow import ConditionalFlow
-from manifoldgen.models.cgan import CGAN
-from manifoldgen.models.wgan import WGANGP
 from manifoldgen.registry import Registry
 
-MODELS: Registry[ConditionalSampler] = Registry("model", ConditionalSampler)
-for _cls in (CVAE, CGAN, WGANGP, ConditionalFlow, ConditionalFlowMatching):
-    MODELS.register(_cls.name)(_cls)
+if TYPE_CHECKING:
+    from manifoldgen.models.base import ConditionalSampler
+
+MODELS: Registry[ConditionalSampler] = Registry("model", "manifoldgen.models.base:ConditionalSampler", {
+    "cvae": "manifoldgen.models.cvae:CVAE", "cgan": "manifoldgen.models.cgan:CGAN",
+    "wgan": "manifoldgen.models.wgan:WGANGP", "flow": "manifoldgen.models.flow:ConditionalFlow",
+    "cfm": "manifoldgen.models.cfm:ConditionalFlowMatching"})
+_CLASSES = {"CVAE": "cvae", "CGAN": "cgan", "WGANGP": "wgan", "ConditionalFlow": "flow",
+            "ConditionalFlowMatching": "cfm"}
+
+
+def __getattr__(name: str):
+    if name in _CLASSES:
+        return MODELS.get(_CLASSES[name])
+    if name == "ConditionalSampler":
+        return MODELS.base
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def get_model_class(name: str) -> type[ConditionalSampler]:
@@ -31,6 +42,7 @@ def get_model_class(name: str) -> type[ConditionalSampler]:
 @file_reader
 def load_model(path: str | Path) -> ConditionalSampler:
     """Load a model directory (model.json + model.safetensors) of any registered model."""
+    read_model_dir = importlib.import_module("manifoldgen.models.base").read_model_dir
     doc, tensors = read_model_dir(path)
     if doc["model"] not in MODELS.names():
         raise ManifoldgenError(f"{path}: unknown model type '{doc['model']}' in model.json; "

@@ -24,11 +24,12 @@ import torch
 from manifoldgen.constraints import Condition
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
-from manifoldgen.training import TrainingLog, train
+from manifoldgen.tasks import Task, task_from_meta
+from manifoldgen.training import TrainingLog, check_rows, train
+from manifoldgen.viz.losses import plot_training
 
 if TYPE_CHECKING:
-    from manifoldgen.data import Dataset
-    from manifoldgen.tasks import Task
+    from manifoldgen.dataset import Dataset
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
@@ -177,9 +178,14 @@ class ConditionalSampler(ABC):
     # ------------------------------------------------------------------ public API
     def fit(self, dataset: Dataset, *, epochs: int | None = None, seed: int = 0, progress: bool = True,
             out: str | Path | None = None, resume: bool = False, task: Task | None = None) -> TrainingLog:
-        """Train on ``dataset`` (see :func:`manifoldgen.training.train`, also for ``task``); with ``out``,
-        checkpoints are written there every epoch and the final model is saved there."""
-        return train(self, dataset, epochs=epochs, seed=seed, progress=progress, out=out, resume=resume, task=task)
+        """Train on ``dataset`` (see :func:`manifoldgen.training.train`) for ``task`` (see :func:`dataset_task`);
+        with ``out``, checkpoints are written there every epoch, and the final model and its loss curves
+        (``loss.png``) are saved there."""
+        log = train(self, dataset, task=dataset_task(dataset, task), epochs=epochs, seed=seed, progress=progress,
+                    out=out, resume=resume)
+        if out is not None:
+            plot_training(log, Path(out) / "loss.png")
+        return log
 
     def sample(self, y: np.ndarray, n: int, generator: torch.Generator | None = None) -> np.ndarray:
         """(n, d) float64 configurations for condition ``y`` ((k,), (1, k) or (n, k))."""
@@ -290,6 +296,14 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"{path}: weights do not match the architecture in {CONFIG_FILE} ({first}); "
                                    "the config was edited or the files come from different models") from exc
         return model
+
+
+def dataset_task(dataset: Dataset, task: Task | None = None) -> Task:
+    """The task a model learns ``dataset`` for, once its rows pass the checks that need none
+    (:func:`~manifoldgen.training.check_rows`): ``task`` (refused unless the dataset was made for it; needed
+    when the dataset's meta names a user's constraint type), by default the task rebuilt from the meta."""
+    check_rows(dataset)
+    return task_from_meta(dataset.meta, task=task, what="the dataset")
 
 
 def _check_hyper(model: str, key: str, value, default) -> None:

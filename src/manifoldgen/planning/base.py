@@ -18,7 +18,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.sampling import Sampler
@@ -51,10 +51,6 @@ class PlannerSettings:
                 or self.candidates <= 0):
             raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, resolution, step, pool_batch "
                                    "and candidates must be positive, pool >= 0")
-
-
-class SamplerFailed(Exception):
-    """The sampler could not produce a configuration: the query ends unsolved."""
 
 
 class Tree:

@@ -16,8 +16,6 @@ information only. A task file's own ``module:Class`` is imported from its folder
 from __future__ import annotations
 
 import contextlib
-import json
-import math
 import re
 import sys
 import tomllib
@@ -29,7 +27,10 @@ import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
 from manifoldgen.errors import ManifoldgenError, file_reader, unknown_name
+from manifoldgen.planning import PLANNERS, planner_settings
+from manifoldgen.provenance import check_made_for
 from manifoldgen.robot import Robot, find_robot, resolve_robot
+from manifoldgen.settings import check_settings
 
 BUILTIN_DIR = Path(__file__).resolve().parent
 TASK_KEYS = {"name": "task name", "description": "one line for `manifoldgen tasks`",
@@ -56,7 +57,7 @@ class Task:
     notes: str = ""
     scenes: dict[str, Path] = field(default_factory=dict)
     file: Path | None = None  # the task file it was read from
-    attached: dict | None = None  # an object the robot holds in every scene (JSON-ready, see scene.Attached)
+    attached: dict | None = None  # an object the robot holds in every scene (JSON-ready, see shapes.Attached)
     planner: dict = field(default_factory=dict)  # our planners' default settings for this task (key -> value)
 
     @property
@@ -175,43 +176,6 @@ def _numbers(value, what: str) -> np.ndarray:
         raise ManifoldgenError(f"{what} must be a list of numbers, got {value!r}") from None
 
 
-def check_made_for(meta: dict, constraint: Constraint, what: str) -> None:
-    """Refuse a file (``what``: e.g. "model runs/cvae") whose ``meta`` was made for another robot (by URDF
-    content), planning group, locked joints or constraint than ``constraint``'s."""
-    robot = constraint.robot
-    spec = meta.get("task") if isinstance(meta.get("task"), dict) else {}
-    made = spec.get("robot", {}) if isinstance(spec.get("robot"), dict) else {}
-    differences = []
-    if made.get("urdf_sha256") != robot.identity["urdf_sha256"]:
-        differences.append(f"robot {made.get('name', meta.get('robot'))} (URDF {str(made.get('urdf_sha256'))[:12]}) "
-                           f"vs {robot.name} (URDF {robot.identity['urdf_sha256'][:12]})")
-    if list(meta.get("joints", [])) != list(robot.joints):
-        differences.append(f"joints {meta.get('joints')} vs {robot.joints}")
-    locked = meta.get("locked", {})
-    if set(locked) != set(robot.locked) or any(abs(locked[j] - v) > 1e-9 for j, v in robot.locked.items()):
-        differences.append("locked joint values")
-    made_spec, spec = json.loads(json.dumps(meta.get("constraint") or {})), json.loads(json.dumps(constraint.spec()))
-    if not _same(made_spec, spec):
-        keys = sorted(k for k in set(made_spec) | set(spec) if not _same(made_spec.get(k), spec.get(k)))
-        differences.append(f"constraint {made_spec.get('type')} vs {spec.get('type')}" if "type" in keys
-                           else f"constraint {spec.get('type')} differs in {', '.join(keys)}")
-    if differences:
-        raise ManifoldgenError(f"{what} was made for another task: {'; '.join(differences)}; use one made for this "
-                               "task (collect / train on this task)")
-
-
-def _same(a, b) -> bool:
-    """Whether two JSON values are equal, numbers to 1e-9 relative (a value computed from the robot's kinematics,
-    such as a foot position, may differ in its last bits between versions of our kinematics)."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, list) and isinstance(b, list):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and bool not in (type(a), type(b)):
-        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
-    return a == b
-
-
 # ---------------------------------------------------------------------- task files
 def _line(text: str, key: str) -> int:
     """The 1-based line where ``key`` is set or opens a table in TOML ``text`` (0 if not found)."""
@@ -294,10 +258,6 @@ def load_task_file(path: str | Path) -> Task:
 
 def _planner_defaults(table) -> dict:
     """The task file's ``[planner]`` table, each key a setting of one of our planners with a value of its type."""
-    from manifoldgen.planning import PLANNERS  # planning builds on tasks
-    from manifoldgen.planning.query import planner_settings
-    from manifoldgen.settings import check_settings
-
     if not isinstance(table, dict):
         raise ManifoldgenError("'planner' must be a table of setting = value, e.g. reach = 0.2")
     known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
@@ -307,7 +267,7 @@ def _planner_defaults(table) -> dict:
 def _held(task: Task, table) -> dict:
     """The task file's ``[attached]`` table as a held object's JSON-ready dict, refusing one that does not
     parse or that collides with the robot at the task's home (the links holding it excepted)."""
-    from manifoldgen.scene import Attached, held_checker  # scene builds on tasks
+    from manifoldgen.shapes import Attached, held_checker  # coal: loaded when a task holds something
 
     if not isinstance(table, dict):
         raise ManifoldgenError("'attached' must be one table: type, size (box), pose {position, quaternion} in "
@@ -381,5 +341,5 @@ def get_task(task: str, robot: str | None = None) -> Task:
     return load_task_file(robots[robot])
 
 
-__all__ = ["Task", "builtin_tasks", "check_made_for", "code_types", "get_task", "load_task_file", "task_from_meta",
+__all__ = ["Task", "builtin_tasks", "code_types", "get_task", "load_task_file", "task_from_meta",
            "task_from_spec"]

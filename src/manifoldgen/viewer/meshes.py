@@ -21,7 +21,8 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.robot import Robot, robots_dir
-from manifoldgen.scene import Obstacle, Scene
+from manifoldgen.scene import Scene
+from manifoldgen.shapes import Obstacle
 
 ROBOT_COLOR = np.array([0.75, 0.75, 0.78, 1.0])  # a visual element without a material
 COLLISION_COLOR = np.array([0.8, 0.6, 0.3, 1.0])

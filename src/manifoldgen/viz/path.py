@@ -9,7 +9,8 @@ import numpy as np
 
 from manifoldgen.constraints.balance import convex_hull
 from manifoldgen.robot import Robot
-from manifoldgen.scene import Obstacle, Scene
+from manifoldgen.scene import Scene
+from manifoldgen.shapes import Obstacle
 from manifoldgen.space import densify
 from manifoldgen.viz.losses import save_figure
 

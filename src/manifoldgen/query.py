@@ -16,6 +16,7 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, save_npz
+from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
 from manifoldgen.planning.result import PlanResult, path_length
@@ -23,6 +24,7 @@ from manifoldgen.planning.smoothing import shortcut
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import Scene
 from manifoldgen.space import ConstrainedSpace
+from manifoldgen.specs import make_sampler
 from manifoldgen.tasks import Task
 
 PATH_FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
@@ -30,19 +32,15 @@ PATH_FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 
 def get_planner(name: str) -> type[Planner]:
     """The planner class registered as ``name`` (clear error listing the known ones)."""
-    from manifoldgen.planning import PLANNERS
-
     return PLANNERS.get(name)
 
 
 def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int, time_limit: float,
               local: str = DEFAULT_LOCAL, smooth: bool = False, settings: dict | None = None,
               ) -> tuple[PlanResult, dict]:
-    """Plan the scene's query with the planner's ``settings`` (field -> value; see :func:`planner_settings`);
-    returns the result (path re-validated, optionally smoothed) and the path file's ``meta``
-    (``meta["validation"]`` holds the check and the resolution it used)."""
-    from manifoldgen.specs import make_sampler
-
+    """Plan the scene's query with the planner's ``settings`` (field -> value; see
+    :func:`manifoldgen.planning.planner_settings`); returns the result (path re-validated, optionally smoothed)
+    and the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used)."""
     if not np.isfinite(time_limit) or time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
     seed = check_seed(seed)
@@ -90,11 +88,6 @@ def task_settings(task: Task, planner: str, settings: dict | None = None) -> dic
     """``planner``'s settings for ``task``: the task file's ``[planner]`` defaults it takes, then ``settings``."""
     known = planner_settings(planner)
     return {**{k: v for k, v in task.planner.items() if k in known}, **(settings or {})}
-
-
-def planner_settings(planner: str) -> dict:
-    """The settings ``planner`` takes (field -> default), for ``--set`` checking."""
-    return asdict(get_planner(planner).settings_type())
 
 
 def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
