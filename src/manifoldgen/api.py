@@ -123,12 +123,14 @@ def load_scene(task: Task | PathLike, name: PathLike) -> Scene:
 
 # ---------------------------------------------------------------------------------------------- data, models
 def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out: PathLike | None = None, *,
-            conditions: Any = None, near_home: float = 0.0, progress: bool = False) -> Dataset:
+            conditions: Any = None, near_home: float = 0.0, anchors: bool = True, progress: bool = False) -> Dataset:
     """Collect ``per_condition`` constraint-satisfying configurations at each of the task's condition values
-    (or ``conditions``, ``(V, k)``), as ``manifoldgen collect`` does; with ``out`` the dataset is also written
-    there (``.npz``; an interrupted call resumes when repeated)."""
+    (or ``conditions``, ``(V, k)``), as ``manifoldgen collect`` does: with ``anchors`` (and no ``near_home``) half
+    the seeds lie around every scene's start and goal, and the dataset records the scenes; with ``out`` the
+    dataset is also written there (``.npz``; an interrupted call resumes when repeated)."""
     from manifoldgen.data import collect as run_collect
     from manifoldgen.io import check_output_path
+    from manifoldgen.scene import task_anchors
 
     task = _task("collect", task)
     per_condition = _integer("collect", "per_condition", per_condition)
@@ -144,21 +146,28 @@ def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out
     out = _optional_path("collect", "out", out)
     if out is not None:
         check_output_path(out, [task.file], what="out")
-    return run_collect(task, per_condition, seed, out, conditions=conditions, near_home=near_home,
+    found = task_anchors(task) if anchors and not near_home else None
+    return run_collect(task, per_condition, seed, out, conditions=conditions, near_home=near_home, anchors=found,
                        progress=bool(progress))
 
 
-def train(dataset: Dataset | PathLike, model: str = "cvae", seed: int = 0, out: PathLike | None = None, *,
+def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: PathLike | None = None, *,
           epochs: int | None = None, progress: bool = False, **hyper) -> ConditionalSampler:
     """Train a conditional model ``p(q | y)`` on ``dataset`` (a :class:`Dataset` or a dataset file) and return it.
 
-    ``model``: ``cvae``, ``cgan``, ``wgan``, ``flow`` or a registered / ``module:Class`` name; ``hyper``: its
-    hyper-parameters (``latent=6``, ``hidden=[256, 256]``, ...; an unknown one lists the known ones). With
-    ``out`` the model directory (``model.json`` + ``model.safetensors``) is written there. Results are
-    reproducible for a seed and a torch thread count (``manifoldgen.runtime.set_torch_threads``)."""
+    ``model``: ``auto`` (as ``manifoldgen train``: the candidates trained, scored on held-out rows and raced on the
+    task's scenes, the fastest kept; :mod:`manifoldgen.selection`), ``cvae``, ``cfm``, ``cgan``, ``wgan``,
+    ``flow`` or a registered / ``module:Class`` name; ``hyper``: its hyper-parameters (``latent=6``,
+    ``hidden=[256, 256]``, ...; an unknown one lists the known ones; not with ``auto``). With ``out`` the model
+    directory (``model.json`` + ``model.safetensors``; with ``auto`` also ``selection.json`` and ``candidates/``)
+    is written there. Results are reproducible for a seed and a torch thread count
+    (``manifoldgen.runtime.set_torch_threads``)."""
+    import tempfile
+
     from manifoldgen.dataset import Dataset
     from manifoldgen.io import check_output_path
     from manifoldgen.models import get_model_class
+    from manifoldgen.selection import SELECTION_FILE, select_model
     from manifoldgen.training import OUTPUT_FILES
 
     source = None
@@ -173,7 +182,15 @@ def train(dataset: Dataset | PathLike, model: str = "cvae", seed: int = 0, out: 
     epochs = None if epochs is None else _integer("train", "epochs", epochs)
     out = _optional_path("train", "out", out)
     if out is not None:
-        check_output_path(out, [source], directory=True, writes=OUTPUT_FILES, what="out")
+        check_output_path(out, [source], directory=True, writes=OUTPUT_FILES + (SELECTION_FILE, "candidates"),
+                          what="out")
+    if model == "auto":
+        if hyper:
+            raise ManifoldgenError(f"train: hyper-parameters ({', '.join(hyper)}) set one model's; name it, e.g. "
+                                   "model='cvae'")
+        with tempfile.TemporaryDirectory(prefix="manifoldgen-train-") as scratch:
+            return select_model(dataset, out if out is not None else scratch, seed=seed, epochs=epochs,
+                                progress=bool(progress))[0]
     net = get_model_class(model)(**hyper)
     net.fit(dataset, epochs=epochs, seed=seed, progress=bool(progress), out=out)
     return net

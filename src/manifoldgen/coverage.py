@@ -10,7 +10,7 @@ neighbours are several typical neighbour distances apart): IK branches separated
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,11 +24,13 @@ MIN_MISS = 0.5  # rad: gaps below this are never a miss (a planner's extension r
 
 @dataclass
 class Anchors:
-    """Start and goal configurations ``q (A, n)`` of a task's scenes at their conditions ``y (A, k)``."""
+    """Start and goal configurations ``q (A, n)`` of a task's scenes at their conditions ``y (A, k)``, and the
+    ``scenes`` themselves as scene documents (JSON-ready dicts, start and goal solved to configurations)."""
 
     q: np.ndarray
     y: np.ndarray
     labels: list[str]
+    scenes: list[dict] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.q)

@@ -88,7 +88,7 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     meta = {"format_version": FORMAT_VERSION, **task.meta(), "seed": seed, "per_condition": per_condition,
             "method": f"{method} + damped least-squares projection",
             **({"near_home": float(near_home)} if near_home else {}),
-            **({"anchors": anchors.to_meta()} if anchors else {})}
+            **({"anchors": anchors.to_meta(), "scenes": anchors.scenes} if anchors else {})}
     partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
         out = check_output_path(out)

@@ -168,7 +168,7 @@ def _checked(scene: Scene, task: Task, name: str) -> Scene:
 def task_anchors(task: Task) -> Anchors:
     """The start and goal of every scene of ``task`` (targets solved as ``plan`` solves them). A scene that
     cannot be set up is left out with a warning (``plan`` reports it in full); no scenes: no anchors."""
-    qs, ys, labels = [], [], []
+    qs, ys, labels, scenes = [], [], [], []
     for name in task.scenes:
         try:
             scene = get_scene(task, name)
@@ -179,5 +179,16 @@ def task_anchors(task: Task) -> Anchors:
             qs.append(np.asarray(getattr(scene, end), float))
             ys.append(np.asarray(scene.condition, float))
             labels.append(f"{name} {end}")
+        scenes.append(solved_document(scene, name))
     n, k = task.robot.n, task.condition.k
-    return Anchors(np.reshape(qs, (-1, n)), np.reshape(ys, (-1, k)), labels)
+    return Anchors(np.reshape(qs, (-1, n)), np.reshape(ys, (-1, k)), labels, scenes)
+
+
+def solved_document(scene: Scene, name: str) -> dict:
+    """``scene`` as a scene document (what :meth:`Scene.from_json` reads) named ``name``, with its start and goal
+    as the configurations they were solved to and the tool it holds: the query itself, with no target to solve."""
+    return {"format_version": FORMAT_VERSION, "name": name, "robot": scene.robot,
+            "obstacles": [o.to_dict() for o in scene.obstacles],
+            "attached": None if scene.attached is None else scene.attached.to_dict(),
+            "start": np.asarray(scene.start, float).tolist(), "goal": np.asarray(scene.goal, float).tolist(),
+            "condition": np.asarray(scene.condition, float).tolist()}

@@ -12,9 +12,9 @@ as it would alone: the same bytes as a sequential run.
 
 Held-out rows do not price what planning pays: a flow-matching model covers more but decodes a row in tens to
 hundreds of microseconds, and on a codimension-one manifold projected uniform rows are as good and cost nothing.
-So when the task names scenes, :func:`race` plans them (:data:`RACE_SEEDS` seeds each, seeds no benchmark uses)
-with every candidate's sampler and with projected uniform rows only (``project``: the rule's model at ``mix``
-1), and the chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
+So when the task names scenes (or its dataset recorded them), :func:`race` plans them (:data:`RACE_SEEDS` seeds
+each, seeds no benchmark uses) with every candidate's sampler and with projected uniform rows only (``project``:
+the rule's model at ``mix`` 1), and the chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
 copied to ``OUT`` with its ``mix``; ``OUT/selection.json`` holds both tables. Without scenes the rule decides.
 """
 
@@ -96,7 +96,8 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1)})
     best_recall = max(row["recall"] for row in table)
     ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
-    raced = race(models, ruled["model"], task, progress=progress) if race_scenes else []
+    raced = race(models, ruled["model"], task, dataset.meta.get("scenes") or [], progress=progress) \
+        if race_scenes else []
     winner = max(raced, key=lambda r: (r["solved"], -r["cpu"])) if raced else None
     name = winner["model"] if winner else ruled["model"]
     for row in table:
@@ -115,15 +116,18 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     return model, table, raced
 
 
-def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, *, progress: bool = False) -> list[dict]:
-    """Plan up to :data:`RACE_SCENES` of ``task``'s scenes :data:`RACE_SEEDS` times each (RRT-Connect, its task
-    settings, :data:`RACE_TIME` seconds) with each model's sampler and with projected uniform rows only (the
-    ``ruled`` model at mix 1, :data:`PROJECTION`); one row per entry: ``label``, ``model``, ``mix``, ``solved``,
-    ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No scenes: []."""
+def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded: list[dict] = (), *,
+         progress: bool = False) -> list[dict]:
+    """Plan up to :data:`RACE_SCENES` of ``task``'s scenes (its scene files, else the scene documents ``recorded``
+    in the dataset's meta: :func:`manifoldgen.scene.solved_document`) :data:`RACE_SEEDS` times each (RRT-Connect,
+    its task settings, :data:`RACE_TIME` seconds) with each model's sampler and with projected uniform rows only
+    (the ``ruled`` model at mix 1, :data:`PROJECTION`); one row per entry: ``label``, ``model``, ``mix``,
+    ``solved``, ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No
+    scenes: []."""
     from manifoldgen.progress import progress_bar
     from manifoldgen.query import get_planner, task_settings
     from manifoldgen.sampling import ModelSampler
-    from manifoldgen.scene import get_scene
+    from manifoldgen.scene import Scene, get_scene
     from manifoldgen.space import ConstrainedSpace
 
     entries = [(name, name, 0.0) for name in models] + [(PROJECTION, ruled, 1.0)]
@@ -133,6 +137,9 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, *, progr
             scenes.append(get_scene(task, name))
         except ManifoldgenError:  # collect already warned that this scene cannot be set up
             continue
+    if not task.scenes:  # a task rebuilt from a file's meta: the scenes its dataset was collected for
+        scenes = [Scene.from_json(json.dumps(doc), f"the dataset's scene {doc.get('name')}")
+                  for doc in list(recorded)[:RACE_SCENES]]
     if not scenes:
         return []
     runs = {label: [] for label, _, _ in entries}
