@@ -105,6 +105,8 @@ def test_solved_and_unsolved_queries_have_one_schema(wall):
     assert b["validation"]["states_checked"] == 0 and not unsolved.valid
     assert unsolved.path.shape == (0, task.robot.n)
     assert unsolved.why().startswith("not solved")
+    with pytest.raises(mg.ManifoldgenError, match="not solved, so there is no path to write"):
+        unsolved.save("never.npz")
 
 
 def test_a_model_object_a_spec_and_a_sampler_plan_alike(wall):

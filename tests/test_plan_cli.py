@@ -137,3 +137,11 @@ def test_bad_sampler_specs(tmp_path, panda_task):
     pr2.save(tmp_path / "pr2.npz")
     result = _plan(tmp_path, "--sampler", f"pg:{tmp_path / 'pr2.npz'}")
     assert result.exit_code == 2 and "dataset" in result.output and "made for another task: robot pr2" in result.output
+
+
+def test_an_unsolved_plan_writes_nothing_and_says_why(tmp_path):
+    out = tmp_path / "p.npz"
+    result = runner.invoke(app, ["plan", "pose", "--scene", "maze", "--time", "0.001", "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    assert "not solved" in result.output and "nothing written" in result.output
+    assert not out.exists() and not out.with_suffix(".png").exists()

@@ -315,6 +315,9 @@ class QueryResult:
         file = _optional_path("QueryResult.save", "file", file)
         if file is None:
             raise _wrong("QueryResult.save", "file", "a file path", file)
+        if not self.result.solved:
+            raise ManifoldgenError(f"QueryResult.save: the query was not solved, so there is no path to write "
+                                   f"({self.result.why()})")
         save_path(file, self.result, self.meta)
         return file
 

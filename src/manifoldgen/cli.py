@@ -197,7 +197,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
          snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
-    """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved."""
+    """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved (nothing
+    written)."""
     from manifoldgen.planning import planner_settings
     from manifoldgen.query import run_query, save_path
     from manifoldgen.runtime import set_torch_threads
@@ -222,22 +223,23 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values)
+    if not result.solved:  # no path: nothing is written, so no file can pass for one
+        console.print(f"[red]not solved[/] in {result.time_s:.3f} s | {result.samples_drawn} samples, "
+                      f"{result.iterations} iterations | {_engine(result)} | nothing written")
+        console.print(result.why(), markup=False)
+        raise typer.Exit(1)
     save_path(output, result, meta)
     frame = (scene_obj.targets.get("goal") or scene_obj.targets.get("start") or {}).get("frame") \
         or constrained_frame(task_obj.constraint) or task_obj.robot.model.frames[-1].name  # a reach traces its hand
     plot_path(result.path, task_obj.robot, frame, scene_obj, picture,
               f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
-    if snapshots is not None and result.solved:
+    if snapshots is not None:
         from manifoldgen.viz.snapshots import draw_snapshots
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)
         picture = f"{picture}, {snapshots}"
-    status = "[green]solved[/]" if result.solved else "[red]not solved[/]"
-    console.print(f"{status} in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
+    console.print(f"[green]solved[/] in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {_engine(result)} "
                   f"-> {output}, {picture}")
-    if not result.solved:
-        console.print(result.why(), markup=False)
-        raise typer.Exit(1)
     if result.extras.get("sampler_note"):
         console.print(f"note: {result.extras['sampler_note']}", markup=False)
 
