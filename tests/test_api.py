@@ -166,7 +166,7 @@ def test_wrong_types_give_one_clear_error(call, words, wall):
 
 
 def test_train_by_default_races_the_candidates_as_the_command_line_does():
-    data = mg.collect("sphere", per_condition=400, seed=3)
+    data = mg.collect("sphere", per_condition=300, seed=3)  # under selection.PARALLEL_ROWS: trained in-process
     model = mg.train(data, seed=1, epochs=2)  # no out: the candidates live in a scratch folder
     assert model.name in ("cvae", "cfm") and model.mix in (0.0, 1.0)
     with pytest.raises(mg.ManifoldgenError, match="hyper-parameters .latent. set one model's; name it"):
