@@ -8,7 +8,7 @@
 ``--set spheres=true``) and prints, per seed, what identifies its search (solved, waypoints, their sum,
 iterations, samples, tree sizes: equal lines mean equal decisions), then the median CPU of ``Planner.solve``.
 ``perf`` runs the same under ``perf record`` (Linux perf; build the core with symbols for names inside it:
-``pip install --no-build-isolation -Ccmake.build-type=RelWithDebInfo ./native``), recording only while a
+``pip install -e . -Ccmake.build-type=RelWithDebInfo``), recording only while a
 query runs (perf's control FIFOs). ``split`` sums a recording's samples by kind of work.
 """
 

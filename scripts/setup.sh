@@ -1,16 +1,14 @@
 #!/usr/bin/env bash
-# Create .venv and install manifoldgen with its test extras. torch==2.13.0 goes first, with exactly
-# that spec: any other spec pulls the CUDA build (gigabytes); once it is there, the package's
-# own `torch>=2.1` requirement is already satisfied.
+# Create .venv and install manifoldgen with every extra and the test tools. torch==2.13.0 goes first, with
+# exactly that spec: any other spec pulls the CUDA build (gigabytes); once it is there, the package's own
+# `torch>=2.1` requirement is already satisfied. The package install compiles the planning core (native/,
+# the module manifoldgen_core) against the pin version the package requires (see pyproject.toml).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=$(command -v python3.11 || command -v python3)
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install --quiet --disable-pip-version-check torch==2.13.0
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[test,native]"
-# The compiled planning core (native/, the module manifoldgen_core), compiled against the very pin wheel just
-# installed (hence no build isolation; the [native] extra brought scikit-build-core, nanobind and cmeel-eigen).
-.venv/bin/python -m pip install --quiet --disable-pip-version-check --no-build-isolation ./native
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[all,test]"
 # Debian's Chromium for the viewer's browser tests (they skip, saying why, where it cannot be installed)
 if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium) \

@@ -144,7 +144,8 @@ def test_bad_inputs_are_one_line(paths, balance_task, panda_task, tmp_path):
 
 def test_missing_engine_is_one_line(paths, monkeypatch):
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco now raises ImportError
-    with pytest.raises(ManifoldgenError, match="pip install mujoco"):
+    with pytest.raises(ManifoldgenError, match=r"the physics check needs the \[physics\] extra: "
+                                               r"pip install 'manifoldgen\[physics\]'"):
         check_path_file(paths["balanced"], FAST)
 
 

@@ -2,6 +2,8 @@
 // manifoldgen/native.py builds a Space from a ConstrainedSpace; keep this API additive.
 #include "core.hpp"
 
+#include <pinocchio/config.hpp>
+
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/pair.h>
@@ -116,6 +118,9 @@ void set_inequalities(Space& s, int p, nb::callable fn) {
 
 NB_MODULE(manifoldgen_core, m) {
   m.doc() = "manifoldgen's compiled planning core (pinocchio + coal): constrained space and RRT-Connect";
+  // the pinocchio whose headers this module was compiled with: manifoldgen.native refuses the module when the
+  // installed pinocchio differs (its libraries would not match the inline code compiled in here)
+  m.attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
 
   // the operations of compiled expressions (core.hpp), the one definition of their codes
   nb::enum_<mgcore::Op>(m, "Op", "Operations of a compiled expression (register i: instruction i's result)")

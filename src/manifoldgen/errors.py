@@ -1,8 +1,10 @@
 """The one exception type the library raises for bad input, its message for unknown names, the guard
-every file reader wears (:func:`file_reader`), and :class:`SamplerFailed`, which ends a search unsolved."""
+every file reader wears (:func:`file_reader`), :class:`SamplerFailed`, which ends a search unsolved, and the
+import of an optional extra's module (:func:`require`)."""
 
 import difflib
 import functools
+import importlib
 import os
 
 
@@ -48,3 +50,15 @@ def file_reader(read):
             raise ManifoldgenError(f"{source}: damaged or unexpected content ({type(exc).__name__}: {why}); "
                                    "regenerate the file or fix it") from None
     return wrapper
+
+
+def require(module: str, extra: str, what: str):
+    """Import ``module``, which ``what`` needs and the package's ``extra`` extra installs; when it is not
+    installed, a one-line error naming the extra and its install command. (A module that is installed but
+    fails to import raises its own error.)"""
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name is None or not (module == exc.name or module.startswith(exc.name + ".")):
+            raise
+        raise ManifoldgenError(f"{what} needs the [{extra}] extra: pip install 'manifoldgen[{extra}]'") from None

@@ -66,7 +66,10 @@ from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
 
 CORES = ("auto", "python", "native")
-BUILD_HINT = "build it with scripts/setup.sh (pip install --no-build-isolation ./native)"
+BUILD_HINT = "install manifoldgen with pip, which compiles it (pip install -e . in a checkout: scripts/setup.sh does)"
+# against the installed pin, without the isolated build's pinned one (the build tools must then be installed)
+REBUILD = ("pip install scikit-build-core nanobind cmeel-eigen && pip install --no-build-isolation --no-deps "
+           "--force-reinstall -e . (in the manifoldgen checkout)")
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
 TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
 # lazy edge checks (native/src/planner.cpp, Search::verify; nodes only while searching): measured wall 31 -> 28 ms,
@@ -79,10 +82,36 @@ LAZY_SAMPLES = True
 
 
 def core_module():
-    """The ``manifoldgen_core`` extension, or None when it is not built."""
+    """The ``manifoldgen_core`` extension, or None when it is not built or does not fit the installed
+    pinocchio (:func:`core_problem` says why)."""
+    return None if core_problem() else _import_core()
+
+
+def core_problem() -> str:
+    """Why the compiled core cannot be used, with the command that fixes it, in one line; "" when it can. A core
+    compiled against another pinocchio than the installed one is refused: its inline pinocchio code would not
+    match the libraries it runs with."""
+    try:
+        core = _import_core()
+    except ImportError as exc:  # the module is there but does not load (e.g. an undefined pinocchio symbol)
+        return (f"the compiled core manifoldgen_core does not load with pinocchio {pin.__version__} "
+                f"({(str(exc).splitlines() or [type(exc).__name__])[0]}); rebuild it: {REBUILD}")
+    if core is None:
+        return f"the compiled core manifoldgen_core is not installed; {BUILD_HINT}"
+    if core.PINOCCHIO_VERSION != pin.__version__:
+        return (f"the compiled core was built against pinocchio {core.PINOCCHIO_VERSION} but pinocchio "
+                f"{pin.__version__} is installed; pip install pin=={core.PINOCCHIO_VERSION}, or rebuild the core "
+                f"against {pin.__version__}: {REBUILD}")
+    return ""
+
+
+def _import_core():
+    """The ``manifoldgen_core`` module; None when it is not installed."""
     try:
         import manifoldgen_core
-    except ImportError:
+    except ModuleNotFoundError as exc:
+        if exc.name != "manifoldgen_core":
+            raise
         return None
     return manifoldgen_core
 
@@ -366,9 +395,9 @@ def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
     core is not built or cannot take the space. ``compile`` (default :data:`COMPILE`): Python parts that trace
     and pass :func:`_disagreements`' check run as compiled expressions, the others through callbacks
     (:func:`compile_report` says which did, and why not)."""
-    core = core_module()
-    if core is None:
-        raise ManifoldgenError(f"the compiled core manifoldgen_core is not installed; {BUILD_HINT}")
+    problem = core_problem()
+    if problem:
+        raise ManifoldgenError(problem)
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")

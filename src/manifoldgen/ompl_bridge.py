@@ -40,15 +40,16 @@ import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import ompl.base as ob
-import ompl.geometric as og
-import ompl.util as ou
 
 from manifoldgen.constraints import Constraint
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, require
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.sampling import Sampler
 from manifoldgen.space import ConstrainedSpace
+
+ob = require("ompl.base", "ompl", "the OMPL bridge")
+og = require("ompl.geometric", "ompl", "the OMPL bridge")
+ou = require("ompl.util", "ompl", "the OMPL bridge")
 
 SPACES = ("projected", "atlas", "tangent", "joint")
 PLANNERS = {"rrtconnect": og.RRTConnect, "rrt": og.RRT, "kpiece": og.KPIECE1, "prm": og.PRM,

@@ -61,7 +61,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, require
 from manifoldgen.io import load_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot, robots_dir
@@ -190,14 +190,6 @@ def check_path(robot: Robot, path: np.ndarray, feet: list[str], settings: Physic
 
 
 # ---------------------------------------------------------------------- the model
-def _mujoco():
-    try:
-        import mujoco
-    except ImportError as exc:
-        raise ManifoldgenError("the physics check needs MuJoCo: run `pip install mujoco`") from exc
-    return mujoco
-
-
 def _urdf_text(robot: Robot) -> str:
     """The robot's URDF with ``package://`` mesh URIs made absolute (pinocchio's package dirs) and
     MuJoCo's compiler options: keep every link a body, URDF inertials only, no visuals."""
@@ -312,7 +304,7 @@ class _Simulation:
     """The MuJoCo model of ``robot`` on a ground plane, with servos and foot sites."""
 
     def __init__(self, robot: Robot, feet: list[str], settings: PhysicsSettings, q0: np.ndarray):
-        mujoco = _mujoco()
+        mujoco = require("mujoco", "physics", "the physics check")
         self.mujoco, self.robot, self.feet, self.settings = mujoco, robot, list(feet), settings
         try:
             spec = mujoco.MjSpec.from_string(_urdf_text(robot))

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.errors import ManifoldgenError, file_reader, require
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz
 from manifoldgen.robot import BASE_JOINTS, Robot
 from manifoldgen.space import ConstrainedSpace, ValidationSettings, densify
@@ -103,9 +103,7 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
     """Time ``path (K, n)`` within ``velocity (n,)`` and ``acceleration (n,)`` limits; returns
     ``time (T,)``, positions, velocities, accelerations ``(T, n)`` sampled at most ``dt`` apart, and
     the uniform time stretch applied after TOPP-RA."""
-    import toppra
-    import toppra.algorithm
-    import toppra.constraint
+    toppra = require("toppra", "trajectory", "time parameterization (TOPP-RA)")
 
     states = densify(path, resolution)[0]
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(states, axis=0), axis=1))])

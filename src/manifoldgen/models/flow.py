@@ -8,8 +8,8 @@ residual of reparametrised samples.
 from __future__ import annotations
 
 import torch
-import zuko
 
+from manifoldgen.errors import require
 from manifoldgen.models.base import SingleLossSampler
 
 
@@ -22,6 +22,7 @@ class ConditionalFlow(SingleLossSampler):
 
     def _build(self) -> None:
         c = self.config
+        zuko = require("zuko", "flow", "the flow model")
         self.nets["flow"] = zuko.flows.NSF(self.d, self.k, transforms=c["transforms"], bins=c["bins"],
                                            hidden_features=list(c["hidden"]), passes=2)
 

@@ -23,7 +23,7 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 @dataclass
 class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
-    search runs: ``auto`` (the compiled core when ``manifoldgen_core`` imports and can take the space, a
+    search runs: ``auto`` (the compiled core when ``manifoldgen_core`` is usable and can take the space, a
     Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace, through
     callbacks (``extras['compile_fallback']``: why), else Python; the result's ``extras['core']`` says which,
     ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an error when the core cannot
@@ -77,11 +77,10 @@ class RRTConnect(Planner):
         self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
         wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
         if wanted != "python":
-            reason = ("the compiled core manifoldgen_core is not installed" if native.core_module() is None
-                      else native.unsupported(self.space))
+            problem = native.core_problem()  # not built, or built against another pinocchio: says the fix
+            reason = problem or native.unsupported(self.space)
             if reason and wanted == "native":
-                raise ManifoldgenError(f"{reason}; {native.BUILD_HINT}" if native.core_module() is None
-                                       else f"{reason}; use core='python' or 'auto'")
+                raise ManifoldgenError(problem or f"{reason}; use core='python' or 'auto'")
             self.core = None if reason else native.core_space(self.space)
             self.compiled = native.compile_report(self.space) if self.core is not None else self.compiled
             if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, require
 from manifoldgen.viewer.scene import FPS, Viewer, build_scene
 from manifoldgen.viewer.source import read_source
 
@@ -43,7 +43,7 @@ def start_server(host: str, port: int):
     URL), lit by a hemisphere light without shadows instead of an environment map: a browser
     without a GPU draws the first frame in 2 s instead of 8. Only the viewer's own page may open its
     websocket (:func:`guard_origin`)."""
-    import viser
+    viser = require("viser", "viewer", "the viewer")
 
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host=host, port=port, verbose=False)
