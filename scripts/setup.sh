@@ -8,7 +8,10 @@ cd "$(dirname "$0")/.."
 PY=$(command -v python3.11 || command -v python3)
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install --quiet --disable-pip-version-check torch==2.13.0
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[all,test]"
+# This environment is built on this machine for this machine: the decoder kernel uses its own instruction set
+# (a wheel for other machines: `pip install .` alone, portable; MANIFOLDGEN_NATIVE_ARCH=OFF here does the same).
+MANIFOLDGEN_NATIVE_ARCH="${MANIFOLDGEN_NATIVE_ARCH:-ON}" \
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[all,test]"
 # Debian's Chromium for the viewer's browser tests (they skip, saying why, where it cannot be installed)
 if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium) \
