@@ -99,6 +99,10 @@ def test_summary_counts_failures_at_the_limit():
     fast = [{**r, "method": "b", "time_s": 0.5, "solved": True} for r in records]
     table = markdown_table(summarize(records + fast), baseline="a")
     assert "| b | 2 | 100.0 |" in table and "≥11.0x |" in table  # a's median run failed: a lower bound
+    late = [{**records[1], "time_s": 14.0}]  # answered 4 s after its limit: counted at what it really ran
+    assert summarize(late)[0].time_max == 14.0
+    none = markdown_table(summarize(late + fast), baseline="a")
+    assert "speed-up" not in none.splitlines()[0] and "the baseline a solved none of its runs" in none
 
 
 def test_truncated_last_line_is_ignored(tmp_path):
