@@ -35,6 +35,17 @@ def check_keys(data: dict, known, what: str) -> None:
 DAMAGED = (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError, OverflowError, RecursionError)
 
 
+def missing(path, what: str = "file") -> str:
+    """Why ``path`` cannot be read as a ``what`` (a regular file): not found, a directory, or a device, pipe or
+    socket; the start of a one-line error."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        return f"{what} {path} is a directory, not a file"
+    if os.path.exists(path):
+        return f"{what} {path} is not a regular file (a device, pipe or socket)"
+    return f"{what} not found: {path}"
+
+
 def file_reader(read):
     """Decorate a reader of files: an exception that a damaged or foreign file's content raises deep inside
     (a string where a number belongs, a missing key ...) becomes one ManifoldgenError naming the file."""

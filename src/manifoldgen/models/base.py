@@ -339,7 +339,8 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, torch.Tensor]]:
     """Read and validate ``model.json`` and ``model.safetensors`` of a model directory."""
     path = Path(path)
     if not path.is_dir():
-        raise ManifoldgenError(f"model directory not found: {path}; train one with `manifoldgen train`")
+        what = "is a file, not a directory" if path.exists() else "not found"
+        raise ManifoldgenError(f"model directory {what}: {path}; train one with `manifoldgen train`")
     for name in (CONFIG_FILE, WEIGHTS_FILE):
         if not (path / name).is_file():
             raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "
