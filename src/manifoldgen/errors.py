@@ -35,7 +35,7 @@ def check_keys(data: dict, known, what: str) -> None:
 DAMAGED = (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError, OverflowError, RecursionError)
 
 
-def missing(path, what: str = "file") -> str:
+def not_a_file(path, what: str = "file") -> str:
     """Why ``path`` cannot be read as a ``what`` (a regular file): not found, a directory, or a device, pipe or
     socket; the start of a one-line error."""
     path = os.fspath(path)

@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from manifoldgen.errors import ManifoldgenError, missing
+from manifoldgen.errors import ManifoldgenError, not_a_file
 
 if TYPE_CHECKING:
     import numpy as np
@@ -228,7 +228,7 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
 
     path = Path(path)
     if not path.is_file():
-        raise ManifoldgenError(missing(path))
+        raise ManifoldgenError(not_a_file(path))
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):

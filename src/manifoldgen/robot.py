@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from manifoldgen.errors import ManifoldgenError, missing
+from manifoldgen.errors import ManifoldgenError, not_a_file
 
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
 _BASE_AXES = (("P", (1, 0, 0)), ("P", (0, 1, 0)), ("P", (0, 0, 1)),
@@ -122,7 +122,7 @@ def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Pa
     if _is_path(robot):
         urdf = Path(robot)
         if not urdf.is_file():
-            raise ManifoldgenError(f"{missing(urdf, 'URDF file')}; give an existing path or a robot name")
+            raise ManifoldgenError(f"{not_a_file(urdf, 'URDF file')}; give an existing path or a robot name")
         beside = urdf.with_suffix(".srdf")
         default = beside if beside.is_file() else None
     else:
@@ -136,7 +136,7 @@ def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Pa
     if srdf is None:
         return urdf, default
     if not Path(srdf).is_file():
-        raise ManifoldgenError(f"{missing(srdf, 'SRDF file')}; give an existing .srdf path, "
+        raise ManifoldgenError(f"{not_a_file(srdf, 'SRDF file')}; give an existing .srdf path, "
                                f"or none to use {default or 'no SRDF'}")
     return urdf, Path(srdf)
 

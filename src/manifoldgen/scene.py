@@ -18,7 +18,7 @@ import numpy as np
 
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.coverage import Anchors
-from manifoldgen.errors import ManifoldgenError, check_keys, file_reader, missing
+from manifoldgen.errors import ManifoldgenError, check_keys, file_reader, not_a_file
 from manifoldgen.io import atomic_write_text
 from manifoldgen.robot import Robot
 from manifoldgen.shapes import Attached, Obstacle, float_list, held_checker
@@ -115,7 +115,7 @@ class Scene:
     def load(cls, path: str | Path) -> Scene:
         path = Path(path)
         if not path.is_file():
-            raise ManifoldgenError(missing(path, "scene file"))
+            raise ManifoldgenError(not_a_file(path, "scene file"))
         try:
             text = path.read_text(encoding="utf-8")
         except UnicodeDecodeError as exc:

@@ -11,7 +11,7 @@ import json
 import tomllib
 from pathlib import Path
 
-from manifoldgen.errors import ManifoldgenError, missing
+from manifoldgen.errors import ManifoldgenError, not_a_file
 
 
 def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, what: str) -> dict:
@@ -19,7 +19,7 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
     values: dict = {}
     if config is not None:
         if not Path(config).is_file():
-            raise ManifoldgenError(f"{missing(config, 'config file')}; give a TOML file of KEY = VALUE lines")
+            raise ManifoldgenError(f"{not_a_file(config, 'config file')}; give a TOML file of KEY = VALUE lines")
         try:
             values.update(tomllib.loads(Path(config).read_text()))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

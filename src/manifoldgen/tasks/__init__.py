@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
-from manifoldgen.errors import ManifoldgenError, file_reader, missing, unknown_name
+from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file, unknown_name
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.provenance import check_made_for
 from manifoldgen.robot import Robot, find_robot, resolve_robot
@@ -195,7 +195,7 @@ def load_task_file(path: str | Path) -> Task:
     """Read a TOML task file (see the module doc and docs/tasks.md)."""
     path = Path(path)
     if not path.is_file():
-        raise ManifoldgenError(f"{missing(path, 'task file')}; give a .toml task file or a built-in task name")
+        raise ManifoldgenError(f"{not_a_file(path, 'task file')}; give a .toml task file or a built-in task name")
     text = path.read_text(errors="replace")
     try:
         data = tomllib.loads(text)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, file_reader, missing
+from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file
 from manifoldgen.io import load_npz
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
@@ -45,7 +45,7 @@ def read_source(file: str | Path, task: str | None = None, *, trust_code: bool =
     task in its meta; ``trust_code``: see :func:`~manifoldgen.tasks.task_from_spec`)."""
     file = Path(file)
     if not file.is_file():
-        raise ManifoldgenError(missing(file))
+        raise ManifoldgenError(not_a_file(file))
     suffix = file.suffix.lower()
     if suffix == ".npz":
         return _read_npz(file, None if task is None else get_task(task), trust_code)
