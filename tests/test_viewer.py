@@ -175,6 +175,8 @@ def test_bad_inputs_get_one_line(tmp_path, maze):
         assert result.exit_code == 2 and expected in result.output and result.output.count("\n") == 1, result.output
     with pytest.raises(ManifoldgenError, match="not an address of this machine"):
         free_port("192.0.2.1", 8080)
+    with pytest.raises(ManifoldgenError, match="'999.1.1.1': not an IPv4 address or a known host name"):
+        free_port("999.1.1.1", 8080)  # not "all ports in use"
 
 
 def test_free_port_skips_a_listening_port():

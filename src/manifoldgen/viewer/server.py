@@ -25,6 +25,11 @@ def free_port(host: str, port: int) -> int:
     """``port`` if it can be bound on ``host``, else the next free one (up to PORT_TRIES later)."""
     if not 0 < port < 65536:
         raise ManifoldgenError(f"--port must be between 1 and 65535, got {port}")
+    try:
+        socket.getaddrinfo(host, None, socket.AF_INET)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ManifoldgenError(f"cannot serve on host {host!r}: not an IPv4 address or a known host name ({exc}); "
+                               "use 127.0.0.1 (this machine only) or 0.0.0.0 (every interface)") from None
     for candidate in range(port, min(port + PORT_TRIES, 65536)):
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server binds: TIME_WAIT is free
@@ -35,6 +40,8 @@ def free_port(host: str, port: int) -> int:
                 if exc.errno == errno.EADDRNOTAVAIL:
                     raise ManifoldgenError(f"cannot serve on host {host}: not an address of this machine; use "
                                            "127.0.0.1 (this machine only) or 0.0.0.0 (every interface)") from exc
+                if exc.errno != errno.EADDRINUSE:
+                    raise ManifoldgenError(f"cannot serve on host {host}, port {candidate}: {exc.strerror}") from exc
     raise ManifoldgenError(f"ports {port} to {candidate} on {host} are all in use; pass another --port")
 
 
