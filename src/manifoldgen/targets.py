@@ -81,12 +81,19 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
                                f"({SEEDS} projected seeds); choose a condition inside "
                                f"{constraint.condition.describe()}")
     q = on.q[on.converged]
-    q = q[ConstrainedSpace(both, yy, checker).valid(q)]
-    if not len(q):
-        raise ManifoldgenError(f"no collision-free configuration on the task's manifold at condition "
-                               f"{np.round(y, 4).tolist()} puts {frame} at the {what} target {target} "
-                               f"({SEEDS} projected seeds); move the target within reach, or away from obstacles")
-    return _distinct(q)
+    valid = q[ConstrainedSpace(both, yy, checker).valid(q)]
+    if not len(valid):
+        at = f"at condition {np.round(y, 4).tolist()} puts {frame} at the {what} target {target}"
+        reaching = reach.satisfied(q, np.broadcast_to(target["position"], (len(q), 3)))
+        if reaching.any():  # the target lies on the manifold; obstacles (or the robot itself) are in the way
+            raise ManifoldgenError(f"no collision-free configuration on the task's manifold {at}: all "
+                                   f"{int(reaching.sum())} that reach it collide ({SEEDS} projected seeds); move the "
+                                   "target away from obstacles")
+        miss = float(np.min(np.linalg.norm(robot.frame_pose(q, frame)[0] - np.asarray(target["position"]), axis=1)))
+        raise ManifoldgenError(f"no collision-free configuration on the task's manifold {at}: the nearest of "
+                               f"{len(q)} brings {frame} within {miss:.3f} m of it, not onto it ({SEEDS} projected "
+                               "seeds); move the target within reach, onto the task's manifold")
+    return _distinct(valid)
 
 
 def resolve_query(constraint: Constraint, y: np.ndarray, start, goal, checker: CollisionChecker | None,
