@@ -14,6 +14,10 @@ constraint it also reports static stability state by state: the centre of mass (
     -> p.npz: 20 waypoints, 1,144 states checked every 0.005; worst constraint use 0.87 of tolerance,
        0 states violating the constraint, 0 in collision, 0 outside the limits: VALID
 
+A folder written by ``manifoldgen bench plan`` is rechecked run by run: each solved record's ``path`` in
+``runs.jsonl`` with the query meta every run shares (``problem.json``), whoever planned it (OMPL's runs and the
+blind baselines' too); unsolved runs have no path and are counted.
+
 Exit status: 0 every path valid; 1 some path invalid; 2 bad usage; 3 could not recheck (a user
 constraint type ``module:Class``, the robot not found or not the file's, an unreadable file).
 """
@@ -21,6 +25,7 @@ constraint type ``module:Class``, the robot not found or not the file's, an unre
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -46,17 +51,23 @@ def densify(path: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray
     return np.concatenate([states, path[-1:]]), np.append(segment, len(steps) - 1)
 
 
-def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolution: float | None = None) -> dict:
+def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolution: float | None = None,
+                  content: tuple[dict, np.ndarray] | None = None, near: Path | None = None) -> dict:
     """Recheck one path file. Returns ``status`` (exit code), ``line`` (verdict), ``details``, ``valid``,
     ``reason`` (the first problem), ``worst`` (max |F_i| / tol_i over the states), ``violations`` (states
     outside tolerance or violating an inequality), ``collisions``, ``outside`` (states outside the limits),
     ``states``, ``resolution``, ``meta``, ``path`` and, for a balance constraint, ``stability`` (``states``,
-    ``unstable``: states whose CoM is outside the support polygon, ``min_depth`` m, ``max_foot_drift`` m; else None)."""
+    ``unstable``: states whose CoM is outside the support polygon, ``min_depth`` m, ``max_foot_drift`` m; else None).
+    ``content``: (meta, path) already read (``file`` then only names it); ``near``: where to look for the robot
+    files (default: the file's folder)."""
     empty = {"worst": float("inf"), "collisions": 0, "outside": 0, "violations": 0, "states": 0, "valid": False,
              "meta": {}, "path": np.zeros((0, 0)), "details": []}
     try:
-        meta, arrays = read_npz(file, ("path",))
-        path = arrays["path"]
+        if content is None:
+            meta, arrays = read_npz(file, ("path",))
+            path = arrays["path"]
+        else:
+            meta, path = content
         n = len(meta["joints"])
         if path.ndim != 2 or path.shape[1] != n:
             raise CannotRecheck(f"path has shape {path.shape}, expected (K, {n}) for the file's joints")
@@ -69,7 +80,7 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
         if not resolution > 0:
             raise CannotRecheck(f"resolution must be positive, got {resolution}")
         checker = Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf,
-                          near=Path(file).parent)
+                          near=near or Path(file).parent)
     except CannotRecheck as exc:
         return {**empty, "status": EXIT_CANNOT, "reason": str(exc), "line": f"{file}: CANNOT RECHECK: {exc}"}
     details = [f"note: {note}" for note in checker.notes]
@@ -135,16 +146,40 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
             "resolution": resolution, "meta": meta, "path": path, "stability": stability}
 
 
+def bench_checks(folder: Path, urdf: str | None, srdf: str | None, resolution: float | None):
+    """One report per solved run of a ``manifoldgen bench plan`` folder, then one counting the unsolved runs."""
+    try:
+        meta = json.loads((folder / "problem.json").read_text())
+        records = [json.loads(line) for line in (folder / "runs.jsonl").read_text().splitlines() if line.strip()]
+    except (OSError, ValueError) as exc:
+        reason = f"not a readable bench folder (problem.json and runs.jsonl): {exc}"
+        yield {"status": EXIT_CANNOT, "details": [], "line": f"{folder}: CANNOT RECHECK: {reason}"}
+        return
+    unsolved = 0
+    for record in records:
+        if not record.get("solved"):
+            unsolved += 1
+            continue
+        name = f"{folder} {record.get('method')} run {record.get('run')}"
+        yield outside_check(name, urdf, srdf, resolution, content=(meta, np.asarray(record.get("path", []), float)),
+                            near=folder)
+    yield {"status": EXIT_VALID, "details": [],
+           "line": f"{folder}: {len(records) - unsolved} solved runs rechecked above, {unsolved} unsolved (no path)"}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Recheck manifoldgen path files (pinocchio + coal only).",
                                      epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
-    parser.add_argument("files", nargs="+", help="path .npz files written by `manifoldgen plan`")
+    parser.add_argument("files", nargs="+", help="path .npz files written by `manifoldgen plan`, or folders "
+                                                 "written by `manifoldgen bench plan`")
     parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
     parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--resolution", type=float,
                         help="state spacing along segments (default: the file's meta.validation.resolution)")
     args = parser.parse_args(argv)
-    return print_reports(outside_check(path, args.urdf, args.srdf, args.resolution) for path in args.files)
+    return print_reports(report for path in args.files for report in (
+        bench_checks(Path(path), args.urdf, args.srdf, args.resolution) if Path(path).is_dir()
+        else [outside_check(path, args.urdf, args.srdf, args.resolution)]))
 
 
 if __name__ == "__main__":

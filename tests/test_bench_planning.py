@@ -1,6 +1,8 @@
 """The planning benchmark harness: same seeds for every method, JSONL records, reports, resume."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import Scene
 
 METHODS = ["atlas=ompl-atlas-rrtconnect", "pg=rrtconnect@pg"]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))  # the standalone checkers users run
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +75,11 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     assert (out / "time.png").read_bytes()[:4] == b"\x89PNG" and (out / "length.png").stat().st_size > 0
     assert json.loads((out / "config.json").read_text())["methods"] == METHODS
     assert (out / "pg-easy-300.npz").is_file()
+    # every run's path, OMPL's included, rechecked outside the project from the folder alone (pinocchio + coal)
+    from check_path import bench_checks
+    reports = list(bench_checks(out, None, None, None))
+    assert [r["status"] for r in reports] == [0] * 5, [r["line"] for r in reports]
+    assert reports[-1]["line"].endswith("4 solved runs rechecked above, 0 unsolved (no path)")
 
     with pytest.raises(ManifoldgenError, match="--resume"):
         run_bench(experiment, METHODS, out, runs=2, progress=False)

@@ -52,7 +52,8 @@ from manifoldgen.runtime import check_seed
 
 RUNS_FILE = "runs.jsonl"
 CONFIG_FILE = "config.json"
-OUTPUT_FILES = (RUNS_FILE, CONFIG_FILE, "results.md", "time.png", "length.png")
+PROBLEM_FILE = "problem.json"  # the path meta every run's path shares: an outside checker rechecks each from it
+OUTPUT_FILES = (RUNS_FILE, CONFIG_FILE, PROBLEM_FILE, "results.md", "time.png", "length.png")
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
 OMPL_PREFIX = "ompl-"
@@ -186,6 +187,21 @@ def _scene(task: str, robot: str, scene: str):
     return task_obj, get_scene(task_obj, scene)
 
 
+def problem_meta(experiment: Experiment) -> dict:
+    """What a path file's ``meta`` holds about the query (:func:`manifoldgen.query.plan_query`), shared by every
+    run of the benchmark: the task (its constraint, whoever planned: the blind baselines' paths are judged
+    against it too), condition, scene, start, goal and the dense check's resolution. With a record's ``path``
+    it is a path file's content (``examples/check_path.py FOLDER`` rechecks every run that way)."""
+    from manifoldgen.query import PATH_FORMAT_VERSION
+    from manifoldgen.space import ValidationSettings
+
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
+    return {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
+            "condition": np.asarray(scene.condition, float).tolist(), "condition_names": list(task.condition.names),
+            "scene_name": scene.name, "scene": scene.to_meta(task.robot), "start": scene.start.tolist(),
+            "goal": scene.goal.tolist(), "validation": {"resolution": ValidationSettings.resolution}}
+
+
 def build(experiment: Experiment, method: Method, seed: int):
     """(planner, scene, space) for one run, built from scratch (the scene's solved query is reused)."""
     from manifoldgen.space import ConstrainedSpace
@@ -285,7 +301,7 @@ def run_once(experiment: Experiment, method: Method, run: int) -> dict:
             "reason": report.reason if report else "", "why": result.why(), "extras": summary["extras"],
             **({"stability": stability} if stability else {}),
             **({"physics": physics} if physics else {}),
-            **({"path": result.path.tolist()} if run == 0 and result.solved else {})}  # run 0's path, for pictures
+            **({"path": result.path.tolist()} if result.solved else {})}  # every path, to recheck outside
 
 
 def _stability(experiment: Experiment, path: np.ndarray) -> dict | None:
@@ -415,7 +431,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
               resume: bool = False, pg_rows: int = 10_000, baseline: str | None = None,
               progress: bool = True, snapshots: bool = False) -> tuple[str, list[MethodSummary]]:
     """Run ``runs`` runs of every method (skipping finished ones with ``resume``); write
-    ``runs.jsonl``, ``config.json``, ``results.md``, ``time.png``, ``length.png`` in ``out_dir``;
+    ``runs.jsonl`` (every run's record with its path), ``config.json``, ``problem.json`` (:func:`problem_meta`),
+    ``results.md``, ``time.png``, ``length.png`` in ``out_dir``;
     return the Markdown table and the summaries."""
     if runs <= 0 or workers <= 0:
         raise ManifoldgenError(f"--runs and --workers must be positive, got {runs} and {workers}")
@@ -445,6 +462,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
             raise ManifoldgenError(f"{runs_path} has runs of '{match.label}' made with '{record['spec']}', not "
                                    f"'{match.spec}'; give that method another label or use another folder")
     atomic_write_text(out_dir / CONFIG_FILE, json.dumps(config, indent=1))
+    atomic_write_text(out_dir / PROBLEM_FILE, json.dumps(problem_meta(experiment), indent=1))
     drop_truncated_line(runs_path)
     parsed = _prepare_pg(experiment, parsed, out_dir, pg_rows)
     for method in parsed:  # fail fast on a bad model path, dataset or planner option
