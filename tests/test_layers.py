@@ -23,8 +23,8 @@ LAYERS = [
     ("planning", ["planning"]),
     ("problem", ["tasks", "scene"]),
     ("models", ["models"]),
-    ("pipeline", ["data", "specs", "query", "selection", "stability", "trajectory", "physics", "ompl_bridge",
-                  "ompl_native", "api"]),
+    ("pipeline", ["data", "specs", "query", "selection", "stability", "trajectory", "physics", "ompl_settings",
+                  "ompl_bridge", "ompl_native", "api"]),
     ("front ends", ["bench", "viz", "viewer", "demos", "cli_common", "cli_view", "cli", ""]),
 ]
 

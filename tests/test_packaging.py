@@ -63,6 +63,15 @@ def test_missing_ompl_is_one_line_through_the_cli(monkeypatch, tmp_path):
     assert says_the_extra(result, "ompl", "the OMPL bridge"), result.output
 
 
+def test_the_cpp_baseline_needs_no_ompl_python_bindings(monkeypatch):
+    """The C++ OMPL baseline runs its own program: without the [ompl] extra it still imports and writes problems."""
+    without_ompl(monkeypatch)
+    for module in ("manifoldgen.ompl_bridge", "manifoldgen.ompl_native"):
+        monkeypatch.delitem(sys.modules, module, raising=False)  # imported afresh
+    import manifoldgen.ompl_native as ompl_native
+    assert ompl_native.OmplSettings().range > 0 and "manifoldgen.ompl_bridge" not in sys.modules
+
+
 def test_missing_zuko_is_one_line_through_the_cli(monkeypatch, tmp_path):
     data = tmp_path / "pose.npz"
     assert runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(data)]).exit_code == 0

@@ -37,12 +37,12 @@ their charts), ``extras`` every space's Newton steps and residual evaluations.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError, require
+from manifoldgen.ompl_settings import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.sampling import Sampler
 from manifoldgen.space import ConstrainedSpace
@@ -55,30 +55,6 @@ SPACES = ("projected", "atlas", "tangent", "joint")
 PLANNERS = {"rrtconnect": og.RRTConnect, "rrt": og.RRT, "kpiece": og.KPIECE1, "prm": og.PRM,
             "prmstar": og.PRMstar, "bkpiece": og.BKPIECE1}
 SAMPLER_PLANNERS = ("prm", "prmstar", "bkpiece")  # call a Python ValidStateSampler
-
-
-@dataclass
-class OmplSettings:
-    """OMPL knobs (OMPL's scalar tolerance is ``1 - margin`` of the space's validation settings
-    on the tolerance-scaled residual, see :class:`OmplConstraint`: the margin our own planners
-    keep for intermediate states).
-
-    max_iterations: Newton iterations per projection (OMPL's default 50); lambda_: OMPL's
-    limit on manifold-walk length / chord length; range: planner range in rad, by default
-    our planners' (``PlannerSettings.range``; 0: OMPL's default, 20% of the space extent,
-    2.6 rad for the panda, which makes tree planners slower in clutter); sample_attempts: draws from our sampler per OMPL
-    request before giving up.
-    """
-
-    max_iterations: int = 50
-    lambda_: float = 2.0
-    range: float = 0.6
-    sample_attempts: int = 10
-
-    def check(self) -> None:
-        if self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 or self.sample_attempts < 1:
-            raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need max_iterations >= 1, lambda_ > 1, "
-                                   "range >= 0, sample_attempts >= 1")
 
 
 class OmplConstraint(ob.Constraint):

@@ -48,7 +48,7 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen import native
 from manifoldgen.native import active_coordinates, constraint_terms, unsupported, write_models
-from manifoldgen.ompl_bridge import OmplSettings
+from manifoldgen.ompl_settings import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.space import REASONS, ConstrainedSpace
 
