@@ -165,6 +165,7 @@ def test_wrong_types_give_one_clear_error(call, words, wall):
         call(*wall)
 
 
+@pytest.mark.slow
 def test_train_by_default_races_the_candidates_as_the_command_line_does():
     data = mg.collect("sphere", per_condition=300, seed=3)  # under selection.PARALLEL_ROWS: trained in-process
     model = mg.train(data, seed=1, epochs=2)  # no out: the candidates live in a scratch folder

@@ -139,6 +139,7 @@ def test_centauro_wheels_stay_upright_over_their_contacts(centauro, rng):
         assert np.abs(moved - start).max() > 0.01  # the seeds had them elsewhere: projection put them back
 
 
+@pytest.mark.slow
 def test_centauro_reach_needs_planning(centauro):
     """The reach scene (the paper's Pholus task): the goal, solved from the left hand's target, is balanced and
     collision-free with the hand on the target, and neither RRT-Connect's direct connection from the stance (projected

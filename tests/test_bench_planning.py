@@ -48,6 +48,7 @@ def test_method_parsing():
             Method.parse(bad)
 
 
+@pytest.mark.slow
 def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     out = tmp_path / "bench"
     experiment = Experiment(easy_scene, time_limit=20.0, seed=5)

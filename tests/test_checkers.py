@@ -177,6 +177,7 @@ def test_checkers_import_only_numpy_pinocchio_coal():
         assert modules <= allowed, (name, modules - allowed)
 
 
+@pytest.mark.slow
 def test_every_builtin_type_is_accepted(folder, datasets):
     """One checker run over every built-in type's dataset (and the fake manifoldgen package in the way)."""
     files = [datasets[kind][0] for kind in BUILTIN]

@@ -19,6 +19,8 @@ from manifoldgen.data import collect
 from manifoldgen.dataset import Dataset
 from manifoldgen.models import CVAE
 
+pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
+
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 COLLECT = {"conditions": [[0.3], [0.5]], "batch": 16, "progress": False}
 TRAIN = {"hidden": [8], "batch": 8, "patience": 50}

@@ -130,6 +130,7 @@ def test_native_decoder_is_the_models_network(name, trained):
         decoder.decode(np.zeros((2, 99), np.float32), y)
 
 
+@pytest.mark.slow
 def test_cfm_covers_both_modes():
     """On two-mode data (the sphere task's polar caps, nothing between them) flow matching samples both caps,
     at a trained radius and between the two trained, each with at least a quarter of the samples, and few

@@ -16,6 +16,8 @@ from manifoldgen.io import save_npz
 from manifoldgen.physics import PhysicsSettings, check_path, check_path_file, summary
 from manifoldgen.tasks import load_task_file
 
+pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
+
 pytest.importorskip("mujoco")
 
 FEET = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]

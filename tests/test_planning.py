@@ -182,6 +182,7 @@ def test_shortcut_keeps_the_constraint_and_never_lengthens():
     assert length <= result.length + 1e-9 and len(short) <= len(result.path)
 
 
+@pytest.mark.slow
 def test_pg_and_cbirrt_solve_the_wall_scene(panda_task):
     scene = get_scene(panda_task, "wall")
     space = ConstrainedSpace(panda_task.constraint, scene.condition, scene.checker(panda_task.robot))

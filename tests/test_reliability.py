@@ -220,6 +220,7 @@ def _alive(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
 def test_benchmark_workers_die_with_their_parent(tmp_path):
     script = tmp_path / "parent.py"

@@ -241,6 +241,7 @@ def test_the_cores_per_pair_broad_phase_keeps_every_verdict_on_talos():
     assert after["collision_checks"] - before["collision_checks"] == np.sum(flagged == 4)
 
 
+@pytest.mark.slow
 def test_a_mesh_coal_cannot_hull_goes_to_coal_on_centauro():
     """coal refuses the convex hull of centauro's pelvis mesh ("Too many neighbors"): the core's sphere model still
     loads, the pelvis's pairs go from the spheres to coal, and every verdict is coal's (drinkcan's robot)."""

@@ -13,6 +13,8 @@ from manifoldgen.tasks import get_task
 
 from certified_paths import compare_certified, manifold_polylines
 
+pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
+
 pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
 
 # talos's links near each other and the scene (a partial model keeps the fit short; every other geometry's pairs

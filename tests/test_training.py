@@ -165,6 +165,7 @@ def _saved(dataset: Dataset, folder) -> str:
     return str(path)
 
 
+@pytest.mark.slow
 def test_candidates_trained_in_parallel_are_the_sequential_ones(tiny, tmp_path):
     from manifoldgen.selection import select_model
 

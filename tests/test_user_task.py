@@ -17,6 +17,8 @@ from manifoldgen.dataset import Dataset
 from manifoldgen.io import load_npz
 from manifoldgen.robot import resolve_robot
 
+pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
+
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "user_task"
 TASK = str(EXAMPLE / "tool-down-xarm7.toml")
 runner = CliRunner()

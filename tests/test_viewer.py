@@ -26,6 +26,8 @@ from manifoldgen.viewer.export import export_html
 from manifoldgen.viewer.meshes import robot_parts
 from manifoldgen.viewer.server import free_port, open_viewer, start_server, stop_server
 
+pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
+
 runner = CliRunner()
 SCENES = Path(__file__).resolve().parents[1] / "src/manifoldgen/tasks/scenes"
 needs_chromium = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"{CHROMIUM} is not installed "
