@@ -9,7 +9,6 @@ import pytest
 from manifoldgen.coverage import Anchors, gaps, missed, modes, spacing
 from manifoldgen.scene import task_anchors
 from manifoldgen.data import collect
-from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import load_model, pretrained_model_dir
 from manifoldgen.sampling import MIX_AFTER, MIX_MAX, MIX_MISSED, PROJECT_ITERS, ModelSampler
 from manifoldgen.space import ConstrainedSpace
@@ -108,17 +107,15 @@ def test_a_query_that_runs_long_mixes_in_projected_rows_gradually(shipped):
     assert sampler.mix() == MIX_MAX and 0 < sampler.stats.mixed < MIX_MAX * 2.5 * MIX_AFTER
 
 
-def test_a_model_whose_mix_is_one_draws_projected_uniform_rows_only(shipped):
+def test_a_model_whose_race_chose_projection_stands_for_the_projection_sampler(shipped):
+    import copy
+
+    from manifoldgen.sampling import ProjectionSampler, model_sampler
     model, space = shipped
-    sampler = ModelSampler(space, model, mix=1.0, seed=0)
-    q = ModelSampler(space, model, seed=1).sample_many(1)[0]
-    assert sampler.begin_query(q, q) == "" and sampler.mix() == 1.0 and sampler.lazy_refine == PROJECT_ITERS
-    rows = sampler.candidates(500)
-    assert sampler.stats.mixed == 500  # every row a uniform one
-    assert space.valid(rows).mean() > 0.5  # uniform seeds projected as the projection sampler projects them
-    half = ModelSampler(space, model, mix=0.5, seed=2)
-    half.begin_query(q, q)
-    half.raw(2000)
-    assert abs(half.stats.mixed - 1000) < 100 and half.lazy_refine == half.refine
-    with pytest.raises(ManifoldgenError, match="mix must be a share"):
-        ModelSampler(space, model, mix=1.5)
+    projection = copy.copy(model)
+    projection.mix = 1.0
+    chosen = model_sampler(space, projection, seed=3)
+    assert type(chosen) is ProjectionSampler
+    np.testing.assert_array_equal(chosen.sample_many(5), ProjectionSampler(space, seed=3).sample_many(5))
+    assert type(model_sampler(space, model, seed=3)) is ModelSampler  # the race kept the model (mix 0 or none)
+    assert type(model_sampler(space, projection, refine=5, seed=3)) is ModelSampler  # refinement asks for the model

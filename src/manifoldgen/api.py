@@ -233,7 +233,7 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
     from manifoldgen.models.base import ConditionalSampler
     from manifoldgen.provenance import check_made_for
     from manifoldgen.runtime import REFINE
-    from manifoldgen.sampling import DatasetSampler, ModelSampler
+    from manifoldgen.sampling import DatasetSampler, model_sampler
     from manifoldgen.specs import make_sampler
 
     refine = None if refine is None else _integer(function, "refine", refine)
@@ -245,7 +245,7 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
         return make_sampler(spec, space, seed), spec
     if isinstance(model, ConditionalSampler):
         refine = REFINE if refine is None else refine
-        return ModelSampler(space, model, refine=refine, **common), f"{model.name}:(in memory),refine={refine}"
+        return model_sampler(space, model, refine=refine, **common), f"{model.name}:(in memory),refine={refine}"
     if isinstance(model, Dataset):
         check_made_for(model.meta, space.constraint, "the dataset")
         return DatasetSampler(space, model.q, model.y, **common), "pg:(in memory)"

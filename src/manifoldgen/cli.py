@@ -317,8 +317,8 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
             console.print(f"{'chosen' if row['chosen'] else 'raced '} {row['label']} on the task's scenes: "
                           f"{row['solved']}/{row['runs']} solved, median CPU {row['cpu']:.3f} s", markup=False)
         if raced and net.mix == 1.0:
-            console.print("plain projection planned this task's scenes fastest: the model's sampler draws projected "
-                          "uniform rows only (see selection.json)", markup=False)
+            console.print("plain projection planned this task's scenes fastest: the model directory's sampler is the "
+                          "projection sampler (see selection.json)", markup=False)
         console.print(f"trained {net.name} on {dataset} -> {output} (model.json, model.safetensors, loss.png, "
                       f"{SELECTION_FILE}, candidates/)")
     else:

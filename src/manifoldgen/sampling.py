@@ -14,8 +14,8 @@ A model sampler is never left worse than projection: at the start of a query (:m
 it measures how far its samples lie from the start and the goal, and when the model misses either (an IK
 branch it never learned) it mixes projected uniform rows into every batch at once; otherwise it starts mixing
 them only when a query has drawn :data:`MIX_AFTER` rows without solving, up to :data:`MIX_MAX` of each batch.
-A model's own ``mix`` (set when ``train`` races the candidates on the task's scenes, see
-:mod:`manifoldgen.selection`) is the least share it ever mixes in: 1 where plain projection planned fastest.
+A model whose ``mix`` is 1 (``train`` raced it on the task's scenes and plain projection planned fastest, see
+:mod:`manifoldgen.selection`) stands for the projection sampler: :func:`model_sampler`.
 """
 
 from __future__ import annotations
@@ -175,20 +175,17 @@ class ModelSampler(Sampler):
     they are returned. The model's network runs in the compiled core where it can
     (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
 
-    def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, mix: float | None = None,
-                 batch: int = 1024, seed: int | np.random.Generator = 0, max_batches: int = 10_000):
+    def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, batch: int = 1024,
+                 seed: int | np.random.Generator = 0, max_batches: int = 10_000):
         super().__init__(space, batch=batch, seed=seed, max_batches=max_batches)
         refine = (model.refine if model.refine is not None else REFINE) if refine is None else refine
         if refine < 0:
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
-        mix = (model.mix or 0.0) if mix is None else mix
-        if not 0.0 <= mix <= 1.0:
-            raise ManifoldgenError(f"mix must be a share of projected uniform rows in [0, 1], got {mix}")
         check_made_for(model.meta, space.constraint, "the model")
         model.check_condition(space.y)
         import torch
 
-        self.model, self.refine, self.floor = model, int(refine), float(mix)
+        self.model, self.refine = model, int(refine)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
         self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
         self.missed = False  # the latest query's start or goal lies far from every model sample
@@ -200,16 +197,10 @@ class ModelSampler(Sampler):
         return min(self.batch, FIRST_ROWS << min(self.stats.batches, 20))
 
     @property
-    def mostly_uniform(self) -> bool:
-        """Rows are mostly uniform seeds (the query's ends are missed, or the model's ``mix`` says so): they are
-        projected lazily, as the projection sampler's are."""
-        return self.missed or self.floor >= MIX_MISSED
-
-    @property
     def lazy_refine(self) -> int:
-        """Projection iterations per raw row: ``refine``, or the projection sampler's when rows are mostly
-        uniform seeds."""
-        return PROJECT_ITERS if self.mostly_uniform else self.refine
+        """Projection iterations per raw row: ``refine``, or the projection sampler's when the query's ends are
+        missed (its rows are then mostly uniform seeds, projected lazily as the projection sampler's are)."""
+        return PROJECT_ITERS if self.missed else self.refine
 
     def begin_query(self, start: np.ndarray, goal: np.ndarray) -> str:
         """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of :data:`CHECK_ROWS` model rows
@@ -219,8 +210,6 @@ class ModelSampler(Sampler):
         from manifoldgen.coverage import gaps, missed, spacing
 
         self.drawn = 0
-        if self.floor >= MIX_MISSED:  # its rows are mostly projected uniform ones whatever the gaps
-            return ""
         rows = self._decode(CHECK_ROWS)
         own = spacing(rows)
         ends = gaps(rows, np.stack([start, goal]))
@@ -235,8 +224,8 @@ class ModelSampler(Sampler):
     def mix(self) -> float:
         """The share of projected uniform rows in the next batch (see the module doc)."""
         if self.missed:
-            return max(MIX_MISSED, self.floor)
-        return max(self.floor, MIX_MAX * float(np.clip(self.drawn / MIX_AFTER - 1.0, 0.0, 1.0)))
+            return MIX_MISSED
+        return MIX_MAX * float(np.clip(self.drawn / MIX_AFTER - 1.0, 0.0, 1.0))
 
     def _decode(self, count: int) -> np.ndarray:
         if self.decoder:
@@ -247,11 +236,11 @@ class ModelSampler(Sampler):
         share = self.mix()
         mixed = int(self.rng.binomial(count, share)) if share else 0
         self.drawn += count
-        rows = self._decode(count - mixed) if count > mixed else np.empty((0, self.space.robot.n))
+        rows = self._decode(count - mixed)
         if not mixed:
             return rows
         uniform = self.space.robot.sample_uniform(mixed, self.rng)
-        if not self.mostly_uniform:  # a query refining rows by `refine` iterations only gets these projected now
+        if not self.missed:  # a query refining rows by `refine` iterations only gets these projected now
             uniform = self.space.project(uniform, max_iters=PROJECT_ITERS).q
             self.stats.refined += mixed
         self.stats.mixed += mixed
@@ -263,6 +252,16 @@ class ModelSampler(Sampler):
         q = self.space.project(q, max_iters=refine).q if refine else q
         self.stats.refined += count if refine else 0
         return q
+
+
+def model_sampler(space: ConstrainedSpace, model, *, refine: int | None = None, **common) -> Sampler:
+    """The sampler a trained ``model`` stands for in ``space``: its :class:`ModelSampler`, or the projection
+    sampler where ``train``'s race found plain projection planned the task's scenes fastest (``model.mix`` 1)
+    and no ``refine`` is asked for. ``common``: ``seed``, ``batch``."""
+    if model.mix == 1 and refine is None:
+        check_made_for(model.meta, space.constraint, "the model")
+        return ProjectionSampler(space, **common)
+    return ModelSampler(space, model, refine=refine, **common)
 
 
 def generate(model, constraint: Constraint, y: np.ndarray, count: int, generator, refine: int = REFINE,

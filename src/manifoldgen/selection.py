@@ -13,8 +13,9 @@ as it would alone: the same bytes as a sequential run.
 Held-out rows do not price what planning pays: a flow-matching model covers more but decodes a row in tens to
 hundreds of microseconds, and on a codimension-one manifold projected uniform rows are as good and cost nothing.
 So when the task names scenes (or its dataset recorded them), :func:`race` plans them (:data:`RACE_SEEDS` seeds
-each, seeds no benchmark uses) with every candidate's sampler and with projected uniform rows only (``project``:
-the rule's model at ``mix`` 1), and the chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
+each, seeds no benchmark uses) with every candidate's sampler and with the projection sampler (``project``:
+kept as the rule's model at ``mix`` 1, which a model sampler spec then maps to the projection sampler), and the
+chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
 copied to ``OUT`` with its ``mix``; ``OUT/selection.json`` holds both tables. Without scenes the rule decides.
 """
 
@@ -52,7 +53,7 @@ RACE_SCENES = 3  # at most this many of the task's scenes are raced
 RACE_SEEDS = 3  # planning runs per scene and sampler in the race
 RACE_SEED = 10_000  # the race's first seed (benchmarks use seeds from 0)
 RACE_TIME = 5.0  # seconds a race run may plan (an unsolved run counts this much CPU)
-PROJECTION = "project"  # the race's entry for projected uniform rows only
+PROJECTION = "project"  # the race's entry for the projection sampler
 
 
 def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: int | None = None,
@@ -120,13 +121,14 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
          progress: bool = False) -> list[dict]:
     """Plan up to :data:`RACE_SCENES` of ``task``'s scenes (its scene files, else the scene documents ``recorded``
     in the dataset's meta: :func:`manifoldgen.scene.solved_document`) :data:`RACE_SEEDS` times each (RRT-Connect,
-    its task settings, :data:`RACE_TIME` seconds) with each model's sampler and with projected uniform rows only
-    (the ``ruled`` model at mix 1, :data:`PROJECTION`); one row per entry: ``label``, ``model``, ``mix``,
+    its task settings, :data:`RACE_TIME` seconds) with each model's sampler and with the projection sampler
+    (:data:`PROJECTION`, kept as the ``ruled`` model at mix 1: :func:`manifoldgen.sampling.model_sampler`); one
+    row per entry: ``label``, ``model``, ``mix``,
     ``solved``, ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No
     scenes: []."""
     from manifoldgen.progress import progress_bar
     from manifoldgen.query import get_planner, task_settings
-    from manifoldgen.sampling import ModelSampler
+    from manifoldgen.sampling import ModelSampler, ProjectionSampler
     from manifoldgen.scene import Scene, get_scene
     from manifoldgen.space import ConstrainedSpace
 
@@ -152,7 +154,8 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
                                      scene.checker(task.robot))
             for label, name, mix in entries:
                 for seed in range(RACE_SEED, RACE_SEED + RACE_SEEDS):
-                    sampler = ModelSampler(space, models[name], mix=mix, seed=seed)
+                    sampler = (ProjectionSampler(space, seed=seed) if mix else
+                               ModelSampler(space, models[name], seed=seed))
                     planner = planner_type(space, sampler, seed=seed, settings=settings)
                     begin = time.process_time()
                     result = planner.solve(scene.start, scene.goal, RACE_TIME)

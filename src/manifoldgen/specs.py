@@ -66,7 +66,7 @@ def make_sampler(spec: str, space: ConstrainedSpace, seed: int) -> Sampler:
 
 def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | None, common: dict) -> Sampler:
     from manifoldgen.models import get_model_class, load_model
-    from manifoldgen.sampling import ModelSampler
+    from manifoldgen.sampling import model_sampler
 
     if name != "model":
         get_model_class(name)  # an unknown model name is reported with the known ones
@@ -77,4 +77,4 @@ def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | 
     if name not in ("model", model.name):
         raise ManifoldgenError(f"'{path}' holds a {model.name} model, not {name}; use '{model.name}:{path}'")
     check_made_for(model.meta, space.constraint, f"model {path}")
-    return ModelSampler(space, model, refine=refine, **common)
+    return model_sampler(space, model, refine=refine, **common)
