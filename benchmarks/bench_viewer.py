@@ -1,4 +1,4 @@
-"""Figures of issue 11: how fast ``manifoldgen view`` is ready, and what ``manifoldgen trajectory`` gives.
+"""The viewer's figures: how fast ``manifoldgen view`` is ready, and what ``manifoldgen trajectory`` gives.
 
 For a panda path (maze scene, held tool) and a centauro path (a scene made here: two configurations
 of the pose task at y = 0 and a box), it times ``manifoldgen view FILE`` from launch to the printed

@@ -66,15 +66,21 @@ def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label
     report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
-    meta = {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
-            "condition": space.y.tolist(), "condition_names": list(task.condition.names),
-            "scene_name": scene.name, "scene": scene.to_meta(task.robot),
-            "start": scene.start.tolist(), "goal": scene.goal.tolist(),
+    meta = {**query_meta(task, scene, space.y),
             "planner": planner, "planner_settings": asdict(solver.settings), "sampler": label,
             "local": solver.local.name, "seed": seed,
             "time_limit": time_limit, "smoothed": smooth, "result": result.to_dict(),
             "validation": report.to_dict() if report else unsolved_validation(space.settings.resolution)}
     return result, meta
+
+
+def query_meta(task: Task, scene: Scene, y: np.ndarray) -> dict:
+    """What a path file's ``meta`` says of the query whoever plans it: the task, the condition ``y (k,)``, the
+    scene, start and goal (the planner's part and the check's are added by the caller)."""
+    return {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
+            "condition": np.asarray(y, float).tolist(), "condition_names": list(task.condition.names),
+            "scene_name": scene.name, "scene": scene.to_meta(task.robot),
+            "start": np.asarray(scene.start, float).tolist(), "goal": np.asarray(scene.goal, float).tolist()}
 
 
 def unsolved_validation(resolution: float) -> dict:

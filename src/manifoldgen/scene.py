@@ -74,12 +74,18 @@ class Scene:
                    np.asarray(meta.get("start", []), float), np.asarray(meta.get("goal", []), float),
                    np.asarray(meta.get("condition", []), float), str(meta.get("robot", "")))
 
+    def to_document(self, targets: bool = True) -> dict:
+        """The scene file's JSON object; start and goal as the targets given (``targets``) or as configurations."""
+        ends = {k: self.targets[k] if targets and k in self.targets else
+                getattr(self, k) if isinstance(getattr(self, k), dict) else  # a target not solved yet
+                np.asarray(getattr(self, k), float).tolist() for k in ("start", "goal")}
+        return {"format_version": FORMAT_VERSION, "name": self.name, "robot": self.robot,
+                "obstacles": [o.to_dict() for o in self.obstacles],
+                "attached": None if self.attached is None else self.attached.to_dict(),
+                **ends, "condition": np.asarray(self.condition, float).tolist()}
+
     def to_json(self) -> str:
-        return json.dumps({"format_version": FORMAT_VERSION, "name": self.name, "robot": self.robot,
-                           "obstacles": [o.to_dict() for o in self.obstacles],
-                           "attached": None if self.attached is None else self.attached.to_dict(),
-                           **{k: self.targets.get(k, getattr(self, k).tolist()) for k in ("start", "goal")},
-                           "condition": self.condition.tolist()}, indent=1)
+        return json.dumps(self.to_document(), indent=1)
 
     def save(self, path: str | Path) -> None:
         atomic_write_text(Path(path), self.to_json())
@@ -187,8 +193,4 @@ def task_anchors(task: Task) -> Anchors:
 def solved_document(scene: Scene, name: str) -> dict:
     """``scene`` as a scene document (what :meth:`Scene.from_json` reads) named ``name``, with its start and goal
     as the configurations they were solved to and the tool it holds: the query itself, with no target to solve."""
-    return {"format_version": FORMAT_VERSION, "name": name, "robot": scene.robot,
-            "obstacles": [o.to_dict() for o in scene.obstacles],
-            "attached": None if scene.attached is None else scene.attached.to_dict(),
-            "start": np.asarray(scene.start, float).tolist(), "goal": np.asarray(scene.goal, float).tolist(),
-            "condition": np.asarray(scene.condition, float).tolist()}
+    return {**scene.to_document(targets=False), "name": name}

@@ -192,14 +192,11 @@ def problem_meta(experiment: Experiment) -> dict:
     run of the benchmark: the task (its constraint, whoever planned: the blind baselines' paths are judged
     against it too), condition, scene, start, goal and the dense check's resolution. With a record's ``path``
     it is a path file's content (``examples/check_path.py FOLDER`` rechecks every run that way)."""
-    from manifoldgen.query import PATH_FORMAT_VERSION
+    from manifoldgen.query import query_meta
     from manifoldgen.space import ValidationSettings
 
     task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
-    return {**task.meta(), "format_version": PATH_FORMAT_VERSION, "kind": "path",
-            "condition": np.asarray(scene.condition, float).tolist(), "condition_names": list(task.condition.names),
-            "scene_name": scene.name, "scene": scene.to_meta(task.robot), "start": scene.start.tolist(),
-            "goal": scene.goal.tolist(), "validation": {"resolution": ValidationSettings.resolution}}
+    return {**query_meta(task, scene, scene.condition), "validation": {"resolution": ValidationSettings.resolution}}
 
 
 def build(experiment: Experiment, method: Method, seed: int):
