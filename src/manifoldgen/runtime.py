@@ -19,10 +19,17 @@ def limit_threads() -> None:
 
 
 def set_torch_threads(threads: int = TORCH_THREADS) -> None:
-    """Set torch's CPU thread count (at least 1)."""
-    import torch
+    """Set torch's CPU thread count (at least 1): at once where torch is loaded, else through
+    ``OMP_NUM_THREADS``, which torch reads when it loads (a command that never needs torch never pays its
+    2-3 s import)."""
+    import os
+    import sys
 
-    torch.set_num_threads(max(1, int(threads)))
+    threads = max(1, int(threads))
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
+    else:
+        os.environ["OMP_NUM_THREADS"] = str(threads)
 
 
 MAX_SEED = 2**32 - 1  # seeds feed numpy's and torch's generators; run r of a benchmark uses seed + r

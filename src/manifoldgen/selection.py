@@ -84,8 +84,11 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
         workers = (os.cpu_count() or 1) if len(dataset) >= PARALLEL_ROWS else 1
     workers = min(len(jobs), workers)
     if workers > 1 and not code_types(task.spec()):  # a child rebuilds the task from the dataset's meta: no user code
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        try:
             list(pool.map(_train_candidate, jobs))
+        finally:  # scoring goes on while the children exit (unloading torch takes a second or two)
+            pool.shutdown(wait=False, cancel_futures=True)
     else:
         for job in jobs:
             _train_candidate(job, task=task, progress=progress)

@@ -23,6 +23,7 @@ import torch
 
 from manifoldgen.constraints import Condition
 from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.models.adam import Adam
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
@@ -103,12 +104,12 @@ class ConditionalSampler(ABC):
         return None
 
     @abstractmethod
-    def _optimizers(self) -> list[torch.optim.Optimizer]:
+    def _optimizers(self) -> list[Adam]:
         """The optimisers, in a fixed order (their state is checkpointed)."""
 
     @abstractmethod
     def _train_step(self, q: torch.Tensor, y: torch.Tensor, y_free: torch.Tensor,
-                    optimizers: list[torch.optim.Optimizer], generator: torch.Generator) -> dict[str, float]:
+                    optimizers: list[Adam], generator: torch.Generator) -> dict[str, float]:
         """One update on a normalised batch; ``y_free`` (B, k) are conditions drawn across the
         trained range for the residual penalty. Returns the losses to log."""
 
@@ -151,17 +152,16 @@ class ConditionalSampler(ABC):
     def normalise_y(self, y: torch.Tensor) -> torch.Tensor:
         return (y - self._y_mean) / self._y_std
 
-    def penalty(self, q: torch.Tensor, y: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
-        """Mean pseudo-Huber constraint residual (in tolerances) of normalised samples ``q (B, d)`` at ``y (B, k)``,
-        plus their joint-limit violation in units of ``LIMIT_SCALE`` rad (so samples learn to stay inside);
-        with ``weight (B,)``, each row's term is scaled by it before the mean."""
+    def penalty(self, q: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Per-row pseudo-Huber constraint residual (B,) (in tolerances) of normalised samples ``q (B, d)`` at
+        ``y (B, k)``, plus their joint-limit violation in units of ``LIMIT_SCALE`` rad (so samples learn to stay
+        inside). One call for all the rows a step penalises: its cost is mostly per call, not per row."""
         if self.residual_fn is None or self.config.get("residual_weight", 0.0) <= 0:
-            return torch.zeros(())
+            return torch.zeros(len(q))
         q = q * self._q_std + self._q_mean
         outside = (torch.relu(q - self._upper) + torch.relu(self._lower - q)) / LIMIT_SCALE
         r2 = self.residual_fn(q, y * self._y_std + self._y_mean) + outside.pow(2).sum(dim=1)
-        terms = pseudo_huber(r2)
-        return (terms if weight is None else terms * weight).mean()
+        return pseudo_huber(r2)
 
     @property
     def condition(self) -> Condition:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import torch
 
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.models.adam import Adam
 from manifoldgen.models.base import SingleLossSampler, mlp
 
 
@@ -66,7 +67,7 @@ class ConditionalFlowMatching(SingleLossSampler):
         return int(self.config["steps"])
 
     def _optimizers(self):
-        return [torch.optim.Adam(self.nets.parameters(), lr=self.config["lr"])]
+        return [Adam(self.nets.parameters(), lr=self.config["lr"])]
 
     def _losses(self, q, y, y_free, generator) -> dict[str, torch.Tensor]:
         x0 = torch.randn(q.shape, generator=generator)
@@ -77,5 +78,5 @@ class ConditionalFlowMatching(SingleLossSampler):
             y_pen = y_free[: max(1, round(self.config["penalty_fraction"] * len(y_free)))]
             with torch.no_grad():
                 x = self._before_last(y_pen, generator)
-            residual = self.penalty(self._last(x, y_pen), y_pen)
+            residual = self.penalty(self._last(x, y_pen), y_pen).mean()
         return {"loss": match + self.config["residual_weight"] * residual, "match": match, "residual": residual}

@@ -12,6 +12,7 @@ from abc import abstractmethod
 import torch
 import torch.nn.functional as F
 
+from manifoldgen.models.adam import Adam
 from manifoldgen.models.base import ConditionalSampler, mlp
 
 
@@ -51,8 +52,8 @@ class _GAN(ConditionalSampler):
     def _optimizers(self):
         c = self.config
         betas = (c["beta1"], 0.9)
-        return [torch.optim.Adam(self.nets["generator"].parameters(), lr=c["lr"], betas=betas),
-                torch.optim.Adam(self.nets["critic"].parameters(), lr=c["lr"], betas=betas)]
+        return [Adam(self.nets["generator"].parameters(), lr=c["lr"], betas=betas),
+                Adam(self.nets["critic"].parameters(), lr=c["lr"], betas=betas)]
 
     @abstractmethod
     def _critic_loss(self, real: torch.Tensor, fake: torch.Tensor, y: torch.Tensor,
@@ -75,7 +76,7 @@ class _GAN(ConditionalSampler):
             d_loss.backward()
             d_opt.step()
         g_adv = self._generator_loss(self._critic(self._generate(y, generator), y))
-        residual = self.penalty(self._generate(y_free, generator), y_free)
+        residual = self.penalty(self._generate(y_free, generator), y_free).mean()
         g_loss = g_adv + self.config["residual_weight"] * residual
         g_opt.zero_grad()
         g_loss.backward()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import torch
 
+from manifoldgen.models.adam import Adam
 from manifoldgen.models.base import SingleLossSampler, mlp
 
 
@@ -35,7 +36,7 @@ class CVAE(SingleLossSampler):
         return self.nets["decoder"], "normal"
 
     def _optimizers(self):
-        return [torch.optim.Adam(self.nets.parameters(), lr=self.config["lr"])]
+        return [Adam(self.nets.parameters(), lr=self.config["lr"])]
 
     def _encode(self, q: torch.Tensor, y: torch.Tensor, generator: torch.Generator | None,
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -48,8 +49,8 @@ class CVAE(SingleLossSampler):
         decoded = self._decode(z, y)
         recon = (decoded - q).pow(2).sum(dim=1).mean()
         kl = 0.5 * (mu.pow(2) + logvar.exp() - 1.0 - logvar).sum(dim=1).mean()
-        residual = self.penalty(self._generate(y_free, generator), y_free)
-        total = recon + self.config["beta"] * kl + self.config["residual_weight"] * residual
-        if self.config["recon_residual_weight"] > 0:
-            total = total + self.config["recon_residual_weight"] * self.penalty(decoded, y)
+        rows = self.penalty(torch.cat([self._generate(y_free, generator), decoded]), torch.cat([y_free, y]))
+        residual, recon_residual = rows[:len(y_free)].mean(), rows[len(y_free):].mean()
+        total = (recon + self.config["beta"] * kl + self.config["residual_weight"] * residual
+                 + self.config["recon_residual_weight"] * recon_residual)
         return {"loss": total, "recon": recon, "kl": kl, "residual": residual}

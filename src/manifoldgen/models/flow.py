@@ -10,6 +10,7 @@ from __future__ import annotations
 import torch
 
 from manifoldgen.errors import require
+from manifoldgen.models.adam import Adam
 from manifoldgen.models.base import SingleLossSampler
 
 
@@ -31,9 +32,9 @@ class ConditionalFlow(SingleLossSampler):
         return self.nets["flow"](y).transform.inv(z)
 
     def _optimizers(self):
-        return [torch.optim.Adam(self.nets.parameters(), lr=self.config["lr"])]
+        return [Adam(self.nets.parameters(), lr=self.config["lr"])]
 
     def _losses(self, q, y, y_free, generator) -> dict[str, torch.Tensor]:
         nll = -self.nets["flow"](y).log_prob(q).mean()
-        residual = self.penalty(self._generate(y_free, generator), y_free)
+        residual = self.penalty(self._generate(y_free, generator), y_free).mean()
         return {"loss": nll + self.config["residual_weight"] * residual, "nll": nll, "residual": residual}
