@@ -44,6 +44,27 @@ def test_model_sampler_returns_only_valid_samples(model_dir, panda_task):
     np.testing.assert_array_equal(again.sample_many(40), q)
 
 
+def test_a_model_directory_samples_in_the_core_as_the_torch_model_does(model_dir, panda_task):
+    """open_model reads the files without torch; its core decoder draws the torch model's decoder's rows, and a
+    plan through it never loads torch (checked in a fresh interpreter)."""
+    import subprocess
+    import sys
+
+    from manifoldgen.models import open_model
+
+    saved, model = open_model(model_dir), load_model(model_dir)
+    assert saved.decoder == model.decoder_spec() == {"net": "decoder", "law": "normal", "noise": 3, "steps": 0,
+                                                     "layers": 3}
+    assert np.array_equal(saved.native_decoder().sample(np.array([0.4]), 50, 7),
+                          model.native_decoder().sample(np.array([0.4]), 50, 7))
+    code = ("import sys; from manifoldgen.cli import app; sys.argv = ['manifoldgen', 'plan', 'pose', "
+            "'--scene', 'wall', '--sampler', 'model:" + str(model_dir) + "', '--time', '20', '-o', "
+            "'" + str(model_dir.parent / "p.npz") + "']\ntry:\n    app()\nexcept SystemExit as e:\n"
+            "    assert not e.code, e.code\nassert 'torch' not in sys.modules")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
 def test_model_sampler_refuses_another_robot(model_dir):
     model = load_model(model_dir)
     pr2 = get_task("pose", "pr2")

@@ -173,7 +173,8 @@ class ModelSampler(Sampler):
     refined by at most ``refine`` projection (Levenberg-Marquardt) iterations (default: the model's own
     :attr:`~manifoldgen.models.base.ConditionalSampler.refine`, else ``runtime.REFINE``), checked before
     they are returned. The model's network runs in the compiled core where it can
-    (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``."""
+    (:meth:`~manifoldgen.models.base.ConditionalSampler.native_decoder`), seeded per batch from ``rng``.
+    ``model``: a trained model, or a model directory as :func:`manifoldgen.models.open_model` reads it."""
 
     def __init__(self, space: ConstrainedSpace, model, *, refine: int | None = None, batch: int = 1024,
                  seed: int | np.random.Generator = 0, max_batches: int = 10_000):
@@ -183,11 +184,13 @@ class ModelSampler(Sampler):
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
         check_made_for(model.meta, space.constraint, "the model")
         model.check_condition(space.y)
-        import torch
-
         self.model, self.refine = model, int(refine)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
-        self.generator = None if self.decoder else torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
+        self.generator = None
+        if not self.decoder:
+            import torch
+
+            self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
         self.missed = False  # the latest query's start or goal lies far from every model sample
         self.drawn = 0  # raw rows drawn since the latest query began
 

@@ -65,15 +65,15 @@ def make_sampler(spec: str, space: ConstrainedSpace, seed: int) -> Sampler:
 
 
 def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | None, common: dict) -> Sampler:
-    from manifoldgen.models import get_model_class, load_model
+    from manifoldgen.models import MODELS, open_model
     from manifoldgen.sampling import model_sampler
 
-    if name != "model":
-        get_model_class(name)  # an unknown model name is reported with the known ones
+    if name != "model" and name not in MODELS.names():
+        MODELS.get(name)  # an unknown model name is reported with the known ones
     if not (Path(path) / "model.json").is_file():
         raise ManifoldgenError(f"no trained model at '{path}' (model.json missing); train one with "
                                f"`manifoldgen train DATASET --model {name} ...` or fix the path")
-    model = load_model(path)
+    model = open_model(path)
     if name not in ("model", model.name):
         raise ManifoldgenError(f"'{path}' holds a {model.name} model, not {name}; use '{model.name}:{path}'")
     check_made_for(model.meta, space.constraint, f"model {path}")

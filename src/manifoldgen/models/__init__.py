@@ -8,7 +8,6 @@ classes are imported (with torch) when first named, so listing the names costs n
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -42,12 +41,26 @@ def get_model_class(name: str) -> type[ConditionalSampler]:
 @file_reader
 def load_model(path: str | Path) -> ConditionalSampler:
     """Load a model directory (model.json + model.safetensors) of any registered model."""
-    read_model_dir = importlib.import_module("manifoldgen.models.base").read_model_dir
+    from manifoldgen.models.files import read_model_dir
+
     doc, tensors = read_model_dir(path)
     if doc["model"] not in MODELS.names():
         raise ManifoldgenError(f"{path}: unknown model type '{doc['model']}' in model.json; "
                                f"known models: {', '.join(MODELS.names())}")
     return MODELS.get(doc["model"]).from_files(path, doc, tensors)
+
+
+@file_reader
+def open_model(path: str | Path):
+    """A model directory as the planners use it, without loading torch
+    (:class:`manifoldgen.models.files.SavedModel`: its facts, its network in the compiled core)."""
+    from manifoldgen.models.files import SavedModel
+
+    saved = SavedModel(path, load_model)
+    if saved.name not in MODELS.names():
+        raise ManifoldgenError(f"{path}: unknown model type '{saved.name}' in model.json; "
+                               f"known models: {', '.join(MODELS.names())}")
+    return saved
 
 
 def pretrained_model_dir(name: str = "panda-pose-cvae") -> Path:
@@ -61,4 +74,4 @@ def pretrained_model_dir(name: str = "panda-pose-cvae") -> Path:
 
 
 __all__ = ["CGAN", "CVAE", "MODELS", "WGANGP", "ConditionalFlow", "ConditionalFlowMatching", "ConditionalSampler",
-           "get_model_class", "load_model", "pretrained_model_dir"]
+           "get_model_class", "load_model", "open_model", "pretrained_model_dir"]

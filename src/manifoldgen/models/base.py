@@ -21,9 +21,10 @@ import numpy as np
 import safetensors.torch
 import torch
 
-from manifoldgen.constraints import Condition
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.adam import Adam
+from manifoldgen.models.files import (CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS_FILE, ModelFacts, check_mix_refine,
+                                      core_decoder, document_checksum, read_model_dir)
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
@@ -32,8 +33,6 @@ from manifoldgen.viz.losses import plot_training
 if TYPE_CHECKING:
     from manifoldgen.dataset import Dataset
 
-MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
-WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 CHUNK = 10_000  # rows per forward pass when sampling (fastest on 2 CPU cores)
 LIMIT_SCALE = 0.01  # rad: a joint-limit overshoot of this size costs as much as one tolerance
 
@@ -61,7 +60,7 @@ def pseudo_huber(r2: torch.Tensor) -> torch.Tensor:
     return torch.sqrt(1.0 + r2) - 1.0
 
 
-class ConditionalSampler(ABC):
+class ConditionalSampler(ModelFacts, ABC):
     """A conditional generative model of configurations ``q (d,)`` given conditions ``y (k,)``.
 
     Subclasses set ``name`` and ``defaults`` (hyper-parameters, all JSON scalars or lists),
@@ -163,18 +162,6 @@ class ConditionalSampler(ABC):
         r2 = self.residual_fn(q, y * self._y_std + self._y_mean) + outside.pow(2).sum(dim=1)
         return pseudo_huber(r2)
 
-    @property
-    def condition(self) -> Condition:
-        """The conditions the model was trained on: names and units from meta, range from the data."""
-        info = self.meta.get("condition", {})
-        names = tuple(info.get("names", [f"y{i}" for i in range(self.k)]))
-        units = tuple(info.get("units", [""] * self.k))
-        return Condition(names, units, np.array([self.norm["y_low"], self.norm["y_high"]], float))
-
-    def check_condition(self, y: np.ndarray, strict: bool = False) -> np.ndarray:
-        """y as (B, k); outside the trained range: warn naming the range, or raise when strict."""
-        return self.condition.check(y, strict=strict)
-
     # ------------------------------------------------------------------ public API
     def fit(self, dataset: Dataset, *, epochs: int | None = None, seed: int = 0, progress: bool = True,
             out: str | Path | None = None, resume: bool = False, task: Task | None = None) -> TrainingLog:
@@ -211,25 +198,31 @@ class ConditionalSampler(ABC):
                 out[start:stop] = (self._generate(yc, generator) * self._q_std + self._q_mean).numpy()
         return np.clip(out, self.norm["lower"], self.norm["upper"], out=out)
 
+    def decoder_spec(self) -> dict | None:
+        """model.json's ``decoder`` entry (see :mod:`manifoldgen.models.files`): the sampling network's name,
+        noise law and width, integration steps and Linear layer count; None where it is not Linear layers
+        with SiLU between them (then only torch samples it)."""
+        net = self._sampling_net()
+        if net is None or not self.nets:
+            return None
+        layers, law = net
+        kinds = [type(layer) for layer in layers]
+        if len(kinds) % 2 == 0 or set(kinds[::2]) != {torch.nn.Linear} or set(kinds[1::2]) - {torch.nn.SiLU}:
+            return None
+        name = next(key for key, module in self.nets.items() if module is layers)
+        steps = self._integration_steps()
+        return {"net": name, "law": law, "noise": self.d if steps else int(self.config["latent"]), "steps": steps,
+                "layers": len(kinds[::2])}
+
     def native_decoder(self):
         """The sampling network copied into the compiled core (``manifoldgen_core.Decoder``: ``sample(y (k,),
         count, seed) -> (count, d)``, the same law as :meth:`sample`, float32 as torch, its own random stream),
-        or None where the core is not built or the network is not Linear layers with SiLU between them."""
-        from manifoldgen.native import core_module
-
-        net, core = self._sampling_net(), core_module()
-        if net is None or core is None or not self.nets:
+        or None where the core is not built or :meth:`decoder_spec` is None."""
+        spec = self.decoder_spec()
+        if spec is None:
             return None
-        layers, law = net
-        kinds, linear = [type(layer) for layer in layers], list(layers)[::2]
-        if len(kinds) % 2 == 0 or set(kinds[::2]) != {torch.nn.Linear} or set(kinds[1::2]) - {torch.nn.SiLU}:
-            return None
-        weights = [layer.weight.detach().float().contiguous().numpy() for layer in linear]
-        biases = [layer.bias.detach().float().contiguous().numpy() for layer in linear]
-        steps = self._integration_steps()
-        return core.Decoder(weights, biases, self.d if steps else int(self.config["latent"]), law == "uniform",
-                            *(np.asarray(self.norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
-                                                                            "lower", "upper")), steps=steps)
+        weights = {key: value.float().numpy() for key, value in self.state_tensors().items()}
+        return core_decoder(spec, weights, self.d, self.norm)
 
     def _integration_steps(self) -> int:
         """0: the sampling network maps [latent, y] to a row; n > 0: it is a velocity field v([x, y, t]) that
@@ -244,7 +237,8 @@ class ConditionalSampler(ABC):
         return {"format_version": MODEL_FORMAT_VERSION, "model": self.name, "config": self.config,
                 "dims": {"d": self.d, "k": self.k}, "normalisation": self.norm, "meta": self.meta,
                 **({"refine": self.refine} if self.refine is not None else {}),
-                **({"mix": self.mix} if self.mix is not None else {})}
+                **({"mix": self.mix} if self.mix is not None else {}),
+                **({"decoder": spec} if (spec := self.decoder_spec()) else {})}
 
     def save(self, path: str | Path) -> None:
         """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first)."""
@@ -268,7 +262,7 @@ class ConditionalSampler(ABC):
         return cls.from_files(path, doc, tensors)
 
     @classmethod
-    def from_files(cls, path: str | Path, doc: dict, tensors: dict[str, torch.Tensor]) -> ConditionalSampler:
+    def from_files(cls, path: str | Path, doc: dict, tensors: dict[str, np.ndarray]) -> ConditionalSampler:
         """Build from a validated model.json document and its weights."""
         try:
             model = cls(**doc["config"])
@@ -276,20 +270,12 @@ class ConditionalSampler(ABC):
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid config ({exc}); "
                                    "the file was edited or is damaged: retrain or restore it") from exc
         model.meta, model.norm = doc["meta"], doc["normalisation"]
-        refine = doc.get("refine")
-        if refine is not None and (isinstance(refine, bool) or not isinstance(refine, int) or not 0 <= refine <= 1000):
-            raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid refine {refine!r}; retrain or restore it")
-        model.refine = refine
-        mix = doc.get("mix")
-        if mix is not None and (isinstance(mix, bool) or not isinstance(mix, (int, float)) or not 0 <= mix <= 1):
-            raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid mix {mix!r} (a share in [0, 1]); retrain "
-                                   "or restore it")
-        model.mix = mix
+        model.refine, model.mix = check_mix_refine(path, doc)
         model.d, model.k = doc["dims"]["d"], doc["dims"]["k"]
         model._set_tensors()
         try:
             model._build()
-            model.nets.load_state_dict(tensors, strict=True)
+            model.nets.load_state_dict({k: torch.from_numpy(v) for k, v in tensors.items()}, strict=True)
             model.nets.eval()
         except (RuntimeError, ValueError, TypeError) as exc:
             first = str(exc).strip().splitlines()[0][:200]
@@ -327,74 +313,6 @@ def _check_hyper(model: str, key: str, value, default) -> None:
     if not ok:
         raise ManifoldgenError(f"hyper-parameter {key}={value!r} of model '{model}' must be {need} "
                                f"(default {default!r})")
-
-
-def document_checksum(doc: dict) -> str:
-    """SHA-256 of ``doc`` without its ``sha256`` field, as canonical JSON (key order and spacing ignored)."""
-    body = {k: v for k, v in doc.items() if k != "sha256"}
-    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-
-
-def read_model_dir(path: str | Path) -> tuple[dict, dict[str, torch.Tensor]]:
-    """Read and validate ``model.json`` and ``model.safetensors`` of a model directory."""
-    path = Path(path)
-    if not path.is_dir():
-        what = "is a file, not a directory" if path.exists() else "not found"
-        raise ManifoldgenError(f"model directory {what}: {path}; train one with `manifoldgen train`")
-    for name in (CONFIG_FILE, WEIGHTS_FILE):
-        if not (path / name).is_file():
-            raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "
-                                   "(retrain, or copy both model.json and model.safetensors)")
-    try:
-        doc = json.loads((path / CONFIG_FILE).read_text())
-    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-        raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from None
-    _validate_doc(path, doc)
-    blob = (path / WEIGHTS_FILE).read_bytes()
-    if hashlib.sha256(blob).hexdigest() != doc["weights_sha256"]:
-        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} does not match the checksum in {CONFIG_FILE}; "
-                               "one of the files was modified or comes from another model")
-    try:
-        tensors = safetensors.torch.load(blob)
-    except Exception as exc:  # safetensors raises its own error types for damaged files
-        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} is not a readable safetensors file ({exc})") from exc
-    return doc, tensors
-
-
-def _validate_doc(path: Path, doc: object) -> None:
-    def bad(why: str) -> ManifoldgenError:
-        return ManifoldgenError(f"{path}/{CONFIG_FILE}: {why}; the file was edited or is damaged: "
-                                "restore it or retrain the model")
-
-    if not isinstance(doc, dict):
-        raise bad("not a JSON object")
-    if doc.get("format_version") != MODEL_FORMAT_VERSION:
-        raise bad(f"format_version {doc.get('format_version')!r} is not supported (expected {MODEL_FORMAT_VERSION}; "
-                  "version 1 files carry no checksum of their fields)")
-    if doc.get("sha256") != document_checksum(doc):
-        raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
-                  "other field was changed)")
-    for key, kind in (("model", str), ("config", dict), ("dims", dict),
-                      ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
-        if not isinstance(doc.get(key), kind):
-            raise bad(f"field '{key}' is missing or not a {kind.__name__}")
-    d, k = doc["dims"].get("d"), doc["dims"].get("k")
-    if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):
-        raise bad("dims must hold positive integers d and k")
-    sizes = {"q_mean": d, "q_std": d, "y_mean": k, "y_std": k, "y_low": k, "y_high": k, "lower": d, "upper": d}
-    for key, size in sizes.items():
-        values = doc["normalisation"].get(key)
-        if not (isinstance(values, list) and len(values) == size
-                and all(isinstance(v, (int, float)) and np.isfinite(v) for v in values)):
-            raise bad(f"normalisation '{key}' must be {size} finite numbers")
-    norm = doc["normalisation"]
-    if min(norm["q_std"] + norm["y_std"]) <= 0:
-        raise bad("normalisation standard deviations must be positive")
-    if any(lo > hi for lo, hi in zip(norm["lower"] + norm["y_low"], norm["upper"] + norm["y_high"])):
-        raise bad("a lower bound (joint limit or condition range) exceeds its upper bound")
-    joints = doc["meta"].get("joints")
-    if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
-        raise bad(f"meta must name the robot and its {d} joints")
 
 
 class SingleLossSampler(ConditionalSampler):

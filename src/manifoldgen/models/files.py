@@ -1,0 +1,178 @@
+"""A model directory read without torch: ``model.json`` (validated, checksummed) and ``model.safetensors``.
+
+``model.json`` describes the network that samples (``decoder``: the weights' name prefix, the noise law and
+width, the integration steps of a velocity field, ``layers`` Linear layers with SiLU between them), so the
+compiled core runs it from the file alone (:meth:`SavedModel.native_decoder`): planning with a trained model
+never loads torch. Where the core is absent or the file names no ``decoder``, :meth:`SavedModel.sample` loads
+the torch model on first use.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import safetensors.numpy
+
+from manifoldgen.constraints import Condition
+from manifoldgen.errors import ManifoldgenError
+
+MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
+WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
+LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
+
+
+def document_checksum(doc: dict) -> str:
+    """SHA-256 of ``doc`` without its ``sha256`` field, as canonical JSON (key order and spacing ignored)."""
+    body = {k: v for k, v in doc.items() if k != "sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """Read and validate ``model.json`` and ``model.safetensors`` of a model directory: the document and the
+    weights by name (numpy arrays)."""
+    path = Path(path)
+    if not path.is_dir():
+        what = "is a file, not a directory" if path.exists() else "not found"
+        raise ManifoldgenError(f"model directory {what}: {path}; train one with `manifoldgen train`")
+    for name in (CONFIG_FILE, WEIGHTS_FILE):
+        if not (path / name).is_file():
+            raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "
+                                   "(retrain, or copy both model.json and model.safetensors)")
+    try:
+        doc = json.loads((path / CONFIG_FILE).read_text())
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from None
+    _validate_doc(path, doc)
+    blob = (path / WEIGHTS_FILE).read_bytes()
+    if hashlib.sha256(blob).hexdigest() != doc["weights_sha256"]:
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} does not match the checksum in {CONFIG_FILE}; "
+                               "one of the files was modified or comes from another model")
+    try:
+        arrays = safetensors.numpy.load(blob)
+    except Exception as exc:  # safetensors raises its own error types for damaged files
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} is not a readable safetensors file ({exc})") from exc
+    return doc, arrays
+
+
+def _validate_doc(path: Path, doc: object) -> None:
+    def bad(why: str) -> ManifoldgenError:
+        return ManifoldgenError(f"{path}/{CONFIG_FILE}: {why}; the file was edited or is damaged: "
+                                "restore it or retrain the model")
+
+    if not isinstance(doc, dict):
+        raise bad("not a JSON object")
+    if doc.get("format_version") != MODEL_FORMAT_VERSION:
+        raise bad(f"format_version {doc.get('format_version')!r} is not supported (expected {MODEL_FORMAT_VERSION}; "
+                  "version 1 files carry no checksum of their fields)")
+    if doc.get("sha256") != document_checksum(doc):
+        raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
+                  "other field was changed)")
+    for key, kind in (("model", str), ("config", dict), ("dims", dict),
+                      ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
+        if not isinstance(doc.get(key), kind):
+            raise bad(f"field '{key}' is missing or not a {kind.__name__}")
+    d, k = doc["dims"].get("d"), doc["dims"].get("k")
+    if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):
+        raise bad("dims must hold positive integers d and k")
+    sizes = {"q_mean": d, "q_std": d, "y_mean": k, "y_std": k, "y_low": k, "y_high": k, "lower": d, "upper": d}
+    for key, size in sizes.items():
+        values = doc["normalisation"].get(key)
+        if not (isinstance(values, list) and len(values) == size
+                and all(isinstance(v, (int, float)) and np.isfinite(v) for v in values)):
+            raise bad(f"normalisation '{key}' must be {size} finite numbers")
+    norm = doc["normalisation"]
+    if min(norm["q_std"] + norm["y_std"]) <= 0:
+        raise bad("normalisation standard deviations must be positive")
+    if any(lo > hi for lo, hi in zip(norm["lower"] + norm["y_low"], norm["upper"] + norm["y_high"])):
+        raise bad("a lower bound (joint limit or condition range) exceeds its upper bound")
+    joints = doc["meta"].get("joints")
+    if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
+        raise bad(f"meta must name the robot and its {d} joints")
+    decoder = doc.get("decoder")
+    if decoder is not None and not (
+            isinstance(decoder, dict) and isinstance(decoder.get("net"), str) and decoder.get("law") in LAWS
+            and all(isinstance(decoder.get(key), int) and not isinstance(decoder.get(key), bool)
+                    and decoder[key] >= low for key, low in (("noise", 1), ("steps", 0), ("layers", 1)))):
+        raise bad("'decoder' must name the sampling network 'net', its noise 'law' (normal or uniform), "
+                  "'noise' width, integration 'steps' and number of Linear 'layers'")
+
+
+def check_mix_refine(path: str | Path, doc: dict) -> tuple[int | None, float | None]:
+    """The document's ``refine`` (projection iterations, 0-1000) and ``mix`` (a share in [0, 1]), each or None."""
+    refine, mix = doc.get("refine"), doc.get("mix")
+    if refine is not None and (isinstance(refine, bool) or not isinstance(refine, int) or not 0 <= refine <= 1000):
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid refine {refine!r}; retrain or restore it")
+    if mix is not None and (isinstance(mix, bool) or not isinstance(mix, (int, float)) or not 0 <= mix <= 1):
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid mix {mix!r} (a share in [0, 1]); retrain "
+                               "or restore it")
+    return refine, mix
+
+
+def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: dict):
+    """``manifoldgen_core.Decoder`` for the sampling network ``decoder`` (a model.json ``decoder`` entry) with
+    ``weights`` by name (``NET.2i.weight (out, in)``, ``NET.2i.bias (out,)``), or None without the core."""
+    from manifoldgen.native import core_module
+
+    core = core_module()
+    if core is None:
+        return None
+    names = [f"{decoder['net']}.{2 * i}" for i in range(decoder["layers"])]
+    try:
+        w = [np.ascontiguousarray(weights[f"{name}.weight"], dtype=np.float32) for name in names]
+        b = [np.ascontiguousarray(weights[f"{name}.bias"], dtype=np.float32) for name in names]
+    except KeyError as exc:
+        raise ManifoldgenError(f"the model's weights lack {exc.args[0]}, which its 'decoder' entry names; the "
+                               "files come from different models: retrain or restore them") from None
+    return core.Decoder(w, b, d if decoder["steps"] else decoder["noise"], decoder["law"] == "uniform",
+                        *(np.asarray(norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
+                                                                   "lower", "upper")), steps=decoder["steps"])
+
+
+class ModelFacts:
+    """What a trained model's files say besides its weights: ``name``, ``config``, ``meta``, ``norm``, ``d``,
+    ``k``, ``refine``, ``mix``, and the conditions it was trained on."""
+
+    name: str
+    meta: dict
+    norm: dict
+    k: int
+
+    @property
+    def condition(self) -> Condition:
+        """The conditions the model was trained on: names and units from meta, range from the data."""
+        info = self.meta.get("condition", {})
+        names = tuple(info.get("names", [f"y{i}" for i in range(self.k)]))
+        units = tuple(info.get("units", [""] * self.k))
+        return Condition(names, units, np.array([self.norm["y_low"], self.norm["y_high"]], float))
+
+    def check_condition(self, y: np.ndarray, strict: bool = False) -> np.ndarray:
+        """y as (B, k); outside the trained range: warn naming the range, or raise when strict."""
+        return self.condition.check(y, strict=strict)
+
+
+class SavedModel(ModelFacts):
+    """A model directory as the planners use it: its facts, its network in the core, torch only if needed
+    (``load``: path -> the torch model, :func:`manifoldgen.models.load_model`)."""
+
+    def __init__(self, path: str | Path, load: Callable[[Path], object]):
+        self.path, self._load = Path(path), load
+        doc, self.weights = read_model_dir(self.path)
+        self.name, self.config, self.meta, self.norm = doc["model"], doc["config"], doc["meta"], doc["normalisation"]
+        self.d, self.k = doc["dims"]["d"], doc["dims"]["k"]
+        self.refine, self.mix = check_mix_refine(self.path, doc)
+        self.decoder = doc.get("decoder")
+        self._torch_model = None
+
+    def native_decoder(self):
+        """The sampling network in the compiled core (see :func:`core_decoder`), or None."""
+        return core_decoder(self.decoder, self.weights, self.d, self.norm) if self.decoder else None
+
+    def sample(self, y: np.ndarray, n: int, generator=None) -> np.ndarray:
+        """(n, d) rows at ``y`` from the torch model (loaded on first use): see ``ConditionalSampler.sample``."""
+        if self._torch_model is None:
+            self._torch_model = self._load(self.path)
+        return self._torch_model.sample(y, n, generator)
