@@ -37,7 +37,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PAGES = sorted(DOCS.glob("*.md"))
-REPO_DIRS = {p.name for p in ROOT.iterdir() if p.is_dir() and not p.name.startswith(".")} - {"build"}
+# a word whose first component is one of these names a repository path, which must exist (outputs such as runs/,
+# build/ or demo-out/ are not repository paths, even where a local run made them)
+REPO_DIRS = {"benchmarks", "docs", "examples", "native", "scripts", "src", "tests"}
 
 OPEN = re.compile(r"^(```|~~~)[ \t]*([\w+-]*)[^\n]*$")
 MARKER = re.compile(r"^<!--\s*test:\s*(.*?)\s*-->$")
@@ -137,10 +139,11 @@ def test_a_built_page_renders_in_chromium(site, tmp_path):
     image = Image.open(shot).convert("RGB")
     assert image.size == (width, height)
     pixels = image.load()
-    # the theme's header bar: one saturated colour across the top, unlike the white page below it
-    header = {pixels[x, 20] for x in range(600, 1200, 10)}
-    assert len(header) == 1 and max(header.pop()) - min(pixels[640, 20]) > 60, "no coloured header bar"
-    assert pixels[640, 300] != pixels[640, 20]
+    # the theme's header bar: one saturated colour along the top edge, unlike the white page below it
+    top = [pixels[x, 3] for x in range(0, width, 8)]
+    colour = max(set(top), key=top.count)
+    assert top.count(colour) > 0.9 * len(top) and max(colour) - min(colour) > 60, f"no coloured header: {colour}"
+    assert pixels[640, 300] != colour
     # the page's title "Python API" is drawn: dark pixels in the title region of the content column
     title = [pixels[x, y] for x in range(300, 500) for y in range(95, 140)]
     dark = sum(1 for p in title if sum(p) < 450)
