@@ -13,7 +13,8 @@ Chromium, and every fenced code block of docs/*.md runs or is checked, by the co
 - ``<!-- test: file PATH -->``: the block is copied verbatim from the repository file PATH;
 - ``json`` blocks parse (``...`` marks an elision); a constraint spec names a registered type and its parameters;
   ``toml`` blocks parse; ``text`` blocks are output or a usage line (``<!-- test: usage -->``: checked as bash);
-- ``; sub OLD => NEW`` after the action replaces text before running, to run a long example at a test's size.
+- ``; sub OLD => NEW`` after the action replaces text before running, to run a long example at a test's size;
+  ``; skip COMMAND`` leaves one command of a ``run`` block checked only (a server, or a file the page does not make).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class Block:
     action: str = ""
     argument: str = ""
     subs: list[tuple[str, str]] = field(default_factory=list)
+    skips: list[str] = field(default_factory=list)  # commands of a run block that are only checked
 
     @property
     def where(self) -> str:
@@ -87,6 +89,9 @@ def blocks(page: Path) -> list[Block]:
             block.action, _, block.argument = action.partition(" ")
             assert block.action in ACTIONS, f"{block.where}: unknown test action '{block.action}'"
             for option in options:
+                if option.startswith("skip "):
+                    block.skips.append(option[5:].strip())
+                    continue
                 assert option.startswith("sub ") and " => " in option, f"{block.where}: unknown option '{option}'"
                 old, new = option[4:].split(" => ", 1)
                 block.subs.append((old.strip(), new.strip()))
@@ -169,10 +174,11 @@ def test_every_block_is_run_or_checked_by_the_convention():
 
 def test_the_collector_reads_markers_and_blocks(tmp_path):
     page = tmp_path / "page.md"
-    page.write_text("text\n\n<!-- test: run; sub -n 4000 => -n 10 -->\n\n```bash\nmanifoldgen sample m -n 4000\n"
-                    "```\n\n```python\nx = 1\n```\n", encoding="utf-8")
+    page.write_text("text\n\n<!-- test: run; sub -n 4000 => -n 10; skip manifoldgen view m -->\n\n```bash\n"
+                    "manifoldgen sample m -n 4000\n```\n\n```python\nx = 1\n```\n", encoding="utf-8")
     run, plain = blocks(page)
     assert (run.action, run.lang, run.line, run.subs) == ("run", "bash", 5, [("-n 4000", "-n 10")])
+    assert run.skips == ["manifoldgen view m"]
     assert run.code() == "manifoldgen sample m -n 10\n"
     assert (plain.action, plain.lang, plain.text) == ("", "python", "x = 1\n")
     assert commands("a \\\n  b  # c\n# d\nT=x; U=y\nmanifoldgen $T 'q r'\nfor m in p q; do c $m; done\n") == \
@@ -499,5 +505,11 @@ def test_the_pages_examples_run(page, tmp_path, monkeypatch):
         if block.lang == "python" and block.action in {"", "run"}:
             exec(compile(block.code(), block.where, "exec"), namespace)
         elif block.lang == "bash" and block.action == "run":
+            skipped = set()
             for words in commands(block.code()):
-                run_command(block, words, env, tmp_path)
+                if shlex.join(words) in block.skips:
+                    check_command(block, words, env)
+                    skipped.add(shlex.join(words))
+                else:
+                    run_command(block, words, env, tmp_path)
+            assert skipped == set(block.skips), f"{block.where}: 'skip' names no command: {set(block.skips) - skipped}"
