@@ -7,7 +7,8 @@ Chromium, and every fenced code block of docs/*.md runs or is checked, by the co
   imports exists and its calls' keywords are the callee's parameters;
 - ``bash`` blocks are checked: every ``manifoldgen`` command is parsed by the CLI's own parser (click, as typed:
   unknown options, wrong values, missing arguments fail) with its sampler specs, bench methods and ``--set`` keys,
-  every ``python SCRIPT`` names an existing script whose parser knows every option given, every ``pip install``
+  every ``python SCRIPT`` is parsed by that script's options (its argparse calls, read from its source), every
+  ``pip install``
   names existing extras, and every repository path named exists; ``<!-- test: run -->`` also runs them, in the
   page's working directory (``manifoldgen`` in this process, scripts with this Python);
 - ``<!-- test: file PATH -->``: the block is copied verbatim from the repository file PATH;
@@ -19,6 +20,7 @@ Chromium, and every fenced code block of docs/*.md runs or is checked, by the co
 
 from __future__ import annotations
 
+import argparse
 import ast
 import importlib
 import inspect
@@ -289,13 +291,55 @@ def check_cli_values(block: Block, names: list[str], ctx) -> None:
         parse_settings(params["settings"], None, get_model_class(params["model"]).defaults, "model")
 
 
-def script_options(script: Path) -> set[str]:
-    """The option strings a script's argparse parser declares (read from its source: nothing is run)."""
-    names = set()
-    for node in ast.walk(ast.parse(script.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "add_argument":
-            names |= {a.value for a in node.args if isinstance(a, ast.Constant) and str(a.value).startswith("-")}
-    return names
+class _ParseError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # raise instead of printing usage and exiting
+        raise _ParseError(message)
+
+
+def script_parser(script: Path) -> argparse.ArgumentParser | set[str]:
+    """The script's argparse parser rebuilt from its source (nothing is run): every ``add_argument`` with its
+    option strings and its literal ``nargs``, ``action``, ``choices``, ``required`` and builtin ``type``. A script
+    with subcommands gives the set of its option strings instead."""
+    tree = ast.parse(script.read_text(encoding="utf-8"))
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)]
+    adds = sorted((c for c in calls if c.func.attr == "add_argument"), key=lambda c: (c.lineno, c.col_offset))
+    if any(c.func.attr == "add_subparsers" for c in calls):
+        return {a.value for c in adds for a in c.args if isinstance(a, ast.Constant) and str(a.value).startswith("-")}
+    parser = _Parser(prog=script.name, add_help=True)
+    for call in adds:
+        names = [a.value for a in call.args if isinstance(a, ast.Constant)]
+        options = {}
+        for keyword in call.keywords:
+            if keyword.arg in {"nargs", "action", "choices", "required", "dest", "const"}:
+                try:
+                    options[keyword.arg] = ast.literal_eval(keyword.value)
+                except ValueError:  # not a literal (choices=list(ROBOTS), a custom action): not checked
+                    pass
+            elif keyword.arg == "type" and isinstance(keyword.value, ast.Name) and keyword.value.id in {"int", "float"}:
+                options["type"] = {"int": int, "float": float}[keyword.value.id]
+        if options.get("action") in {"store_true", "store_false", "count", "help", "version"}:
+            options.pop("type", None)
+        parser.add_argument(*names, **options)
+    return parser
+
+
+def check_script(block: Block, script: Path, args: list[str]) -> None:
+    """``python SCRIPT ARGS``: parsed by the script's own options (see :func:`script_parser`)."""
+    parser = script_parser(script)
+    name = script.relative_to(ROOT).as_posix()
+    if isinstance(parser, set):
+        for word in args:
+            if re.match(r"--?[a-zA-Z]", word):
+                assert word.split("=")[0] in parser, f"{block.where}: {name} has no option {word}"
+        return
+    try:
+        parser.parse_args(args)
+    except _ParseError as exc:
+        raise AssertionError(f"{block.where}: python {name} {shlex.join(args)}: {exc}") from exc
 
 
 def check_command(block: Block, words: list[str], env: dict) -> None:
@@ -323,11 +367,14 @@ def check_command(block: Block, words: list[str], env: dict) -> None:
             return
         script = ROOT / args[0]
         assert script.is_file(), f"{block.where}: {args[0]}: no such file"
-        known = script_options(script)
-        for word in args[1:]:
-            word = word.strip("[]")
-            if re.match(r"--?[a-zA-Z]", word):
-                assert word.split("=")[0] in known, f"{block.where}: {args[0]} has no option {word}"
+        if block.action == "usage":  # a usage line: [OPTIONAL ...] brackets, placeholders, alternatives
+            parser = script_parser(script)
+            known = parser if isinstance(parser, set) else {o for a in parser._actions for o in a.option_strings}
+            for word in (w.strip("[]") for w in args[1:]):
+                if re.match(r"--?[a-zA-Z]", word):
+                    assert word in known, f"{block.where}: {args[0]} has no option {word}"
+        else:
+            check_script(block, script, args[1:])
     elif program == "pip":
         assert args[0] == "install", f"{block.where}: pip {args[0]}"
         project = tomllib.loads((ROOT / "pyproject.toml").read_text())
