@@ -1,8 +1,7 @@
-"""Coarse-first edge checks in the compiled core's search (RRTConnectSettings.lazy_stride): returned paths are
-checked at every planning-resolution state and densely, colliding edges found on candidate paths are cut,
-stride 1 checks every state at once, and a bad stride is refused in one line. Dense edges
-(RRTConnectSettings.dense_edges): every motion passes the path check when it is made, so no candidate path is
-rejected and no edge cut."""
+"""Edge checks in the compiled core's search (RRTConnectSettings.edges). Coarse (``coarse:K``): returned paths
+are checked at every planning-resolution state and densely, colliding edges found on candidate paths are cut,
+``coarse:1`` checks every state at once, and a bad value is refused in one line. Dense (``dense:K``): every
+motion passes the path check when it is made, so no candidate path is rejected and no edge cut."""
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (
 
 
 def _solve(task, scene_name: str, seed: int, stride: int, dense_edges: bool = False):
-    """(space, result) of the core's RRT-Connect with the shipped CVAE at lazy_stride ``stride``."""
+    """(space, result) of the core's RRT-Connect with the shipped CVAE, edges ``coarse:stride`` (or dense)."""
     from manifoldgen.models import pretrained_model_dir
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.scene import get_scene
@@ -22,7 +21,7 @@ def _solve(task, scene_name: str, seed: int, stride: int, dense_edges: bool = Fa
     scene = get_scene(task, scene_name)
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
     planner = RRTConnect(space, make_sampler(f"cvae:{pretrained_model_dir()}", space, seed), seed=seed,
-                         settings=RRTConnectSettings(core="native", lazy_stride=stride, dense_edges=dense_edges))
+                         settings=RRTConnectSettings(core="native", edges=f"{'dense' if dense_edges else 'coarse'}:{stride}"))
     return space, planner.solve(scene.start, scene.goal, 20.0)
 
 
@@ -60,25 +59,24 @@ def test_stride_one_checks_every_state_at_once_and_coarse_checks_keep_the_search
     _assert_checked_state_by_state(panda_task, coarse_space, coarse.path)
 
 
-def test_a_bad_stride_is_refused_in_one_line(panda_task):
+def test_a_bad_edges_value_is_refused_in_one_line(panda_task):
     from manifoldgen.planning import RRTConnectSettings
     from manifoldgen.planning import planner_settings
     from manifoldgen.settings import check_settings
-    for bad in (0, -2, 1.5, True):
-        with pytest.raises(ManifoldgenError, match="lazy_stride must be a whole number >= 1") as error:
-            RRTConnectSettings(lazy_stride=bad).check()
+    for bad in ("coarse:0", "coarse:-2", "coarse:1.5", "dense", "lazy:2", "2", True):
+        with pytest.raises(ManifoldgenError, match="edges must be 'coarse:K' or 'dense:K'") as error:
+            RRTConnectSettings(edges=bad).check()
         assert "\n" not in str(error.value)
-    with pytest.raises(ManifoldgenError, match="lazy_stride must be a int"):  # a task file's [planner] table
-        check_settings({"lazy_stride": "2"}, planner_settings("rrtconnect"), "planner")
+    with pytest.raises(ManifoldgenError, match="edges must be a str"):  # a task file's [planner] table
+        check_settings({"edges": 2}, planner_settings("rrtconnect"), "planner")
 
 
-def test_edges_checked_only_on_candidate_paths_are_cut_and_reattached(panda_task, monkeypatch):
-    """native.LAZY (nodes only while searching) in the maze: hundreds of edges cut, some nodes given another
-    parent instead of leaving with their subtrees, and the search still ends with a path valid at every state."""
-    from manifoldgen import native
-    monkeypatch.setattr(native, "LAZY", True)
-    space, result = _solve(panda_task, "maze", 90, 2)
-    assert result.solved and result.extras["cut_edges"] > 100 and result.extras["reattached"] > 0
+def test_a_cut_edge_gives_its_node_another_parent(panda_task):
+    """Coarse checks (every 2nd state, the default) in the maze, seed 4: an edge on a candidate path is cut and
+    its node reattached to another parent instead of leaving with its subtree; the path returned is valid at
+    every state."""
+    space, result = _solve(panda_task, "maze", 4, 2)
+    assert result.solved and result.extras["cut_edges"] > 0 and result.extras["reattached"] > 0
     _assert_checked_state_by_state(panda_task, space, result.path)
 
 
@@ -94,10 +92,3 @@ def test_dense_edges_pass_the_path_check_as_they_are_made(panda_task, scene_name
     for a, b in zip(result.path[:-1], result.path[1:]):
         assert space.validate_path(np.array([a, b])).valid
     _assert_checked_state_by_state(panda_task, space, result.path)
-
-
-def test_a_bad_dense_edges_value_is_refused_in_one_line():
-    from manifoldgen.planning import RRTConnectSettings
-    with pytest.raises(ManifoldgenError, match="dense_edges must be true or false") as error:
-        RRTConnectSettings(dense_edges="yes").check()
-    assert "\n" not in str(error.value)

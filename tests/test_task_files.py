@@ -60,8 +60,8 @@ def test_a_task_files_planner_table_sets_defaults_that_set_overrides(tmp_path):
     assert task_settings(task, "rrt") == {"range": 1.0}  # RRT has no stepping stones
     sphere = get_task("sphere")  # its [planner] reach is in metres, fitted to the unit sphere
     result, meta = run_query(sphere, get_scene(sphere, "sphere"), "project", "rrtconnect", seed=0, time_limit=20)
-    assert result.solved and meta["planner_settings"]["reach"] == 0.2 and meta["planner_settings"]["lazy_stride"] == 1
-    assert meta["task"]["planner"] == {"reach": 0.2, "lazy_stride": 1}
+    assert result.solved and meta["planner_settings"]["reach"] == 0.2 and meta["planner_settings"]["edges"] == "coarse:1"
+    assert meta["task"]["planner"] == {"reach": 0.2, "edges": "coarse:1"}
 
 
 BAD = [

@@ -265,29 +265,26 @@ class Space {
   PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment, bool certify);
 };
 
-// RRT-Connect settings (manifoldgen.planning.base.PlannerSettings) and the local planner's name.
+// RRT-Connect settings, filled whole from Python (manifoldgen.native.core_settings: the planner's settings
+// dataclass is their one source; the binding's constructor takes every field, and there are no defaults here).
 struct PlannerSettings {
-  double range = 0.6, resolution = 0.05, step = 0.4;
-  bool partial = true;
-  int pool = 2048, pool_batch = 256, candidates = 8, target_batch = 32;
-  std::string local = "auto";
-  // lazy: tree edges are checked for collision only when they lie on a candidate path (nodes at once);
-  // an edge found colliding then is cut (see planner.cpp, Search::verify)
-  bool lazy = false;
-  // lazy_stride: coarse-first edge checks (when not lazy): a motion's planning-resolution states are checked for
-  // collision every lazy_stride-th and at nodes while searching, the rest when the edge lies on a candidate path
-  // (1: every state at once)
-  int lazy_stride = 1;
-  // dense_edges: each motion passes the path check (Space::validate_path) when it is made, after a pre-check of
-  // its every lazy_stride-th planning-resolution state (all tests, bisection order); a candidate path is then
-  // made of checked edges and is never rejected (planner.cpp, Local::dense)
-  bool dense_edges = false;
+  double range, resolution, step;
+  bool partial;
+  int pool, pool_batch, candidates, target_batch;
+  std::string local;  // the local planner: auto, interpolate, project or direct
+  // edge_stride: coarse-first edge checks: a motion's planning-resolution states are checked for collision every
+  // edge_stride-th and at nodes while searching, the rest when the edge lies on a candidate path (1: every state
+  // at once); with dense_edges, each motion passes the path check (Space::validate_path) when it is made, after a
+  // pre-check of its every edge_stride-th planning-resolution state (all tests, bisection order), so a candidate
+  // path is made of checked edges and is never rejected (planner.cpp, Local::dense)
+  int edge_stride;
+  bool dense_edges;
   // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
   // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
-  int refine = -1;
+  int refine;
   // reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of one of its nodes
-  // (else range; RRTConnectSettings.reach)
-  double reach = 0.0;
+  // (else range)
+  double reach;
 };
 
 struct PlanOutput {

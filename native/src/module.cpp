@@ -447,20 +447,35 @@ NB_MODULE(manifoldgen_core, m) {
       "The search's nearest-neighbour index over points (N, n) (rows inserted in order), for each query (Q, n): "
       "(nearest alive row, lowest index on ties, -1 if none; whether an alive row is within radius). For tests.");
 
+  nb::class_<mgcore::PlannerSettings>(m, "PlannerSettings")
+      .def(
+          "__init__",
+          [](mgcore::PlannerSettings* s, double range, double resolution, double step, bool partial, int pool,
+             int pool_batch, int candidates, int target_batch, const std::string& local, int edge_stride,
+             bool dense_edges, int refine, double reach) {
+            if (edge_stride < 1) throw std::invalid_argument("edge_stride must be at least 1 (1: every state checked at once)");
+            new (s) mgcore::PlannerSettings{range, resolution, step, partial, pool, pool_batch, candidates,
+                                            target_batch, local, edge_stride, dense_edges, refine, reach};
+          },
+          nb::kw_only(), "range"_a, "resolution"_a, "step"_a, "partial"_a, "pool"_a, "pool_batch"_a, "candidates"_a,
+          "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a,
+          "RRT-Connect's settings, every field given (no defaults: manifoldgen.native.core_settings fills them from "
+          "the planner's settings). edge_stride > 1: motions are checked for collision at every edge_stride-th state "
+          "and at nodes while searching, the rest on candidate paths; dense_edges: each motion passes the path check "
+          "when it is made (after a pre-check of every edge_stride-th state), so no candidate path is rejected; "
+          "refine >= 0: draw gives raw candidates, each refined (refine projection iterations) and checked when the "
+          "search first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
+          "of its nodes (else range).")
+      .def_ro("range", &mgcore::PlannerSettings::range)
+      .def_ro("edge_stride", &mgcore::PlannerSettings::edge_stride)
+      .def_ro("dense_edges", &mgcore::PlannerSettings::dense_edges)
+      .def_ro("refine", &mgcore::PlannerSettings::refine)
+      .def_ro("reach", &mgcore::PlannerSettings::reach);
+
   m.def(
       "rrt_connect",
-      [](Space& space, const In1& start, const In1& goal, nb::callable draw, double time_limit, double range,
-         double resolution, double step, bool partial, int pool, int pool_batch, int candidates,
-         const std::string& local, int target_batch, bool lazy, int refine, double reach, int lazy_stride, bool dense_edges) {
-        mgcore::PlannerSettings st;
-        st.range = range, st.resolution = resolution, st.step = step, st.partial = partial, st.pool = pool;
-        st.pool_batch = pool_batch, st.candidates = candidates, st.local = local, st.target_batch = target_batch;
-        st.lazy = lazy;
-        if (lazy_stride < 1) throw std::invalid_argument("lazy_stride must be at least 1 (1: every state checked at once)");
-        st.lazy_stride = lazy_stride;
-        st.dense_edges = dense_edges;
-        st.refine = refine;
-        st.reach = reach;
+      [](Space& space, const In1& start, const In1& goal, nb::callable draw, double time_limit,
+         const mgcore::PlannerSettings& st) {
         const int nn = space.n();
         mgcore::Draw fetch = [&](int count) {
           nb::object rows = draw(count);
@@ -484,15 +499,10 @@ NB_MODULE(manifoldgen_core, m) {
         d["nodes"] = out.nodes;
         return d;
       },
-      "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "range"_a, "resolution"_a, "step"_a, "partial"_a,
-      "pool"_a, "pool_batch"_a, "candidates"_a, "local"_a, "target_batch"_a, "lazy"_a = false, "refine"_a = -1, "reach"_a = 0.0, "lazy_stride"_a = 1, "dense_edges"_a = false,
-      "RRT-Connect from start to goal (n,) in space; draw(count) -> (count, n) valid samples. A dict: path (K, n) "
-      "(0 rows: unsolved), iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, nodes. "
-      "lazy: tree edges are checked for collision only on candidate paths. refine >= 0: draw gives raw candidates, "
-      "each refined (refine projection iterations) and checked when the search first uses it (counts: refined, "
-      "accepted). reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of its nodes (else range). "
-      "lazy_stride > 1: motions are checked for collision at every lazy_stride-th state and at nodes while searching, the "
-      "rest on candidate paths (verified_states: those states checked; reattached: cut edges whose node got another parent). "
-      "dense_edges: each motion passes the path check when it is made (after a pre-check of every lazy_stride-th state), "
-      "so no candidate path is rejected.");
+      "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "settings"_a,
+      "RRT-Connect from start to goal (n,) in space with settings (PlannerSettings); draw(count) -> (count, n) rows "
+      "(valid samples, or raw candidates where settings.refine >= 0). A dict: path (K, n) (0 rows: unsolved), "
+      "iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, verified_states (coarse edges' "
+      "states checked on candidate paths), reattached (cut edges whose node got another parent), refined, "
+      "accepted (raw candidates made samples, and of those valid), nodes.");
 }

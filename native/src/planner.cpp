@@ -191,7 +191,8 @@ struct Tree {
   std::vector<int> parent;
   std::vector<char> alive;
   // per node, how the edge into it was checked for collision at its planning-resolution states i (Local::segment_states):
-  // 0 every state; s > 0 only where (i + 1) % s == 0 (coarse edges; Local::UNCHECKED: none), the rest left to Search::verify;
+  // 0 every state; s > 0 only where (i + 1) % s == 0 (coarse edges; Local::UNCHECKED: a loose part, none), the rest
+  // left to Search::verify;
   // Local::DENSE: by the path check (dense edges)
   std::vector<int> coarse;
   KdTree index;
@@ -336,7 +337,7 @@ struct Local {
   // Coarse-first edge checks: a motion's states i (segment_states) are checked for collision only where
   // (i + 1) % stride == 0 and at the state it ends at when that becomes a node (limits, constraint and
   // inequalities at every state); Search::verify checks the others when the edge lies on a candidate path.
-  // 1: every state (eager); UNCHECKED: nodes only (PlannerSettings::lazy).
+  // 1: every state (eager); UNCHECKED: the record of a loose part (made()).
   static constexpr int UNCHECKED = std::numeric_limits<int>::max();
   int stride = 1;
   // Dense edges (PlannerSettings::dense_edges): a motion is kept only when it passes the path check
@@ -645,7 +646,7 @@ struct Search {
         continue;
       }
       ++out.cut_edges;
-      if (local.stride != Local::UNCHECKED) local.stride = 1;
+      local.stride = 1;
       if (reattach(k, child)) ++out.reattached;
       else tree.kill(child);
       return false;
@@ -792,10 +793,10 @@ struct Search {
 
   void run(const Vec& start, const Vec& goal) {
     // the direct motion is checked at every state (a coarse direct walk would cross obstacles), or with dense edges
-    // at every lazy_stride-th (the path check follows); not in a tree, its progress is dropped when it fails
-    if (s.dense_edges) local.stride = s.lazy_stride;
+    // at every edge_stride-th (the path check follows); not in a tree, its progress is dropped when it fails
+    if (s.dense_edges) local.stride = s.edge_stride;
     if (direct(start, goal)) return;
-    local.stride = s.lazy ? Local::UNCHECKED : s.lazy_stride;
+    local.stride = s.edge_stride;
     local.dense = s.dense_edges;
     trees.emplace_back(start);
     trees.emplace_back(goal);

@@ -72,10 +72,6 @@ REBUILD = ("pip install scikit-build-core nanobind cmeel-eigen && pip install --
            "--force-reinstall -e . (in the manifoldgen checkout)")
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
 TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
-# lazy edge checks (native/src/planner.cpp, Search::verify; nodes only while searching): measured wall 31 -> 28 ms,
-# maze 107 -> 304 ms (the trees grow through the maze's walls), so off; the coarse-first checks of the planner
-# setting lazy_stride check every lazy_stride-th state while searching instead
-LAZY = False
 # lazy samples (planner.cpp): the sampler's raw rows go to the search, which refines and checks a row only
 # when it first uses it
 LAZY_SAMPLES = True
@@ -676,6 +672,18 @@ def _draw(sampler, raw: bool):
     return draw
 
 
+def core_settings(planner, refine: int):
+    """The core's ``PlannerSettings`` for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect`): every field
+    from its settings dataclass, its local planner and stone radius, and ``refine`` (projection iterations of a
+    raw row when the search first uses it; -1: the sampler's rows come checked). The one place they cross."""
+    s = planner.settings
+    stride, dense = s.edge_checks()
+    return core_module().PlannerSettings(
+        range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=s.pool, pool_batch=s.pool_batch,
+        candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
+        dense_edges=dense, refine=refine, reach=planner._stone_radius())
+
+
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
     """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
     settings and sampler it uses): the direct connection, then the search, until ``deadline``
@@ -691,11 +699,8 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
         sampler.space = NativeSpace(space, core, collision=False)
     try:
         out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                               _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0), s.range,
-                               s.resolution, s.step, s.partial, s.pool, s.pool_batch, s.candidates, planner.local.name,
-                               TARGET_BATCH, LAZY, refine=int(sampler.lazy_refine) if lazy else -1,
-                               reach=planner._stone_radius(), lazy_stride=s.lazy_stride,
-                               dense_edges=s.dense_edges)
+                                        _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0),
+                                        core_settings(planner, int(sampler.lazy_refine) if lazy else -1))
     finally:
         if swapped:
             sampler.space = space

@@ -20,6 +20,9 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 
+EDGE_CHECKS = ("coarse", "dense")  # see RRTConnectSettings.edges
+
+
 @dataclass
 class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
@@ -33,34 +36,38 @@ class RRTConnectSettings(PlannerSettings):
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
     straight motions to stones: in the maze fewer of them collide; shipped CVAE, sphere checks, held-out
     seeds 90-189, median CPU wall / maze: 11.3 / 80.8 ms at 0.6 (= range), 12.5 / 53.1 ms at 0.5, 13.4 /
-    43.4 ms at 0.4; README "Compiled core"); ``lazy_stride``: coarse-first edge checks in the core's search: a
-    motion's planning-resolution states are checked for collision every ``lazy_stride``-th (and at the node it
-    ends at) while the trees grow, the others only when the edge lies on a candidate path (a colliding one is cut
-    from its tree), so every returned path is still checked at every planning-resolution state and then densely;
-    1 checks every state at once; ``dense_edges``: the core's search keeps a motion only when it passes the final
-    path check (the space's dense check, ``ValidationSettings.resolution``) as it is made, after a pre-check of its
-    every ``lazy_stride``-th planning-resolution state (every test); a candidate path is then never rejected and
-    needs no check of its own (it pays where the trees are about the path and a path check of a motion costs little
-    more than its planning check: talos reach, README "Dense edges"). The Python search checks every state at once
-    whatever these settings (it is the core's test oracle at ``lazy_stride=1``, ``dense_edges=False``)."""
+    43.4 ms at 0.4; docs/benchmarks.md "Compiled core"); ``edges``: how the core's search checks a motion for
+    collision: ``coarse:K`` checks its planning-resolution states every K-th (and at the node it ends at) while
+    the trees grow, the others only when the edge lies on a candidate path (a colliding one is cut from its tree),
+    so every returned path is still checked at every planning-resolution state and then densely (``coarse:1``:
+    every state at once); ``dense:K`` keeps a motion only when it passes the final path check (the space's dense
+    check, ``ValidationSettings.resolution``) as it is made, after a pre-check of its every K-th
+    planning-resolution state (every test), so a candidate path is never rejected and needs no check of its own
+    (it pays where the trees are about the path and a path check of a motion costs little more than its planning
+    check: talos reach, docs/benchmarks.md "Dense edges"). The Python search checks every state at once whatever
+    this setting (it is the core's test oracle at ``coarse:1``)."""
 
     core: str = "auto"
     spheres: bool = False
     reach: float = 0.5
-    lazy_stride: int = 2
-    dense_edges: bool = False
+    edges: str = "coarse:2"
 
     def check(self) -> None:
         super().check()
-        if isinstance(self.lazy_stride, bool) or not isinstance(self.lazy_stride, int) or self.lazy_stride < 1:
-            raise ManifoldgenError(f"lazy_stride must be a whole number >= 1 (1: every motion state checked for "
-                                   f"collision at once), got {self.lazy_stride!r}; e.g. lazy_stride=3")
-        if not isinstance(self.dense_edges, bool):
-            raise ManifoldgenError(f"dense_edges must be true or false, got {self.dense_edges!r}; e.g. dense_edges=true")
+        self.edge_checks()
         if not self.reach > 0:
             raise ManifoldgenError(f"reach must be a positive distance (rad), got {self.reach}; e.g. reach=0.5")
         if self.core not in native.CORES:
             raise ManifoldgenError(f"unknown core '{self.core}'; known: {', '.join(native.CORES)}")
+
+    def edge_checks(self) -> tuple[int, bool]:
+        """``edges`` as (stride K >= 1, dense), or a one-line error."""
+        kind, _, stride = str(self.edges).partition(":")
+        if kind not in EDGE_CHECKS or not stride.isdigit() or int(stride) < 1:
+            raise ManifoldgenError(f"edges must be 'coarse:K' or 'dense:K' with K a whole number >= 1 (coarse:1: "
+                                   f"every motion state checked for collision at once), got {self.edges!r}; e.g. "
+                                   "edges='coarse:3'")
+        return int(stride), kind == "dense"
 
 
 class RRTConnect(Planner):
