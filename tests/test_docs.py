@@ -12,7 +12,8 @@ Chromium, and every fenced code block of docs/*.md runs or is checked, by the co
   names existing extras, and every repository path named exists; ``<!-- test: run -->`` also runs them, in the
   page's working directory (``manifoldgen`` in this process, scripts with this Python);
 - ``<!-- test: file PATH -->``: the block is copied verbatim from the repository file PATH;
-- ``json`` blocks parse (``...`` marks an elision); a constraint spec names a registered type and its parameters;
+- ``json`` blocks parse (``...`` marks an elision); a constraint spec names a registered type and its parameters,
+  and one without elisions is built on its frames' robot and evaluated at that task's home;
   ``toml`` blocks parse; ``text`` blocks are output or a usage line (``<!-- test: usage -->``: checked as bash);
 - ``; sub OLD => NEW`` after the action replaces text before running, to run a long example at a test's size;
   ``; skip COMMAND`` leaves one command of a ``run`` block checked only (a server, or a file the page does not make).
@@ -508,6 +509,29 @@ def check_constraint_spec(block: Block, spec: dict, elided: bool) -> None:
     required = {n for n, p in params.items() if p.default is p.empty and n not in ("self", "robot")
                 and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)}
     assert elided or required <= given, f"{block.where}: constraint '{spec['type']}' needs {sorted(required - given)}"
+    if not elided:  # built on the robot its frames belong to, and evaluated at that task's home
+        build_on_robot(block, spec)
+
+
+# which built-in task's robot a spec's frames belong to (by frame name); a spec without frames: panda's 7 joints
+ROBOT_TASKS = {"panda_": ("pose", "panda"), "r_gripper": ("dualarm", "pr2"), "l_gripper": ("dualarm", "pr2"),
+               "point": ("sphere", None)}
+
+
+def build_on_robot(block: Block, spec: dict) -> None:
+    import numpy as np
+
+    from manifoldgen.constraints import build_constraint
+    from manifoldgen.tasks import get_task
+
+    frames = [v for k, v in spec.items() if k == "frame" or k.startswith("frame_")]
+    tasks = {task for prefix, task in ROBOT_TASKS.items() for f in frames if f.startswith(prefix)} or {("pose", "panda")}
+    assert len(tasks) == 1, f"{block.where}: frames {frames} of no single known robot"
+    task = get_task(*tasks.pop())
+    constraint = build_constraint(task.robot, spec)
+    y = np.asarray(constraint.condition.values, float)[:1]
+    residual = constraint.residual(task.home[None], y)
+    assert residual.shape == (1, len(constraint.tolerance)), f"{block.where}: residual {residual.shape}"
 
 
 # ----------------------------------------------------------------------------------------------------- the tests
