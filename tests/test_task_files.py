@@ -79,6 +79,21 @@ BAD = [
     ("robot = [", "not valid TOML"),
     (GOOD + "[planner]\nreech = 0.2\n", "line 11: unknown planner setting 'reech'; known: "),
     (GOOD + "[planner]\nreach = \"far\"\n", "line 11: planner setting reach must be a float"),
+    # values of the wrong kind, refused when the file is read (not by a later command, not read letter by letter)
+    (GOOD + "[planner]\nreach = -1.0\n", "line 11: reach must be a positive distance"),
+    (GOOD + "[planner]\nedges = \"lazy\"\n", "line 11: edges must be 'coarse:K' or 'dense:K'"),
+    ('default = "no"\n' + GOOD, "line 1: 'default' (this robot is the default for the task name) must be true or false"),
+    ("floating_base = 0\n" + GOOD, "line 1: 'floating_base' (true for a free-flying base) must be true or false"),
+    (GOOD.replace('name = "mine"', 'name = ["mine"]'), "line 1: 'name' (task name) must be a string"),
+    (GOOD.replace('robot = "panda"', "robot = 5"), "line 2: 'robot' (example-robot-data name or URDF path) must be a string"),
+    ('name = "mine"\nrobot = "panda"\ngroup = "panda_joint1"\n' + GOOD[GOOD.index("[[constraints]]"):],
+     "line 3: 'group' (planning group joints) must be a list of joint names"),
+    (GOOD.replace("values = [[0.3], [0.5]]", "values = [[0.3], [0.5]]\nposition_axes = \"xy\""),
+     "constraint 'pose': position_axes must be a list"),
+    (GOOD + "position_tolerance = nan\n", "constraint 'pose': position_tolerance must be a positive number, got nan"),
+    (GOOD + "position_tolerance = -0.01\n", "constraint 'pose': position_tolerance must be a positive number"),
+    (GOOD + "orientation_tolerance = \"0.01\"\n", "constraint 'pose': orientation_tolerance must be a positive number"),
+    (GOOD.replace('frame = "panda_hand_tcp"', "frame = 3"), "constraint 'pose': frame must be a string, got 3"),
 ]
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import inspect
 import itertools
+import math
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -195,11 +196,44 @@ def build_constraint(robot: Robot, spec: dict) -> Constraint:
                                f"'module:Class'), got {spec!r}")
     cls = CONSTRAINTS.get(str(spec["type"]))
     arguments = {k: v for k, v in spec.items() if k != "type"}
+    check_arguments(cls, arguments, str(spec["type"]))
     try:
         return cls.from_spec(robot, arguments)
     except TypeError as exc:
         params = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "robot")]
         raise ManifoldgenError(f"constraint '{spec['type']}': {exc}; its parameters are {', '.join(params)}") from exc
+
+
+def check_arguments(cls: type, arguments: dict, name: str) -> None:
+    """Refuse, in one line, a constructor argument of the wrong kind for what its signature says: a string or a
+    number where a list belongs (a string would be read letter by letter), a non-number, NaN or infinity where a
+    number belongs (a ``*tolerance`` must be positive, a ``margin`` at least 0), anything but true or false for
+    a flag, and a non-string for a name. Parameters that say nothing (no default, no annotation) are left to the
+    constructor."""
+    parameters = inspect.signature(cls.__init__).parameters
+    for key, value in arguments.items():
+        p = parameters.get(key)
+        if p is None or p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
+            continue
+        default, note = p.default, str(p.annotation)
+        if isinstance(default, bool) or note == "bool":
+            ok, need = isinstance(value, bool), "true or false"
+        elif isinstance(default, float) or note == "float":
+            number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            if key.endswith("tolerance"):
+                ok, need = number and value > 0, "a positive number"
+            elif key == "margin":
+                ok, need = number and value >= 0, "a number >= 0"
+            else:
+                ok, need = number, "a finite number"
+        elif isinstance(default, (tuple, list)) or note.startswith(("list", "tuple")):
+            ok, need = isinstance(value, (list, tuple)), "a list (e.g. [\"z\"] or [0.0, 0.0, 1.0])"
+        elif isinstance(default, str) or note.startswith("str"):
+            ok, need = isinstance(value, str) or (value is None and default is None), "a string"
+        else:
+            continue
+        if not ok:
+            raise ManifoldgenError(f"constraint '{name}': {key} must be {need}, got {value!r}")
 
 
 def _jsonable(value):

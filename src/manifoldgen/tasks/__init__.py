@@ -41,6 +41,10 @@ TASK_KEYS = {"name": "task name", "description": "one line for `manifoldgen task
              "constraints": "[[constraints]] tables", "scenes": "name = scene file table",
              "attached": "[attached] table: an object the robot holds (a tray), as a scene's held object",
              "planner": "[planner] table: our planners' default settings for this task (--set wins)"}
+TASK_TYPES = {"name": str, "description": str, "default": bool, "robot": str, "srdf": str, "group": list,
+              "floating_base": bool, "base_bounds": list, "locked": dict, "home": list, "home_condition": list,
+              "constraints": list, "scenes": dict, "attached": dict, "planner": dict}  # what each key's value is
+TYPE_WORDS = {str: "a string", bool: "true or false", list: "a list [...]", dict: "a table"}
 HOME_SEEDS = 256  # uniform seeds projected when a task gives no home
 
 
@@ -208,6 +212,11 @@ def load_task_file(path: str | Path) -> Task:
     unknown = [k for k in data if k not in TASK_KEYS]
     if unknown:
         raise ManifoldgenError(f"{where(unknown[0])}: unknown key '{unknown[0]}'; known keys: {', '.join(TASK_KEYS)}")
+    for key, value in data.items():
+        kind = TASK_TYPES[key]
+        if not isinstance(value, kind) or (key == "group" and not all(isinstance(j, str) for j in value)):
+            what = "a list of joint names" if key == "group" else TYPE_WORDS[kind]
+            raise ManifoldgenError(f"{where(key)}: '{key}' ({TASK_KEYS[key]}) must be {what}, got {value!r}")
     for key in ("name", "robot", "constraints"):
         if key not in data:
             raise ManifoldgenError(f"{path}: missing '{key}' ({TASK_KEYS[key]}); every task file needs name, robot "
@@ -261,7 +270,12 @@ def _planner_defaults(table) -> dict:
     if not isinstance(table, dict):
         raise ManifoldgenError("'planner' must be a table of setting = value, e.g. reach = 0.2")
     known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
-    return check_settings(table, known, "planner")
+    values = check_settings(table, known, "planner")
+    for name in PLANNERS.names():  # each value within its range, as the planners will check it
+        own = {k: v for k, v in values.items() if k in planner_settings(name)}
+        if own:
+            PLANNERS.get(name).settings_type(**own).check()
+    return values
 
 
 def _held(task: Task, table) -> dict:
