@@ -14,6 +14,7 @@ from manifoldgen.constraints.projection import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
 from manifoldgen.physics import PhysicsSettings, check_path, check_path_file, summary
+from manifoldgen.query import PATH_FORMAT_VERSION
 from manifoldgen.tasks import load_task_file
 
 pytestmark = pytest.mark.slow  # the quick loop (pytest -m "not slow") leaves this module out
@@ -59,7 +60,8 @@ margin = 0.02
 
 def _save(task, folder, name, waypoints):
     file = folder / f"{name}.npz"
-    save_npz(file, {**task.meta(), "kind": "path"}, path=np.asarray(waypoints))
+    meta = {**task.meta(), "kind": "path", "format_version": PATH_FORMAT_VERSION, "condition": [0.62]}
+    save_npz(file, meta, path=np.asarray(waypoints))
     return file
 
 

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from manifoldgen.cli import app
 from manifoldgen.data import collect
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CVAE
 from manifoldgen.scene import get_scene
 from manifoldgen.tasks import get_task
@@ -145,3 +146,36 @@ def test_an_unsolved_plan_writes_nothing_and_says_why(tmp_path):
     assert result.exit_code == 1, result.output
     assert "not solved" in result.output and "nothing written" in result.output
     assert not out.exists() and not out.with_suffix(".png").exists()
+
+
+BROKEN_PATHS = [  # (what is changed in a planned path file, the words of the one-line refusal)
+    ("format", lambda meta, path: ({**meta, "format_version": 99}, path), "path format 99 is not the one"),
+    ("no format", lambda meta, path: ({k: v for k, v in meta.items() if k != "format_version"}, path), "format None"),
+    ("kind", lambda meta, path: ({**meta, "kind": "dataset"}, path), "its meta says kind 'dataset'"),
+    ("empty", lambda meta, path: (meta, path[:0]), "must be a non-empty (K, n) array of finite numbers"),
+    ("NaN", lambda meta, path: (meta, np.where(np.arange(path.size).reshape(path.shape) == 3, np.nan, path)),
+     "must be a non-empty (K, n) array of finite numbers"),
+    ("strings", lambda meta, path: (meta, path.astype(str)), "must be a non-empty (K, n) array of finite numbers"),
+    ("width", lambda meta, path: (meta, path[:, :5]), "its states have 5 coordinates"),
+    ("condition", lambda meta, path: ({**meta, "condition": ["high"]}, path), "meta 'condition' must be 1 finite"),
+    ("no condition", lambda meta, path: ({k: v for k, v in meta.items() if k != "condition"}, path),
+     "meta 'condition' must be 1 finite"),
+]
+
+
+@pytest.mark.parametrize("change, words", [(c, w) for _, c, w in BROKEN_PATHS], ids=[i for i, _, _ in BROKEN_PATHS])
+def test_a_path_file_is_checked_whole_before_it_is_used(planned_path, tmp_path, change, words):
+    """Every reader of path files (trajectory, snapshots, the viewer, physics) refuses a broken one in one line
+    before using it (read_path_file); the trajectory command says it and writes nothing."""
+    from manifoldgen.io import load_npz, save_npz
+    from manifoldgen.query import read_path_file
+
+    meta, arrays = load_npz(planned_path("wall"), ("path",))
+    meta, path = change(meta, arrays["path"])
+    broken = tmp_path / "broken.npz"
+    save_npz(broken, meta, path=path)
+    with pytest.raises(ManifoldgenError) as error:
+        read_path_file(broken)
+    assert words in str(error.value) and "\n" not in str(error.value)
+    result = runner.invoke(app, ["trajectory", str(broken), "-o", str(tmp_path / "t.csv")])
+    assert result.exit_code == 2 and words in result.output and not (tmp_path / "t.csv").exists()

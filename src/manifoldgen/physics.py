@@ -62,7 +62,6 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.errors import ManifoldgenError, require
-from manifoldgen.io import load_npz
 from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot, robots_dir
 
@@ -147,18 +146,17 @@ def check_path_file(path_file: str | Path, settings: PhysicsSettings | None = No
                     trust_code: bool = False) -> PhysicsResult:
     """Rebuild the task from the path file's meta (``task``, ``trust_code``: see
     :func:`~manifoldgen.tasks.task_from_meta`) and execute its ``path (K, n)`` (see :func:`check_path`)."""
-    from manifoldgen.tasks import task_from_meta
+    from manifoldgen.query import read_path_file
 
-    meta, arrays = load_npz(path_file, ("path",))
+    meta, path, task = read_path_file(path_file, task, trust_code=trust_code)
     if not meta.get("floating_base"):
         raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the "
                                "physics check needs a floating-base robot standing on its feet (a balance task's path)")
-    task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
     feet = list(feet) if feet else balance_feet(meta.get("constraint") or {})
     if not feet:
         raise ManifoldgenError(f"{path_file}: its constraint ({(meta.get('constraint') or {}).get('type')}) names no "
                                "feet; give the foot frames (--feet), or check a balance task's path")
-    result = check_path(task.robot, arrays["path"], feet, settings, progress=progress)
+    result = check_path(task.robot, path, feet, settings, progress=progress)
     result.path_file = str(path_file)
     return result
 

@@ -96,6 +96,41 @@ def task_settings(task: Task, planner: str, settings: dict | None = None) -> dic
     return {**{k: v for k, v in task.planner.items() if k in known}, **(settings or {})}
 
 
+def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_code: bool = False,
+                   ) -> tuple[dict, np.ndarray, Task]:
+    """A path file, checked whole before anything uses it: its ``meta``, ``path (K, n)`` (K >= 1 finite
+    states) and the task rebuilt from the meta (``task``, ``trust_code``: see
+    :func:`~manifoldgen.tasks.task_from_meta`). Refused in one line: another kind of file, another format
+    version, an empty or malformed path, a path that does not fit the task's joints, a missing condition."""
+    from manifoldgen.io import load_npz
+    from manifoldgen.tasks import task_from_meta
+
+    meta, arrays = load_npz(path_file, ())
+    if "path" not in arrays or meta.get("kind", "path") != "path":
+        raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array, or its meta says kind "
+                               f"{meta.get('kind')!r}); give a file written by `manifoldgen plan`")
+    if meta.get("format_version") != PATH_FORMAT_VERSION:
+        raise ManifoldgenError(f"{path_file}: path format {meta.get('format_version')!r} is not the one this version "
+                               f"reads ({PATH_FORMAT_VERSION}); plan the query again")
+    path = arrays["path"]
+    if path.dtype.kind not in "fiu" or path.ndim != 2 or len(path) == 0 or not np.isfinite(path).all():
+        raise ManifoldgenError(f"{path_file}: 'path' must be a non-empty (K, n) array of finite numbers, got "
+                               f"{path.dtype} of shape {path.shape}; plan the query again")
+    path = np.asarray(path, float)
+    task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
+    if path.shape[1] != task.robot.n:
+        raise ManifoldgenError(f"{path_file}: its states have {path.shape[1]} coordinates, {task.robot.name}'s "
+                               f"{task.name} task has {task.robot.n} joints")
+    try:
+        y = np.asarray(meta.get("condition", []), dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        y = np.array([np.nan])
+    if len(y) != task.condition.k or not np.isfinite(y).all():
+        raise ManifoldgenError(f"{path_file}: meta 'condition' must be {task.condition.k} finite numbers, got "
+                               f"{meta.get('condition')!r}")
+    return meta, path, task
+
+
 def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
     """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string)."""
     save_npz(check_output_path(output), meta, path=result.path)

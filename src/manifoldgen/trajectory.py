@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, file_reader, require
-from manifoldgen.io import atomic_write_text, check_output_path, load_npz
+from manifoldgen.io import atomic_write_text, check_output_path
 from manifoldgen.robot import BASE_JOINTS, Robot
 from manifoldgen.space import ConstrainedSpace, ValidationSettings, densify
 
@@ -136,22 +136,14 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
                        dt: float = 0.01, *, task: Task | None = None, trust_code: bool = False) -> Trajectory:
     """The time-parameterised trajectory of a path file, every sample rechecked (``info["check"]``); ``task``,
     ``trust_code``: see :func:`~manifoldgen.tasks.task_from_meta`."""
+    from manifoldgen.query import read_path_file
     from manifoldgen.scene import Scene
-    from manifoldgen.tasks import task_from_meta
 
     vel_scale, acc_scale = check_scale(vel_scale, "--vel-scale"), check_scale(acc_scale, "--acc-scale")
     if not (np.isfinite(dt) and dt > 0):
         raise ManifoldgenError(f"--dt must be a positive number of seconds, got {dt}")
-    meta, arrays = load_npz(path_file, ())
-    if "path" not in arrays:
-        raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array); give a file written by "
-                               "`manifoldgen plan`")
-    path = np.asarray(arrays["path"], float)
-    task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
+    meta, path, task = read_path_file(path_file, task, trust_code=trust_code)
     robot = task.robot
-    if path.ndim != 2 or len(path) == 0 or path.shape[1] != robot.n:
-        raise ManifoldgenError(f"{path_file}: path of shape {path.shape} is empty or does not fit the {robot.n} "
-                               f"joints of {robot.name}")
     urdf_velocity = velocity_limits(robot)
     velocity, acceleration = urdf_velocity * vel_scale, ACC_PER_VELOCITY * urdf_velocity * acc_scale
     t, q, qd, qdd, stretch = time_parameterize(path, velocity, acceleration, dt)

@@ -17,6 +17,7 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file
 from manifoldgen.io import load_npz
+from manifoldgen.query import read_path_file
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
 
@@ -59,11 +60,7 @@ def read_source(file: str | Path, task: str | None = None, *, trust_code: bool =
 def _read_npz(file: Path, task: Task | None, trust_code: bool) -> ViewSource:
     meta, arrays = load_npz(file, ())
     if "path" in arrays:
-        path = np.asarray(arrays["path"], float)
-        t = task_from_meta(meta, task=task, trust_code=trust_code, what=str(file))
-        _check_width(path, t, file)
-        if len(path) == 0:
-            raise ManifoldgenError(f"{file} holds an empty path (the query was not solved); nothing to show")
+        meta, path, t = read_path_file(file, task, trust_code=trust_code)
         y = np.broadcast_to(np.asarray(meta["condition"], float), (len(path), t.condition.k))
         scene = Scene.from_meta(meta)
         return ViewSource("path", file, meta, t, path, y, scene,

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import check_output_path, load_npz
+from manifoldgen.io import check_output_path
+from manifoldgen.query import read_path_file
 from manifoldgen.scene import Scene
 from manifoldgen.space import densify
 from manifoldgen.stability import balance_part
@@ -34,8 +35,8 @@ def write_snapshots(path: str | Path | np.ndarray, out: str | Path, meta: dict |
                     count: int = 6) -> Path:
     """Save the strip for a path file, or for ``path (K, n)`` with its file's ``meta``; returns ``out``."""
     if meta is None:
-        meta, arrays = load_npz(path, ("path",))
-        path = arrays["path"]
+        meta, path, task = read_path_file(path)
+        return draw_snapshots(path, task, Scene.from_meta(meta), out, count)
     return draw_snapshots(path, task_from_meta(meta), Scene.from_meta(meta), out, count)
 
 
