@@ -104,3 +104,20 @@ def test_truncated_foreign_and_nan_files_are_refused(small, tmp_path):
         Dataset.load(tmp_path / "nan.npz")
     with pytest.raises(ManifoldgenError, match="not found"):
         Dataset.load(tmp_path / "absent.npz")
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"format_version": 1}, "dataset format 1 is not the one this version reads (2)"),
+    ({"format_version": "2"}, "dataset format '2' is not the one"),
+    ({"joints": "panda_joint1"}, "'joints' a list of joint names"),
+    ({"robot": ["panda"]}, "meta 'robot' must be a name"),
+])
+def test_a_dataset_of_another_format_or_with_a_malformed_meta_is_refused(tmp_path, change, words):
+    from manifoldgen.dataset import FORMAT_VERSION, Dataset
+
+    joints = [f"panda_joint{i}" for i in range(1, 8)]
+    meta = {"format_version": FORMAT_VERSION, "robot": "panda", "joints": joints, "constraint": {"type": "pose"}}
+    Dataset(np.zeros((3, 7)), np.zeros((3, 1)), {**meta, **change}).save(tmp_path / "d.npz")
+    with pytest.raises(ManifoldgenError) as error:
+        Dataset.load(tmp_path / "d.npz")
+    assert words in str(error.value) and "\n" not in str(error.value)

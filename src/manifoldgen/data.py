@@ -24,7 +24,7 @@ import numpy as np
 
 from manifoldgen.constraints import project
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
-from manifoldgen.dataset import Dataset
+from manifoldgen.dataset import FORMAT_VERSION, Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.progress import progress_bar
@@ -33,7 +33,6 @@ from manifoldgen.scene import task_checker
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.tasks import Task
 
-FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
 DEFAULT_ROWS = 10_000  # rows a collection makes by default, shared by its condition values ...
 MIN_PER_CONDITION = 200  # ... but at least this many at each

@@ -13,6 +13,8 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.io import load_npz, save_npz
 
+FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
+
 
 @dataclass
 class Dataset:
@@ -40,6 +42,13 @@ class Dataset:
         for key in ("format_version", "robot", "joints", "constraint"):
             if key not in meta:
                 raise ManifoldgenError(f"{path}: meta lacks '{key}'; not a manifoldgen dataset")
+        if meta["format_version"] != FORMAT_VERSION:
+            raise ManifoldgenError(f"{path}: dataset format {meta['format_version']!r} is not the one this version "
+                                   f"reads ({FORMAT_VERSION}); collect it again")
+        if not isinstance(meta["robot"], str) or not isinstance(meta["joints"], list) \
+                or not all(isinstance(j, str) for j in meta["joints"]):
+            raise ManifoldgenError(f"{path}: meta 'robot' must be a name and 'joints' a list of joint names; the file "
+                                   "was edited or is damaged: collect it again")
         if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
             raise ManifoldgenError(f"{path}: inconsistent shapes q {q.shape}, y {y.shape} for "
                                    f"{len(meta['joints'])} joints")
