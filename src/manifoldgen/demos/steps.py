@@ -13,30 +13,39 @@ import numpy as np
 import torch
 from rich.console import Console
 
-from manifoldgen.data import collect
-from manifoldgen.models import get_model_class
+from manifoldgen.data import collect, default_rows
 from manifoldgen.query import run_query, save_path
-from manifoldgen.runtime import REFINE
+from manifoldgen.runtime import CANDIDATES, REFINE
+from manifoldgen.scene import task_anchors
 from manifoldgen.sampling import generate
+from manifoldgen.selection import select_model
 from manifoldgen.training import CHECKPOINT
 
 
-def collect_and_train(task, per_condition: int, epochs: int, seed: int, output: Path, console: Console,
-                      figures: dict, *, dataset: str, conditions: np.ndarray | None = None,
-                      settings: dict | None = None, what: str = "", near_home: float = 0.0) -> object:
-    """Collect ``per_condition`` rows per condition into ``output/dataset`` (``near_home`` > 0: seeds normal
-    around the task's home, see :func:`~manifoldgen.data.collect`), train a CVAE into ``output/cvae``
-    (resuming a stopped demo's training); returns the model."""
-    console.rule(f"1. collect{what}")
+def collect_and_train(task, seed: int, output: Path, console: Console, figures: dict, *, dataset: str) -> tuple:
+    """The default pipeline's first two steps, as ``collect`` and ``train`` run them with no options: the
+    default rows seeded half around every scene's start and goal into ``output/dataset``, then the candidate
+    models trained, scored on held-out rows and raced on the task's scenes into ``output/model``
+    (:func:`~manifoldgen.selection.select_model`). Returns the kept model and the sampler spec that stands for
+    it (``model:DIR``: the projection sampler where projection won the race)."""
+    console.rule("1. collect (defaults: rows seeded around the scenes' start and goal, and uniform)")
     start = time.perf_counter()
-    rows = collect(task, per_condition, seed, output / dataset, conditions=conditions, near_home=near_home)
+    rows = collect(task, default_rows(len(task.condition.grid)), seed, output / dataset, anchors=task_anchors(task))
     figures["rows"], figures["collect_s"] = len(rows), time.perf_counter() - start
-    console.rule("2. train a CVAE")
-    model = get_model_class("cvae")(**(settings or {}))
-    interrupted = (output / "cvae" / CHECKPOINT).exists()  # a previous demo was stopped mid-training
-    log = model.fit(rows, epochs=epochs, seed=seed, out=output / "cvae", resume=interrupted)
-    figures["train_s"], figures["epochs"] = log.seconds, len(log.history)
-    return model
+    console.rule(f"2. train ({', '.join(CANDIDATES)} side by side, scored on held-out rows, raced on the scenes)")
+    start = time.perf_counter()
+    model, table, raced = select_model(rows, output / "model", seed=seed, task=task,
+                                       resume=any((output / "model" / "candidates" / name / CHECKPOINT).exists()
+                                                  for name in CANDIDATES))
+    figures["train_s"], figures["kept"] = time.perf_counter() - start, ("projection" if model.mix == 1 else model.name)
+    figures["candidates"], figures["race"] = table, raced
+    return model, f"model:{output / 'model'}"
+
+
+def race_line(figures: dict) -> str:
+    """One line of what training kept and why: each raced entry's solved runs and median CPU."""
+    race = ", ".join(f"{r['label']} {r['solved']}/{r['runs']} in {1000 * r['cpu']:.0f} ms" for r in figures["race"])
+    return f"kept {figures['kept']}" + (f" (race on the scenes, median CPU: {race})" if race else "")
 
 
 def sample_accuracy(model, task, y: np.ndarray, samples: int, seed: int, console: Console, figures: dict) -> None:
