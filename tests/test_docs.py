@@ -126,8 +126,12 @@ def test_the_site_builds_with_warnings_as_errors(site):
     for name in manifoldgen.__all__:  # every name of the namespace is documented in the reference
         assert re.search(rf'id="manifoldgen\.[\w.]*\b{name}"', reference), f"mg.{name} is not in the API reference"
     assert ":class:" not in reference and ":func:" not in reference  # docstring roles rendered as code
-    index = (site / "index.html").read_text(encoding="utf-8")
-    assert "<!-- test:" not in index.split("<body", 1)[0]  # markers stay comments
+    for page in PAGES:  # every code block is rendered as one, and the markers before them stay invisible comments
+        html = (site / ("index.html" if page.stem == "index" else f"{page.stem}/index.html")).read_text("utf-8")
+        article = html.split('<article', 1)[1].split('</article>', 1)[0]
+        assert article.count("<pre") == len(blocks(page)), f"{page.name}: a code block did not render as code"
+        prose = re.sub(r"<code>.*?</code>", "", article, flags=re.S)  # the convention's own page quotes markers
+        assert "&lt;!-- test:" not in prose, f"{page.name}: a test marker is shown as text"
 
 
 @pytest.mark.slow  # a browser
