@@ -529,7 +529,8 @@ def build_on_robot(block: Block, spec: dict) -> None:
     from manifoldgen.tasks import get_task
 
     frames = [v for k, v in spec.items() if k == "frame" or k.startswith("frame_")]
-    tasks = {task for prefix, task in ROBOT_TASKS.items() for f in frames if f.startswith(prefix)} or {("pose", "panda")}
+    tasks = {task for prefix, task in ROBOT_TASKS.items() for f in frames if f.startswith(prefix)}
+    tasks = tasks or {("pose", "panda")}
     assert len(tasks) == 1, f"{block.where}: frames {frames} of no single known robot"
     task = get_task(*tasks.pop())
     constraint = build_constraint(task.robot, spec)
