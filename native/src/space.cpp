@@ -52,13 +52,14 @@ struct Compiled {
   explicit Compiled(Expression e) : expression(std::move(e)), leaves(expression.leaves()) {}
 };
 
-constexpr int CALLBACK_TERM = 5, EXPRESSION_TERM = 6;  // Term::kind
-constexpr int EXPRESSION_INEQUALITY = 2;               // Inequality::kind
+// What a residual term is: one per built-in constraint kind (Space::add_pose ... add_linear), a Python callback
+// (add_callback) or a compiled expression (add_expression).
+enum TermKind : int { POSE_TERM, CHAIN_TERM, SPHERE_TERM, ORIENTATION_TERM, LINEAR_TERM, CALLBACK_TERM, EXPRESSION_TERM };
+// What an inequality is: the CoM's support polygon, a hemisphere of directions, or a compiled expression.
+enum InequalityKind : int { COM_POLYGON, HEMISPHERE, EXPRESSION_INEQUALITY };
 
 struct Term {
-  // 0: pose, 1: closed chain, 2: sphere (offset = its centre, y = (radius)), 3: orientation, 4: linear,
-  // 5 (CALLBACK_TERM): Python callback, 6 (EXPRESSION_TERM): compiled expression
-  int kind;
+  TermKind kind;  // sphere: offset = its centre, y = (radius)
   pinocchio::FrameIndex frame, frame_b;
   Eigen::Matrix3d rotation;
   std::vector<int> position_axes, orientation_axes;
@@ -70,10 +71,10 @@ struct Term {
   int callback = -1, callback_rows = 0;  // callback: its index in Impl::callbacks, its residual rows
   std::shared_ptr<Compiled> compiled;    // expression
   int rows() const {
-    return kind == 0 ? static_cast<int>(position_axes.size() + orientation_axes.size())
-           : kind == 1 ? 6
-           : kind == 3 ? 2
-           : kind == 4 ? static_cast<int>(A.rows())
+    return kind == POSE_TERM ? static_cast<int>(position_axes.size() + orientation_axes.size())
+           : kind == CHAIN_TERM ? 6
+           : kind == ORIENTATION_TERM ? 2
+           : kind == LINEAR_TERM ? static_cast<int>(A.rows())
            : kind == CALLBACK_TERM ? callback_rows
            : kind == EXPRESSION_TERM ? compiled->expression.rows()
                        : 1;
@@ -82,14 +83,14 @@ struct Term {
 
 // An inequality G(q) <= 0 (whole-body terms).
 struct Inequality {
-  int kind;  // 0: CoM support polygon, 1: hemisphere, 2 (EXPRESSION_INEQUALITY): compiled expression
+  InequalityKind kind;
   pinocchio::FrameIndex frame = 0;
   Eigen::Vector3d axis = Eigen::Vector3d::Zero(), direction = Eigen::Vector3d::Zero();
   RowMat normals;  // (H, 2)
   Vec bounds;      // (H,)
   std::shared_ptr<Compiled> compiled;  // expression
   int rows() const {
-    return kind == 0 ? static_cast<int>(normals.rows()) : kind == EXPRESSION_INEQUALITY ? compiled->expression.rows() : 1;
+    return kind == COM_POLYGON ? static_cast<int>(normals.rows()) : kind == EXPRESSION_INEQUALITY ? compiled->expression.rows() : 1;
   }
 };
 
@@ -131,16 +132,17 @@ std::shared_ptr<coal::ConvexBase> mesh_hull(coal::BVHModelBase& mesh) {
 }
 
 // A scene primitive the spheres are tested against (world pose fixed at construction of the pair list).
+enum ShapeKind : int { NO_SHAPE = -1, BOX, SPHERE, CYLINDER };
 struct Shape {
-  int kind = -1;  // 0 box (half sides), 1 sphere (radius), 2 cylinder (radius, half length along z); -1 none
+  ShapeKind kind = NO_SHAPE;  // size: a box's half sides, a sphere's radius, a cylinder's radius and half length (z)
   Eigen::Vector3d size = Eigen::Vector3d::Zero();
   double outer = 0.0;  // circumradius: the shape lies within this distance of its origin
 };
 
 // Distance from point p (in the shape's frame) to the shape (0 inside).
 double shape_distance(const Shape& s, const Eigen::Vector3d& p) {
-  if (s.kind == 0) return (p.cwiseAbs() - s.size).cwiseMax(0.0).norm();
-  if (s.kind == 1) return std::max(p.norm() - s.size[0], 0.0);
+  if (s.kind == BOX) return (p.cwiseAbs() - s.size).cwiseMax(0.0).norm();
+  if (s.kind == SPHERE) return std::max(p.norm() - s.size[0], 0.0);
   const double radial = std::max(std::hypot(p[0], p[1]) - s.size[0], 0.0);
   const double axial = std::max(std::abs(p[2]) - s.size[1], 0.0);
   return std::hypot(radial, axial);
@@ -149,15 +151,15 @@ double shape_distance(const Shape& s, const Eigen::Vector3d& p) {
 Shape shape_of(const pinocchio::GeometryObject& g) {
   Shape s;
   if (auto box = std::dynamic_pointer_cast<coal::Box>(g.geometry)) {
-    s.kind = 0;
+    s.kind = BOX;
     s.size = box->halfSide;
     s.outer = s.size.norm();
   } else if (auto sphere = std::dynamic_pointer_cast<coal::Sphere>(g.geometry)) {
-    s.kind = 1;
+    s.kind = SPHERE;
     s.size[0] = sphere->radius;
     s.outer = s.size[0];
   } else if (auto cyl = std::dynamic_pointer_cast<coal::Cylinder>(g.geometry)) {
-    s.kind = 2;
+    s.kind = CYLINDER;
     s.size[0] = cyl->radius;
     s.size[1] = cyl->halfLength;
     s.outer = std::hypot(s.size[0], s.size[1]);
@@ -167,10 +169,11 @@ Shape shape_of(const pinocchio::GeometryObject& g) {
 
 // How the sphere test treats one collision pair: spheres against spheres, spheres against a
 // primitive, or the exact coal test of that pair.
+enum PairKind : int { SPHERES_SPHERES, SPHERES_PRIMITIVE, EXACT_PAIR };
 struct PairTest {
-  int kind;  // 0 spheres-spheres, 1 spheres(a)-primitive(b), 2 exact
-  int a, b;  // geometry indices (kind 1: a has spheres, b is the primitive)
-  std::size_t pair;  // index in the geometry model's collision pairs (kind 2)
+  PairKind kind;
+  int a, b;  // geometry indices (SPHERES_PRIMITIVE: a has spheres, b is the primitive)
+  std::size_t pair;  // index in the geometry model's collision pairs (EXACT_PAIR)
 };
 
 }  // namespace
@@ -308,14 +311,14 @@ struct Space::Impl {
         row += t.rows();
         continue;
       }
-      if (t.kind >= 3) {
+      if (t.kind == ORIENTATION_TERM || t.kind == LINEAR_TERM) {
         row += whole_body_residual(t, q, F + row);
         continue;
       }
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-      if (t.kind == 2) {
+      if (t.kind == SPHERE_TERM) {
         F[row++] = (A.translation() - t.offset).norm() - t.y[0];
-      } else if (t.kind == 0) {
+      } else if (t.kind == POSE_TERM) {
         for (std::size_t k = 0; k < t.position_axes.size(); ++k)
           F[row++] = A.translation()[t.position_axes[k]] - t.y[k];
         const Eigen::Vector3d err = pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()));
@@ -347,19 +350,19 @@ struct Space::Impl {
         row += t.rows();
         continue;
       }
-      if (t.kind >= 3) {
+      if (t.kind == ORIENTATION_TERM || t.kind == LINEAR_TERM) {
         row += whole_body_jacobian(t, q, F + row, J + static_cast<long>(row) * nn);
         continue;
       }
       const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
       Ja.setZero();
       pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
-      if (t.kind == 2) {
+      if (t.kind == SPHERE_TERM) {
         const Eigen::Vector3d d = A.translation() - t.offset;
         const double r = d.norm();
         F[row] = r - t.y[0];
         put(row++, (d / std::max(r, 1e-12)).transpose() * Ja.topRows<3>());
-      } else if (t.kind == 0) {
+      } else if (t.kind == POSE_TERM) {
         double theta;
         const Eigen::Vector3d err =
             pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()), theta);
@@ -427,9 +430,9 @@ struct Space::Impl {
     base_map.bottomRightCorner<3, 3>() = R.transpose() * E;
   }
 
-  // Rows of an orientation (3) or linear (4) term at q (forward kinematics done); returns their count.
+  // Rows of an orientation or linear term at q (forward kinematics done); returns their count.
   int whole_body_residual(const Term& t, const double* q, double* F) {
-    if (t.kind == 4) {
+    if (t.kind == LINEAR_TERM) {
       Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, n()) - t.y;
       return static_cast<int>(t.A.rows());
     }
@@ -441,7 +444,7 @@ struct Space::Impl {
   // The same rows and their Jacobian rows (J: the first row's start, n per row; joint Jacobians done).
   int whole_body_jacobian(const Term& t, const double* q, double* F, double* J) {
     const int nn = n();
-    if (t.kind == 4) {
+    if (t.kind == LINEAR_TERM) {
       Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, nn) - t.y;
       Eigen::Map<RowMat>(J, t.A.rows(), nn) = t.A;
       return static_cast<int>(t.A.rows());
@@ -470,7 +473,7 @@ struct Space::Impl {
     for (const Inequality& c : inequalities) {
       if (c.kind == EXPRESSION_INEQUALITY) {
         expression_rows(*c.compiled, q, G + row, nullptr);
-      } else if (c.kind == 0) {
+      } else if (c.kind == COM_POLYGON) {
         const Eigen::Vector2d com = data.com[0].head<2>();
         Eigen::Map<Vec>(G + row, c.normals.rows()) = c.normals * com - c.bounds;
       } else {
@@ -562,18 +565,18 @@ struct Space::Impl {
     std::vector<Vec> rows, angles;
     for (std::size_t i = 0; i < terms.size(); ++i) {
       const Term& t = terms[i];
-      if (t.kind == 0) {
+      if (t.kind == POSE_TERM) {
         for (std::size_t k = 0; k < t.position_axes.size(); ++k) rows.push_back(frame_rates(t.frame, false));
         for (std::size_t k = 0; k < t.orientation_axes.size(); ++k) rows.push_back(LOG_RATE * frame_rates(t.frame, true));
         if (!t.orientation_axes.empty()) {
           angle_terms.push_back(static_cast<int>(i));
           angles.push_back(frame_rates(t.frame, true));
         }
-      } else if (t.kind == 2) {
+      } else if (t.kind == SPHERE_TERM) {
         rows.push_back(frame_rates(t.frame, false));
-      } else if (t.kind == 3) {
+      } else if (t.kind == ORIENTATION_TERM) {
         for (int k = 0; k < 2; ++k) rows.push_back(t.basis.row(k).norm() * t.axis.norm() * frame_rates(t.frame, true));
-      } else if (t.kind == 4) {
+      } else if (t.kind == LINEAR_TERM) {
         for (int k = 0; k < t.A.rows(); ++k) rows.push_back(t.A.row(k).cwiseAbs().transpose());
       } else {
         certifiable = false;
@@ -591,7 +594,7 @@ struct Space::Impl {
       }
     for (const Inequality& c : inequalities)
       for (int h = 0; h < c.rows(); ++h)
-        rows.push_back(c.kind == 0 ? Vec(c.normals.row(h).norm() * com)
+        rows.push_back(c.kind == COM_POLYGON ? Vec(c.normals.row(h).norm() * com)
                                    : Vec(c.direction.norm() * c.axis.norm() * frame_rates(c.frame, true)));
     rows.insert(rows.end(), angles.begin(), angles.end());
     rates.resize(static_cast<long>(rows.size()), n());
@@ -687,12 +690,12 @@ struct Space::Impl {
     place_kinematics(q);
     flagged = false;
     for (const PairTest& t : tests) {
-      if (t.kind == 0) {
+      if (t.kind == SPHERES_SPHERES) {
         if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
         place(t.a);
         place(t.b);
         if (!spheres_touch(t.a, t.b)) continue;
-      } else if (t.kind == 1) {
+      } else if (t.kind == SPHERES_PRIMITIVE) {
         const pinocchio::SE3& pose = pose_of(t.b);
         if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
@@ -746,12 +749,12 @@ struct Space::Impl {
   bool spheres_hit(const double* q) {
     place_kinematics(q);
     for (const PairTest& t : tests) {
-      if (t.kind == 0) {
+      if (t.kind == SPHERES_SPHERES) {
         if ((bound_world[t.a] - bound_world[t.b]).norm() > bound_radius[t.a] + bound_radius[t.b]) continue;
         place(t.a);
         place(t.b);
         if (spheres_touch(t.a, t.b)) return true;
-      } else if (t.kind == 1) {
+      } else if (t.kind == SPHERES_PRIMITIVE) {
         const pinocchio::SE3& pose = pose_of(t.b);
         if (beyond(t.b, pose, bound_world[t.a], bound_radius[t.a])) continue;
         place(t.a);
@@ -1150,11 +1153,11 @@ struct Space::Impl {
 
   bool pair_apart(const PairTest& t) {
     const int common = pair_common[t.pair];
-    if (t.kind == 0 && spheres_apart(t, common)) return true;
-    if (t.kind == 1 && sphere_primitive_apart(t, common)) return true;
+    if (t.kind == SPHERES_SPHERES && spheres_apart(t, common)) return true;
+    if (t.kind == SPHERES_PRIMITIVE && sphere_primitive_apart(t, common)) return true;
     // a pair left to coal whose geometries both have spheres (tight: spheres touching while the meshes are apart in
     // many states): its grown spheres first all the same, a certificate as good, cheaper than the hulls' GJK
-    if (t.kind == 2 && !spheres_of[t.a].empty() && !spheres_of[t.b].empty() && spheres_apart(t, common)) return true;
+    if (t.kind == EXACT_PAIR && !spheres_of[t.a].empty() && !spheres_of[t.b].empty() && spheres_apart(t, common)) return true;
     return outers_apart(t.pair, common);
   }
 
@@ -1272,7 +1275,7 @@ void Space::add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vect
   Impl& p = *impl_;
   if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("pose frame id out of range");
   if (y.size() != static_cast<long>(position_axes.size())) throw std::runtime_error("pose y must give each position axis");
-  Term t{0, static_cast<pinocchio::FrameIndex>(frame), 0, rotation, position_axes, orientation_axes, y,
+  Term t{POSE_TERM, static_cast<pinocchio::FrameIndex>(frame), 0, rotation, position_axes, orientation_axes, y,
          Eigen::Vector3d::Zero()};
   p.add(t);
 }
@@ -1281,7 +1284,7 @@ void Space::add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation,
   Impl& p = *impl_;
   const int nf = static_cast<int>(p.model.nframes);
   if (frame_a < 0 || frame_b < 0 || frame_a >= nf || frame_b >= nf) throw std::runtime_error("chain frame id out of range");
-  Term t{1, static_cast<pinocchio::FrameIndex>(frame_a), static_cast<pinocchio::FrameIndex>(frame_b), rotation, {}, {},
+  Term t{CHAIN_TERM, static_cast<pinocchio::FrameIndex>(frame_a), static_cast<pinocchio::FrameIndex>(frame_b), rotation, {}, {},
          Vec(), offset};
   p.add(t);
 }
@@ -1290,7 +1293,7 @@ void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) 
   Impl& p = *impl_;
   if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("sphere frame id out of range");
   if (!(radius > 0)) throw std::runtime_error("sphere radius must be positive");
-  Term t{2, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec::Constant(1, radius),
+  Term t{SPHERE_TERM, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec::Constant(1, radius),
          center};
   p.add(t);
 }
@@ -1299,7 +1302,7 @@ void Space::add_sphere(int frame, const Eigen::Vector3d& center, double radius) 
 void Space::add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis) {
   Impl& p = *impl_;
   if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("orientation frame id out of range");
-  Term t{3, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(),
+  Term t{ORIENTATION_TERM, static_cast<pinocchio::FrameIndex>(frame), 0, Eigen::Matrix3d::Identity(), {}, {}, Vec(),
          Eigen::Vector3d::Zero()};
   t.axis = axis;
   t.basis = basis;
@@ -1310,7 +1313,7 @@ void Space::add_linear(const RowMat& A, const Vec& y) {
   Impl& p = *impl_;
   if (A.cols() != p.n() || A.rows() != y.size() || A.rows() == 0)
     throw std::runtime_error("linear terms need A (r, n) over the active coordinates and y (r,)");
-  Term t{4, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, y, Eigen::Vector3d::Zero()};
+  Term t{LINEAR_TERM, 0, 0, Eigen::Matrix3d::Identity(), {}, {}, y, Eigen::Vector3d::Zero()};
   t.A = A;
   p.add(t);
 }
@@ -1329,7 +1332,7 @@ void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
   Impl& p = *impl_;
   if (normals.cols() != 2 || normals.rows() != bounds.size() || normals.rows() < 3)
     throw std::runtime_error("a CoM polygon needs normals (H, 2) and bounds (H,), H >= 3");
-  Inequality c{0};
+  Inequality c{COM_POLYGON};
   c.normals = normals;
   c.bounds = bounds;
   p.g += c.rows();
@@ -1341,7 +1344,7 @@ void Space::add_com_polygon(const RowMat& normals, const Vec& bounds) {
 void Space::add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction) {
   Impl& p = *impl_;
   if (frame < 0 || frame >= static_cast<int>(p.model.nframes)) throw std::runtime_error("hemisphere frame id out of range");
-  Inequality c{1};
+  Inequality c{HEMISPHERE};
   c.frame = static_cast<pinocchio::FrameIndex>(frame);
   c.axis = axis;
   c.direction = direction;
@@ -1450,15 +1453,15 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
                         std::find(exact.begin(), exact.end(), std::make_pair(b, a)) != exact.end();
     // a primitive (box, sphere, cylinder: an obstacle, a held tray) is tested exactly against the other's
     // spheres, tighter than its own spheres would be
-    if (forced) p.tests.push_back({2, a, b, k});
-    else if (sa && p.shapes[b].kind >= 0) p.tests.push_back({1, a, b, k});
-    else if (sb && p.shapes[a].kind >= 0) p.tests.push_back({1, b, a, k});
-    else if (sa && sb) p.tests.push_back({0, a, b, k});
-    else p.tests.push_back({2, a, b, k});
+    if (forced) p.tests.push_back({EXACT_PAIR, a, b, k});
+    else if (sa && p.shapes[b].kind != NO_SHAPE) p.tests.push_back({SPHERES_PRIMITIVE, a, b, k});
+    else if (sb && p.shapes[a].kind != NO_SHAPE) p.tests.push_back({SPHERES_PRIMITIVE, b, a, k});
+    else if (sa && sb) p.tests.push_back({SPHERES_SPHERES, a, b, k});
+    else p.tests.push_back({EXACT_PAIR, a, b, k});
   }
   // cheapest first: primitives, then sphere pairs, exact pairs last
   std::stable_sort(p.tests.begin(), p.tests.end(), [](const PairTest& x, const PairTest& y) {
-    static const int rank[3] = {1, 0, 2};
+    static const int rank[3] = {1, 0, 2};  // by PairKind: spheres-primitive first, then sphere pairs, exact last
     return rank[x.kind] < rank[y.kind];
   });
   for (const auto& pair : p.geom.collisionPairs) {  // the hulls now, not in the first plan's checks
