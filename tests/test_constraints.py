@@ -1,5 +1,8 @@
 """Constraints: pose residual and Jacobian, SO(3) helpers, composition, conditions, extensibility."""
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -196,6 +199,33 @@ def test_constraint_contract(case, panda_task, pr2_both_arms, centauro_floating,
     assert res.converged.mean() > 0.3
     ok = res.q[res.converged]
     assert c.violation(ok, y).max() < 1e-3 and robot.within_limits(ok).all()
+    _core_and_checker_agree(c, q, np.asarray(y, float), built_in=case != "user")
+
+
+def _core_and_checker_agree(c, q, y, built_in: bool):
+    """The compiled core runs the constraint with no Python callback (a built-in through its own core terms,
+    :meth:`Constraint.core_terms`, or compiled from its trace) to the same residual and Jacobian; the outside
+    checker (examples/recheck.py, pinocchio alone) knows every built-in type, so adding one means its Python
+    file, its core term or a residual that traces, and its checker entry."""
+    from manifoldgen import native
+    from manifoldgen.space import ConstrainedSpace
+
+    if native.core_problem():
+        return
+    space = ConstrainedSpace(c, y)
+    core = native.core_space(space)
+    assert native.compile_report(space)["callbacks"] == {}
+    F, J = core.jacobian(q)
+    np.testing.assert_allclose(F, c.residual(q, y), atol=1e-9)
+    np.testing.assert_allclose(J, c.jacobian(q, y)[1], atol=1e-6)
+    if built_in:
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+        try:
+            import recheck
+        finally:
+            sys.path.pop(0)
+        parts = [c] if not isinstance(c, ConstraintSet) else c.parts
+        assert all(part.spec()["type"] in recheck.PART_TYPES for part in parts)
 
 
 def test_closed_chain_between_pr2_grippers(pr2_both_arms, rng):

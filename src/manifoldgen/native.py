@@ -54,13 +54,6 @@ import pinocchio as pin
 
 from manifoldgen.constraints import Constraint, ConstraintSet, Projection
 from manifoldgen.constraints import trace
-from manifoldgen.constraints.balance import BalanceConstraint
-from manifoldgen.constraints.closed_chain import ClosedChainConstraint
-from manifoldgen.constraints.joint_linear import JointLinearConstraint
-from manifoldgen.constraints.orientation import OrientationConstraint
-from manifoldgen.constraints.pose import PoseConstraint
-from manifoldgen.constraints.rotation import RotationConstraint
-from manifoldgen.constraints.sphere import SphereConstraint
 from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
@@ -139,35 +132,11 @@ def _parts(space: ConstrainedSpace) -> list:
     return constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
 
 
-BUILT_IN = (PoseConstraint, RotationConstraint, ClosedChainConstraint, SphereConstraint, BalanceConstraint,
-            OrientationConstraint, JointLinearConstraint)
-
-
 def unsupported(space: ConstrainedSpace) -> str | None:
     """Why the core cannot take ``space`` (a one-line reason), or None when it can."""
     if not isinstance(space.robot, Robot):
         return "the compiled core needs a pinocchio Robot"
     return None
-
-
-def _balance_terms(robot: Robot, part: BalanceConstraint, y: np.ndarray) -> list[dict]:
-    """A balance constraint's equalities as pose terms in its residual order (each foot's position, then with
-    flat feet each foot's rotation, then the base frame's height), and its CoM margin as the support polygon's
-    inequalities ``normals . com[x, y] - (offsets - margin) <= 0``."""
-    identity = np.eye(3).reshape(-1).tolist()
-    terms = [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": identity,
-              "position_axes": [0, 1, 2], "orientation_axes": [], "y": target.tolist()}
-             for foot, target in zip(part.feet, part.foot_positions)]
-    if part.flat:
-        terms += [{"type": "pose", "frame": foot, "frame_id": robot.frame_id(foot), "rotation": R.reshape(-1).tolist(),
-                   "position_axes": [], "orientation_axes": [0, 1, 2], "y": []}
-                  for foot, R in zip(part.feet, part.foot_rotations)]
-    terms.append({"type": "pose", "frame": part.base_frame, "frame_id": robot.frame_id(part.base_frame),
-                  "rotation": identity, "position_axes": [2], "orientation_axes": [],
-                  "y": y.tolist()})
-    terms.append({"type": "com_polygon", "normals": part._normals.tolist(),
-                  "bounds": (part._offsets - part.margin).tolist()})
-    return terms
 
 
 # Compiled expressions of Python parts (constraints/trace.py, native/src/expression.cpp).
@@ -252,45 +221,20 @@ def _layout(space: ConstrainedSpace, compile: bool = True, refused: dict | None 
     for part in _parts(space):
         y = space.y[offset:offset + part.condition.k]
         offset += part.condition.k
-        if type(part) not in BUILT_IN and compile and id(part) not in refused:
+        terms = part.core_terms(y)
+        if terms is not None:
+            out += [("term", term) for term in terms]
+            continue
+        if compile and id(part) not in refused:
             compiled = compiled_part(part, y, robot)
             if isinstance(compiled, CompiledPart):
                 out.append(("expression", (part, y, compiled)))
                 continue
             refused[id(part)] = compiled
-        if type(part) not in BUILT_IN:
-            if out and out[-1][0] == "callback":
-                out[-1][1].parts.append((part, y))
-            else:
-                out.append(("callback", ConstraintCallback([(part, y)])))
-            continue
-        if type(part) is PoseConstraint:
-            term = {"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                    "rotation": part.rotation.reshape(-1).tolist(), "position_axes": list(part._idx),
-                    "orientation_axes": list(part._oidx), "y": y.tolist()}
-        elif type(part) is RotationConstraint:
-            term = {"type": "pose", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                    "rotation": part.target(y[None])[0].reshape(-1).tolist(), "position_axes": [],
-                    "orientation_axes": [0, 1, 2], "y": []}
-        elif type(part) is BalanceConstraint:
-            out += [("term", t) for t in _balance_terms(robot, part, y)]
-            continue
-        elif type(part) is OrientationConstraint:
-            frame_id = robot.frame_id(part.frame)
-            out.append(("term", {"type": "orientation", "frame": part.frame, "frame_id": frame_id,
-                                 "axis": part.axis.tolist(), "basis": part.basis.tolist()}))
-            term = {"type": "hemisphere", "frame": part.frame, "frame_id": frame_id, "axis": part.axis.tolist(),
-                    "direction": part.direction.tolist()}
-        elif type(part) is JointLinearConstraint:
-            term = {"type": "linear", "A": part.coefficients.tolist(), "y": y.tolist()}
-        elif type(part) is SphereConstraint:
-            term = {"type": "sphere", "frame": part.frame, "frame_id": robot.frame_id(part.frame),
-                    "center": part.center.tolist(), "radius": float(y[0])}
+        if out and out[-1][0] == "callback":
+            out[-1][1].parts.append((part, y))
         else:
-            term = {"type": "chain", "frame_a": part.frame_a, "frame_b": part.frame_b,
-                    "frame_a_id": robot.frame_id(part.frame_a), "frame_b_id": robot.frame_id(part.frame_b),
-                    "rotation": part.rotation.reshape(-1).tolist(), "offset": (y[0] * part.axis).tolist()}
-        out.append(("term", term))
+            out.append(("callback", ConstraintCallback([(part, y)])))
     return out
 
 
@@ -399,11 +343,9 @@ def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
     layout, refused = checked_layout(space, COMPILE if compile is None else compile)
     out = _build_core(space, layout)
-    compiled = {id(term[0]) for kind, term in layout if kind == "expression"}
-    _REPORTS[space] = {"compiled": [part.spec()["type"] for part in _parts(space) if id(part) in compiled],
+    _REPORTS[space] = {"compiled": [term[0].spec()["type"] for kind, term in layout if kind == "expression"],
                        "callbacks": {part.spec()["type"]: refused.get(id(part), "compilation is off")
-                                     for part in _parts(space) if type(part) not in BUILT_IN
-                                     and id(part) not in compiled}}
+                                     for kind, term in layout if kind == "callback" for part, _ in term.parts}}
     return out
 
 

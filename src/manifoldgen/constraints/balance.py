@@ -126,6 +126,25 @@ class BalanceConstraint(Constraint):
         com = self.robot.com(q)[:, :2]
         return np.min(self._offsets - com @ self._normals.T, axis=1)
 
+    def core_terms(self, y):
+        """Its equalities as pose terms in its residual order (each foot's position, then with flat feet each
+        foot's rotation, then the base frame's height), and its CoM margin as the support polygon's inequalities
+        ``normals . com[x, y] - (offsets - margin) <= 0`` (a ``com_polygon`` term)."""
+        identity, frame_id = np.eye(3).reshape(-1).tolist(), self.robot.frame_id
+        terms = [{"type": "pose", "frame": foot, "frame_id": frame_id(foot), "rotation": identity,
+                  "position_axes": [0, 1, 2], "orientation_axes": [], "y": target.tolist()}
+                 for foot, target in zip(self.feet, self.foot_positions)]
+        if self.flat:
+            terms += [{"type": "pose", "frame": foot, "frame_id": frame_id(foot), "rotation": R.reshape(-1).tolist(),
+                       "position_axes": [], "orientation_axes": [0, 1, 2], "y": []}
+                      for foot, R in zip(self.feet, self.foot_rotations)]
+        terms.append({"type": "pose", "frame": self.base_frame, "frame_id": frame_id(self.base_frame),
+                      "rotation": identity, "position_axes": [2], "orientation_axes": [],
+                      "y": np.asarray(y, float).tolist()})
+        terms.append({"type": "com_polygon", "normals": self._normals.tolist(),
+                      "bounds": (self._offsets - self.margin).tolist()})
+        return terms
+
     def jacobian(self, q, y):
         q, y = self.batch(q, y)
         F, J, Fr, Jr = [], [], [], []

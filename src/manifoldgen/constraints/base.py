@@ -134,6 +134,13 @@ class Constraint(ABC):
         xp = array_namespace(q)
         return xp.zeros((q.shape[0], 0), dtype=q.dtype)
 
+    def core_terms(self, y: np.ndarray) -> list[dict] | None:
+        """This constraint at its condition ``y (k,)`` as the compiled core's terms, in residual order
+        (JSON-ready dicts: ``type`` and its fields, see :func:`manifoldgen.native.constraint_terms`), or None where
+        the core has no term of its own for it (a user's constraint: its residual is compiled from its trace, or
+        called back)."""
+        return None
+
     def spec(self) -> dict:
         """JSON-ready full specification: ``type`` (registered name or ``module:Class``) and the
         constructor's arguments; :func:`build_constraint` rebuilds the constraint from it."""

@@ -37,6 +37,12 @@ class ClosedChainConstraint(Constraint):
         self.condition = Condition(("distance",), ("m",), np.asarray(values, float))
         self.tolerance = np.array([position_tolerance] * 3 + [orientation_tolerance] * 3)
 
+    def core_terms(self, y):
+        """A ``chain`` term: the frames' ids, the rotation between them and the offset ``d * axis``."""
+        return [{"type": "chain", "frame_a": self.frame_a, "frame_b": self.frame_b,
+                 "frame_a_id": self.robot.frame_id(self.frame_a), "frame_b_id": self.robot.frame_id(self.frame_b),
+                 "rotation": self.rotation.reshape(-1).tolist(), "offset": (float(y[0]) * self.axis).tolist()}]
+
     def jacobian(self, q, y):
         q, y = self.batch(q, y)
         pa, Ra, Ja = self.robot.frame_jacobian(q, self.frame_a)

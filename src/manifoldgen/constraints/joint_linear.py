@@ -26,6 +26,9 @@ class JointLinearConstraint(Constraint):
                                    np.asarray(values, float))
         self.tolerance = np.full(len(A), float(tolerance))
 
+    def core_terms(self, y):
+        return [{"type": "linear", "A": self.coefficients.tolist(), "y": np.asarray(y, float).tolist()}]
+
     def residual(self, q, y):
         q, y = self.batch(q, y)
         return q @ as_like(self.coefficients.T, q) - y

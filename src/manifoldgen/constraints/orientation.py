@@ -51,6 +51,14 @@ class OrientationConstraint(Constraint):
         _, R = self.robot.frame_pose(q, self.frame)
         return R @ as_like(self.axis, R)
 
+    def core_terms(self, y):
+        """Its two residual rows as an ``orientation`` term (axis, basis) and its ``hemisphere`` inequality."""
+        frame_id = self.robot.frame_id(self.frame)
+        return [{"type": "orientation", "frame": self.frame, "frame_id": frame_id, "axis": self.axis.tolist(),
+                 "basis": self.basis.tolist()},
+                {"type": "hemisphere", "frame": self.frame, "frame_id": frame_id, "axis": self.axis.tolist(),
+                 "direction": self.direction.tolist()}]
+
     def residual(self, q, y):
         q, y = self.batch(q, y)
         return self._pointing(q) @ as_like(self.basis.T, q)

@@ -51,6 +51,11 @@ class PoseConstraint(Constraint):
                                    np.asarray(values, float))
         self.tolerance = np.array([position_tolerance] * len(self._idx) + [orientation_tolerance] * len(self._oidx))
 
+    def core_terms(self, y):
+        return [{"type": "pose", "frame": self.frame, "frame_id": self.robot.frame_id(self.frame),
+                 "rotation": self.rotation.reshape(-1).tolist(), "position_axes": list(self._idx),
+                 "orientation_axes": list(self._oidx), "y": np.asarray(y, float).tolist()}]
+
     def residual(self, q, y):
         q, y = self.batch(q, y)
         p, R = self.robot.frame_pose(q, self.frame)

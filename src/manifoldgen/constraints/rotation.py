@@ -38,6 +38,12 @@ class RotationConstraint(Constraint):
         turn = as_like(np.eye(3), y) + s * K + (1 - c) * (K @ K)
         return turn @ as_like(self.rotation, y)
 
+    def core_terms(self, y):
+        """A pose term without position axes, its target turned by ``y``."""
+        return [{"type": "pose", "frame": self.frame, "frame_id": self.robot.frame_id(self.frame),
+                 "rotation": self.target(np.asarray(y, float)[None])[0].reshape(-1).tolist(), "position_axes": [],
+                 "orientation_axes": [0, 1, 2], "y": []}]
+
     def residual(self, q, y):
         q, y = self.batch(q, y)
         _, R = self.robot.frame_pose(q, self.frame)

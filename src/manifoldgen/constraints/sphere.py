@@ -32,6 +32,10 @@ class SphereConstraint(Constraint):
         self.condition = Condition((f"{frame}.radius",), ("m",), radii)
         self.tolerance = np.array([float(tolerance)])
 
+    def core_terms(self, y):
+        return [{"type": "sphere", "frame": self.frame, "frame_id": self.robot.frame_id(self.frame),
+                 "center": self.center.tolist(), "radius": float(y[0])}]
+
     def residual(self, q, y):
         q, y = self.batch(q, y)
         xp = array_namespace(q)
