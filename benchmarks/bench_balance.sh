@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Whole-body balance (issue 9): every figure of the README's "Whole-body balance" section, one command.
+# Whole-body balance: every figure of the README's "Whole-body balance" section, one command.
 #
 #     bash benchmarks/bench_balance.sh [OUT=runs/balance] [RUNS=30] [TIME=30] [STEPS="reach others drinkcan"] [WORKERS=1]
 #                                      [ROBOTS="talos centauro"]

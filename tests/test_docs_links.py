@@ -3,6 +3,7 @@ markdown page at one of its headings; the README is a front door of at most 250 
 commands, that speaks of the software only (no work-log words: sessions, issue numbers, commit hashes)."""
 
 import re
+import subprocess
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -109,3 +110,14 @@ def test_the_readme_is_a_short_front_door():
     assert setup == SETUP, "the two set-up commands, exactly, and no others"
     assert "pip install" not in text
     assert "docs/benchmarks.md" in text and "docs/python-api.md" in text and "docs/tasks.md" in text
+
+
+def test_the_code_speaks_of_the_software_not_of_the_work_log():
+    """No issue numbers in the code, the tests, the scripts, the task files or the benchmarks either."""
+    tracked = subprocess.run(["git", "ls-files", "*.py", "*.sh", "*.toml", "*.cpp", "*.hpp", "*.json"], cwd=ROOT,
+                             capture_output=True, text=True).stdout.split()
+    if not tracked:
+        pytest.skip("not a git checkout")
+    found = {name: ISSUE.findall((ROOT / name).read_text(encoding="utf-8", errors="replace")) for name in tracked
+             if name != "tests/test_docs_links.py" and (ROOT / name).is_file()}
+    assert not {k: v for k, v in found.items() if v}, "issue numbers in files"

@@ -1,4 +1,4 @@
-"""Regression tests of issue 10: resume settings, output permissions, the one-file checkpoint, the
+"""Reliability regressions: resume settings, output permissions, the one-file checkpoint, the
 collision-matrix cache, outputs that are inputs, and benchmark workers that die with their parent."""
 
 from __future__ import annotations

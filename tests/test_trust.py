@@ -154,7 +154,11 @@ def held(tmp_path):
         process.wait()
 
 
-def test_a_second_writer_is_refused(held, tmp_path):
+def test_a_second_writer_is_refused(held, tmp_path, tmp_path_factory, panda_task):
+    from manifoldgen.data import collect
+
+    dataset = tmp_path_factory.mktemp("data") / "d.npz"
+    collect(panda_task, 40, 0, dataset, progress=False)
     out, bench = tmp_path / "x.npz", tmp_path / "b"
     pid = held(out)
     message = _one_error(runner.invoke(app, ["collect", "pose", "--per-condition", "5", "-o", str(out)]))
@@ -163,7 +167,12 @@ def test_a_second_writer_is_refused(held, tmp_path):
     message = _one_error(runner.invoke(app, ["bench", "plan", "pose", "--scene", "wall", "-m", "rrtconnect@project",
                                              "--runs", "1", "-o", str(bench)]))
     assert f"process {pid}" in message and f"{bench}.lock" in message
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.lock", "x.npz.lock"], "only the holders' locks"
+    model = tmp_path / "m"
+    pid = held(model)
+    message = _one_error(runner.invoke(app, ["train", str(dataset), "--model", "cvae", "--epochs", "1", "-o",
+                                             str(model)]))
+    assert f"process {pid}" in message and f"{model}.lock" in message
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.lock", "m.lock", "x.npz.lock"], "only the holders' locks"
     with output_lock(tmp_path / "y"), pytest.raises(ManifoldgenError, match=f"process {os.getpid()}"):
         with output_lock(tmp_path / "y"):
             pass

@@ -35,7 +35,7 @@ import torch
 
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, locks_output
 from manifoldgen.metrics import joint_features, prdc
 from manifoldgen.models import get_model_class, load_model
 from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_task
@@ -56,6 +56,7 @@ RACE_TIME = 5.0  # seconds a race run may plan (an unsolved run counts this much
 PROJECTION = "project"  # the race's entry for the projection sampler
 
 
+@locks_output("out")  # one training per model directory
 def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: int | None = None,
                  resume: bool = False, progress: bool = True, task: Task | None = None,
                  workers: int | None = None, race_scenes: bool = True,

@@ -29,7 +29,7 @@ import torch
 
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.io import atomic_write_bytes, atomic_write_text, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import REFINE, check_seed
 
@@ -197,6 +197,7 @@ def _check_latent(model: Trainable, dimension: int) -> None:
                       f"dimensional sheet of it; train with --set latent={dimension}", stacklevel=3)
 
 
+@locks_output("out")  # one training per model directory
 def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
           validation: float = VALIDATION) -> TrainingLog:
