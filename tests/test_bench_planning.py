@@ -73,6 +73,8 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     text = (out / "results.md").read_text()
     assert "| atlas | 2 | 100.0 |" in text and "| pg | 2 | 100.0 |" in text and table in text
     assert "| Median CPU (s) |" in text and "| atlas | 2/2 |" in text and "| pg | 2/2 |" in text
+    assert "- `atlas`: OMPL through its Python bindings (atlas) (2 runs)" in text  # where each method ran
+    assert "- `pg`: compiled core (2 runs)" in text or "- `pg`: Python search" in text
     assert (out / "time.png").read_bytes()[:4] == b"\x89PNG" and (out / "length.png").stat().st_size > 0
     assert json.loads((out / "config.json").read_text())["methods"] == METHODS
     assert (out / "pg-easy-300.npz").is_file()

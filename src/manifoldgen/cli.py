@@ -92,17 +92,6 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     console.print(_coverage_lines(dataset.meta["coverage"]), markup=False, highlight=False)
 
 
-def _engine(result) -> str:
-    """Where the search ran, and why not in the compiled core when it could not."""
-    where = result.extras.get("core")
-    if where == "native":
-        return "compiled core"
-    if where == "python":
-        return f"Python search ({result.extras['core_fallback']})" if result.extras.get("core_fallback") \
-            else "Python search (asked for)"
-    return "Python search (this planner has no compiled version)"
-
-
 def _coverage_lines(report: dict) -> str:
     """The collection's coverage report (:func:`manifoldgen.data.coverage`) as a few lines."""
     counts = [len(shares) for shares in report["modes"].values()]
@@ -200,6 +189,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved (nothing
     written)."""
     from manifoldgen.planning import planner_settings
+    from manifoldgen.planning.result import engine
     from manifoldgen.query import run_query, save_path
     from manifoldgen.runtime import set_torch_threads
     from manifoldgen.scene import get_scene
@@ -225,7 +215,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
                              local=local, smooth=smooth, settings=values)
     if not result.solved:  # no path: nothing is written, so no file can pass for one
         console.print(f"[red]not solved[/] in {result.time_s:.3f} s | {result.samples_drawn} samples, "
-                      f"{result.iterations} iterations | {_engine(result)} | nothing written")
+                      f"{result.iterations} iterations | {engine(result.extras)} | nothing written")
         console.print(result.why(), markup=False)
         raise typer.Exit(1)
     save_path(output, result, meta)
@@ -238,7 +228,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)
         picture = f"{picture}, {snapshots}"
     console.print(f"[green]solved[/] in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
-                  f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {_engine(result)} "
+                  f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {engine(result.extras)} "
                   f"-> {output}, {picture}")
     if result.extras.get("sampler_note"):
         console.print(f"note: {result.extras['sampler_note']}", markup=False)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.planning.result import engine
 from manifoldgen.space import ValidationSettings
 
 
@@ -183,6 +184,19 @@ def _stability_section(records: list[dict], methods: list[str]) -> str:
             f"{ValidationSettings.resolution} rad):\n\n" + table) if table else ""
 
 
+def engine_lines(records: list[dict], order: list[str]) -> str:
+    """Where each method's searches ran (and why not in the compiled core), with its run count: a Markdown list."""
+    lines = []
+    for method in order:
+        counts: dict[str, int] = {}
+        for r in records:
+            if r["method"] == method:
+                where = engine(r.get("extras", {}))
+                counts[where] = counts.get(where, 0) + 1
+        lines.append(f"- `{method}`: " + "; ".join(f"{where} ({n} runs)" for where, n in counts.items()))
+    return "\nWhere each method's searches ran:\n\n" + "\n".join(lines) + "\n"
+
+
 def write_report(records: list[dict], out_dir: str | Path, title: str, *, methods: list[str] | None = None,
                  baseline: str | None = None, notes: str = "") -> tuple[str, list[MethodSummary]]:
     """Write ``results.md``, ``time.png`` and ``length.png`` to ``out_dir``; return the table and summaries."""
@@ -198,7 +212,7 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             "Constraint::project; Atlas and TangentBundle project through charts and count 0). The worst "
             "violation is max |F_i| / tol_i over every state of every solved path, checked every "
             f"{ValidationSettings.resolution} rad."
-            "\n\n" + table + _stability_section(records, order)
+            "\n\n" + table + engine_lines(records, order) + _stability_section(records, order)
             + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own; the C++ "
             "baseline's: its program's plus our dense check of its paths, not the harness around it; FK: configurations whose constraint kinematics was computed, Jacobians "
             "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "

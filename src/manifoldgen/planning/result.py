@@ -11,6 +11,23 @@ REFUSALS = {"range": "no sample within range", "constraint": "constraint", "coll
             "limits": "joint limits", "inequality": "inequality"}  # extras["rejected"] keys, in words
 
 
+def engine(extras: dict) -> str:
+    """Where a query's search ran, from its result's ``extras``, and why not in the compiled core when it
+    could not: "compiled core", "Python search (why)", "C++ OMPL (its space)" or OMPL through its Python
+    bindings."""
+    where = extras.get("core")
+    if where == "native":
+        return "compiled core"
+    if where == "python":
+        return f"Python search ({extras['core_fallback']})" if extras.get("core_fallback") else \
+            "Python search (asked for)"
+    if "native_ops" in extras:
+        return f"C++ OMPL ({extras.get('space', '?')})"
+    if "ompl_status" in extras:
+        return f"OMPL through its Python bindings ({extras.get('space', '?')})"
+    return "Python search (this planner has no compiled version)"
+
+
 def path_length(path: np.ndarray) -> float:
     """Joint-space length of a waypoint array ``(K, n)`` (sum of Euclidean segment lengths)."""
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
