@@ -362,13 +362,14 @@ def check_command(block: Block, words: list[str], env: dict) -> None:
         for path in repo_paths(word):
             assert (ROOT / path).exists(), f"{block.where}: {path}: no such file or folder in the repository"
     program, args = words[0], words[1:]
-    if program in {"manifoldgen", ".venv/bin/manifoldgen"}:
+    program = re.sub(r"^[\w.-]+/bin/(?=pip$|python$|manifoldgen$)", "", program)  # a virtual environment's tools
+    if program == "manifoldgen":
         names, ctx = cli_command(block, args)
         if ctx is not None:
             check_cli_values(block, names, ctx)
-    elif program in {"python", "python3", ".venv/bin/python"}:
+    elif program in {"python", "python3"}:
         if args[:1] == ["-m"]:
-            assert args[1] in {"pytest", "pip", "mkdocs"}, f"{block.where}: python -m {args[1]}"
+            assert args[1] in {"pytest", "pip", "mkdocs", "build", "venv"}, f"{block.where}: python -m {args[1]}"
             return
         script = ROOT / args[0]
         assert script.is_file(), f"{block.where}: {args[0]}: no such file"
@@ -399,6 +400,9 @@ def check_command(block: Block, words: list[str], env: dict) -> None:
                 assert named, f"{block.where}: pip install {word}"
                 for extra in (named.group(1) or "").split(","):
                     assert not extra or extra in extras, f"{block.where}: no extra [{extra}] in pyproject.toml"
+            elif word.endswith(".tar.gz"):  # the source distribution `python -m build --sdist` makes
+                version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+                assert word.endswith(f"manifoldgen-{version}.tar.gz"), f"{block.where}: {word} is not this sdist"
             elif word.startswith("torch=="):
                 assert word in (ROOT / "scripts/setup.sh").read_text(), f"{block.where}: {word} is not setup.sh's"
             else:  # the core's rebuild: the build requirements, without the pinned pin
