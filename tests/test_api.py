@@ -109,6 +109,18 @@ def test_solved_and_unsolved_queries_have_one_schema(wall):
         unsolved.save("never.npz")
 
 
+def test_a_saved_path_loads_back_as_the_same_result(wall, tmp_path):
+    task, scene = wall
+    planned = mg.plan(task, scene, sampler=f"cvae:{PRETRAINED}", seed=0, time_limit=10)
+    loaded = mg.QueryResult.load(planned.save(tmp_path / "p.npz"))
+    np.testing.assert_array_equal(loaded.path, planned.path)
+    assert loaded.to_dict() == planned.to_dict() and loaded.valid and loaded.solved
+    assert loaded.result.length == pytest.approx(planned.result.length)
+    assert mg.check_path(task, scene, loaded).valid
+    with pytest.raises(mg.ManifoldgenError, match="QueryResult.load: file must be a file path \\(str or os.PathLike\\), got int 3"):
+        mg.QueryResult.load(3)
+
+
 def test_a_model_object_a_spec_and_a_sampler_plan_alike(wall):
     task, scene = wall
     model = mg.load_model(PRETRAINED)

@@ -308,13 +308,31 @@ class QueryResult:
         """JSON-ready: the path file's meta (``result``, ``validation``, the query, the task), without the path."""
         return copy.deepcopy(self.meta)
 
+    @classmethod
+    def load(cls, file: PathLike, task: Task | None = None, *, trust_code: bool = False) -> QueryResult:
+        """A path file (``manifoldgen plan -o`` or :meth:`save`), checked whole
+        (:func:`manifoldgen.query.read_path_file`; ``task``, ``trust_code``: for a file whose task names a
+        user's constraint type)."""
+        from manifoldgen.planning.result import PlanResult, path_length
+        from manifoldgen.query import read_path_file
+
+        if not _pathlike(file):
+            raise _wrong("QueryResult.load", "file", "a file path (str or os.PathLike)", file)
+        meta, path, _ = read_path_file(file, task, trust_code=trust_code)
+        done = meta.get("result", {})
+        result = PlanResult(True, path, float(done.get("time_s", 0.0)), int(done.get("iterations", 0)),
+                            int(done.get("samples_drawn", 0)), int(done.get("projections", 0)),
+                            str(done.get("planner", meta.get("planner", ""))), path_length(path),
+                            dict(done.get("extras", {})))
+        return cls(result, meta)
+
     def save(self, file: PathLike) -> Path:
         """Write the path file (``path (K, n)`` + ``meta``; atomic), as ``manifoldgen plan -o`` does."""
         from manifoldgen.query import save_path
 
-        file = _optional_path("QueryResult.save", "file", file)
-        if file is None:
-            raise _wrong("QueryResult.save", "file", "a file path", file)
+        if not _pathlike(file):
+            raise _wrong("QueryResult.save", "file", "a file path (str or os.PathLike)", file)
+        file = Path(file)
         if not self.result.solved:
             raise ManifoldgenError(f"QueryResult.save: the query was not solved, so there is no path to write "
                                    f"({self.result.why()})")
