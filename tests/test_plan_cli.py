@@ -179,3 +179,11 @@ def test_a_path_file_is_checked_whole_before_it_is_used(planned_path, tmp_path, 
     assert words in str(error.value) and "\n" not in str(error.value)
     result = runner.invoke(app, ["trajectory", str(broken), "-o", str(tmp_path / "t.csv")])
     assert result.exit_code == 2 and words in result.output and not (tmp_path / "t.csv").exists()
+
+
+def test_no_picture_writes_the_path_alone(tmp_path):
+    out = tmp_path / "p.npz"
+    result = runner.invoke(app, ["plan", "pose", "--scene", "wall", "--sampler", "project", "--no-picture",
+                                 "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.npz"] and result.output.rstrip().endswith(str(out))

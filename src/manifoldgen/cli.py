@@ -185,9 +185,11 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
                                             "--set range=0.8; unknown keys list the known ones"),
          config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
          snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
+         picture: bool = typer.Option(True, "--picture/--no-picture", help="Draw the path's picture (a .png beside "
+                                      "-o; matplotlib takes 1-2 s of the command's time)"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
-    """Plan the scene's query; writes the path (.npz) and its picture (.png). Exit 1 when unsolved (nothing
-    written)."""
+    """Plan the scene's query; writes the path (.npz) and its picture (.png, unless --no-picture). Exit 1 when
+    unsolved (nothing written)."""
     from manifoldgen.planning import planner_settings
     from manifoldgen.planning.result import engine
     from manifoldgen.query import run_query, save_path
@@ -195,17 +197,16 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
     from manifoldgen.targets import constrained_frame
-    from manifoldgen.viz.path import plot_path
     from manifoldgen.specs import parse_spec
     set_torch_threads()
     _bounded("--time", time_limit)
-    picture = output.with_suffix(".png")
-    if picture == output or snapshots in (output, picture):
+    image = output.with_suffix(".png") if picture else None
+    if image == output or (snapshots is not None and snapshots in (output, image)):
         also = f" and --snapshots {snapshots}" if snapshots else ""
-        raise ManifoldgenError(f"-o {output} and its picture {picture}{also} would overwrite each other; give -o a "
-                               ".npz name and --snapshots another .png")
+        raise ManifoldgenError(f"-o {output} and its picture {image or output.with_suffix('.png')}{also} would "
+                               "overwrite each other; give -o a .npz name and --snapshots another .png")
     inputs = [_file(task), _file(scene), _file(parse_spec(sampler)[1]), config]
-    for out in (output, picture, snapshots):
+    for out in (output, image, snapshots):
         if out is not None:
             check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
@@ -219,17 +220,21 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         console.print(result.why(), markup=False)
         raise typer.Exit(1)
     save_path(output, result, meta)
-    frame = (scene_obj.targets.get("goal") or scene_obj.targets.get("start") or {}).get("frame") \
-        or constrained_frame(task_obj.constraint) or task_obj.robot.model.frames[-1].name  # a reach traces its hand
-    plot_path(result.path, task_obj.robot, frame, scene_obj, picture,
-              f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+    written = [output]
+    if image is not None:
+        from manifoldgen.viz.path import plot_path
+        frame = (scene_obj.targets.get("goal") or scene_obj.targets.get("start") or {}).get("frame") \
+            or constrained_frame(task_obj.constraint) or task_obj.robot.model.frames[-1].name  # a reach: its hand
+        plot_path(result.path, task_obj.robot, frame, scene_obj, image,
+                  f"{scene_obj.name}: {planner} + {sampler}, seed {seed}")
+        written.append(image)
     if snapshots is not None:
         from manifoldgen.viz.snapshots import draw_snapshots
         draw_snapshots(result.path, task_obj, scene_obj, snapshots)
-        picture = f"{picture}, {snapshots}"
+        written.append(snapshots)
     console.print(f"[green]solved[/] in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {engine(result.extras)} "
-                  f"-> {output}, {picture}")
+                  f"-> {', '.join(map(str, written))}")
     if result.extras.get("sampler_note"):
         console.print(f"note: {result.extras['sampler_note']}", markup=False)
 
