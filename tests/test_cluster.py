@@ -61,7 +61,8 @@ def _without_timings(record: dict) -> dict:
 def test_parse_cluster_names_one_meaning():
     assert parse_cluster(None) is None and parse_cluster("ray") == Cluster(None, None)
     assert parse_cluster("ray:10.0.0.5:6379", 3) == Cluster("10.0.0.5:6379", 3)
-    for bad, message in [("dask", "--cluster takes ray"), ("ray:", "--cluster takes ray")]:
+    for bad, message in [("dask", "--cluster takes ray"), ("ray:", "--cluster takes ray"),
+                         ("ray:ray://head:10001", "Ray Client addresses are not supported")]:
         with pytest.raises(ManifoldgenError, match=message):
             parse_cluster(bad)
     with pytest.raises(ManifoldgenError, match="tasks running at once"):
@@ -214,13 +215,13 @@ def test_a_sweep_on_the_cluster_ranks_and_writes_what_a_local_sweep_does(cluster
     from manifoldgen.model_sweep import SWEEP_FILE, sweep
     from manifoldgen.selection import RECALL_SLACK
     dataset = collect(sphere, 60, 0, batch=64, progress=False)
-    args = dict(models=["cvae", "cfm"], latents=[2], seeds=[0, 1], epochs=2, progress=False)
+    args = dict(models=["cvae", "cfm"], latents=[2, 3], seeds=[0], epochs=2, progress=False)
     local = sweep(dataset, tmp_path / "local", **args)
     remote = sweep(dataset, tmp_path / "ray", cluster=Cluster(), **args)
     strip = lambda rows: [{k: v for k, v in r.items() if k not in TIMINGS | {"seconds"}} for r in rows]  # noqa: E731
     assert strip(remote) == strip(local)
-    assert sorted(r["name"] for r in local) == ["cfm-seed0", "cfm-seed1", "cvae-latent2-seed0", "cvae-latent2-seed1"]
-    assert local[0]["chosen"] and [r["rank"] for r in local] == [1, 2, 3, 4]
+    assert sorted(r["name"] for r in local) == ["cfm-seed0", "cvae-latent2-seed0", "cvae-latent3-seed0"]  # no latent
+    assert local[0]["chosen"] and [r["rank"] for r in local] == [1, 2, 3]
     best = max(r["recall"] for r in local)
     near = [r for r in local if r["recall"] >= best - RECALL_SLACK]
     assert local[:len(near)] == sorted(near, key=lambda r: -r["accuracy"])
@@ -230,6 +231,9 @@ def test_a_sweep_on_the_cluster_ranks_and_writes_what_a_local_sweep_does(cluster
     table = json.loads((tmp_path / "ray" / SWEEP_FILE).read_text())
     assert [r["name"] for r in table["candidates"]] == [r["name"] for r in local]
     assert {r["node"] for r in table["candidates"]} <= {n["NodeID"] for n in ray.nodes()}
+    assert sweep(dataset, tmp_path / "ray", **args) == remote  # a rerun trains nothing: every candidate is kept
+    with pytest.raises(ManifoldgenError, match="other settings"):
+        sweep(dataset, tmp_path / "ray", **{**args, "epochs": 3})
 
 
 def test_a_node_that_leaves_mid_run_loses_and_duplicates_no_row(cluster, panda_task, tmp_path):

@@ -17,8 +17,7 @@ app.add_typer(bench_app, name="bench")
 
 
 CLUSTER_HELP = ("Run on a Ray cluster: ray (a Ray on this machine, started for the command) or ray:ADDRESS (a "
-                "running cluster: its head's HOST:PORT, ray://HOST:PORT or auto); needs the [ray] extra; see "
-                "docs/cluster.md")
+                "running cluster: its head's HOST:PORT, or auto); needs the [ray] extra; see docs/cluster.md")
 WORKERS_HELP = "Parallel worker processes (default 1); with --cluster: runs at once (default: one per cluster CPU)"
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
           "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive

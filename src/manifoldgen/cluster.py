@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib.metadata
 import os
 import socket
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -28,8 +29,8 @@ DISTRIBUTION = "manifoldgen"
 
 @dataclass(frozen=True)
 class Cluster:
-    """Where tasks run: ``address`` None starts a Ray on this machine for the command; ``workers`` caps the
-    tasks running at once (None: as many as the cluster has CPUs)."""
+    """Where tasks run: ``address`` None starts a Ray on this machine for the command (``HOST:PORT`` or ``auto``:
+    a running cluster); ``workers`` caps the tasks running at once (None: a queue of twice the cluster's CPUs)."""
 
     address: str | None = None
     workers: int | None = None
@@ -47,7 +48,10 @@ def parse_cluster(text: str | None, workers: int | None = None) -> Cluster | Non
     kind, colon, address = text.strip().partition(":")
     if kind != "ray" or (colon and not address.strip()):
         raise ManifoldgenError(f"--cluster takes ray (a Ray on this machine) or ray:ADDRESS (a running cluster: "
-                               f"HOST:PORT of its head, ray://HOST:PORT or auto), got '{text}'")
+                               f"HOST:PORT of its head, or auto), got '{text}'")
+    if address.startswith("ray://"):
+        raise ManifoldgenError(f"--cluster {text}: Ray Client addresses are not supported; run the command on a node "
+                               "of the cluster with ray:HEAD-HOST:PORT or ray:auto")
     if workers is not None and workers <= 0:
         raise ManifoldgenError(f"--workers must be positive (with --cluster: tasks running at once), got {workers}")
     require("ray", "ray", "--cluster ray")  # before any work starts
@@ -55,13 +59,13 @@ def parse_cluster(text: str | None, workers: int | None = None) -> Cluster | Non
 
 
 def _host_port(address: str) -> tuple[str, int] | None:
-    """(host, port) of ``HOST:PORT`` or ``ray://HOST:PORT``; None for ``auto``."""
+    """(host, port) of ``HOST:PORT``; None for ``auto``."""
     if address == "auto":
         return None
-    host, _, port = address.removeprefix("ray://").rpartition(":")
+    host, _, port = address.rpartition(":")
     if not host or not port.isdigit():
-        raise ManifoldgenError(f"--cluster ray:{address}: give the head's HOST:PORT (e.g. ray:10.0.0.5:6379), "
-                               "ray://HOST:PORT or auto")
+        raise ManifoldgenError(f"--cluster ray:{address}: give the head's HOST:PORT (e.g. ray:10.0.0.5:6379) or "
+                               "ray:auto")
     return host.strip("[]"), int(port)
 
 
@@ -124,7 +128,8 @@ class Pool:
         return self.ray.put(value)
 
     def free(self) -> int:
-        return self.window - len(self.pending)
+        """Tasks that may be submitted before the window is full."""
+        return max(0, self.window - len(self.pending))
 
     def submit(self, key, fn: Callable, *args, inputs: Iterable[str] = ()) -> None:
         """Run ``fn(*args)`` on a worker (``args`` may be references from :meth:`put`); :meth:`wait` returns it
@@ -133,8 +138,8 @@ class Pool:
         self.pending[ref] = key
 
     def wait(self) -> list[tuple[object, object, dict]]:
-        """Block until at least one task finished; ``[(key, result, node), ...]`` of those that did."""
-        ready, _ = self.ray.wait(list(self.pending), num_returns=1)
+        """Block until at least one task finished; ``[(key, result, node), ...]`` of all that did."""
+        self.ray.wait(list(self.pending), num_returns=1)
         ready, _ = self.ray.wait(list(self.pending), num_returns=len(self.pending), timeout=0)
         return [(self.pending.pop(ref), *self._get(ref)) for ref in ready]
 
@@ -156,9 +161,9 @@ class Pool:
                                    "work is saved: rerun the same command to resume") from None
 
     def cancel(self) -> None:
-        """Cancel every pending task (an interrupt or an error: what finished is already written)."""
+        """Cancel every pending task (done, interrupted or failed: what finished is already written)."""
         for ref in self.pending:
-            self.ray.cancel(ref, force=True)
+            self.ray.cancel(ref)
         self.pending.clear()
 
     def map_unordered(self, fn: Callable, jobs: Iterable[tuple], *, inputs: Iterable[str] = ()
@@ -205,6 +210,18 @@ def _check_nodes(ray, version: str) -> None:
 
 
 @contextmanager
+def _stderr_to(file) -> Iterator[None]:
+    """Send this process's file descriptor 2 to ``file`` (C++ libraries write there directly)."""
+    saved = os.dup(2)
+    os.dup2(file.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+@contextmanager
 def connect(cluster: Cluster) -> Iterator[Pool]:
     """A :class:`Pool` on ``cluster``. Joins the Ray this process already runs, if any; otherwise starts a Ray on
     this machine (``address`` None; stopped on leaving) or connects to the one at ``address``."""
@@ -214,17 +231,26 @@ def connect(cluster: Cluster) -> Iterator[Pool]:
     if started:
         if cluster.address is not None:
             _reachable(cluster.address)
-        try:
-            ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
-        except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
-            first = (str(exc).strip().splitlines() or [""])[0][:200]
-            raise ManifoldgenError(f"cannot join {cluster.describe()} ({first}); start it with `ray start --head` "
-                                   "or check the address") from None
+        with tempfile.TemporaryFile() as log:
+            try:
+                with _stderr_to(log):  # Ray's core prints every retry of a refused connection there
+                    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False,
+                             logging_level="ERROR")
+            except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
+                log.seek(0)
+                first = (str(exc).strip().splitlines() or [""])[0][:200]
+                hint = ("the cluster wants Ray's token: set RAY_AUTH_MODE=token with the cluster's token (see "
+                        "docs/cluster.md)" if b"InvalidAuthToken" in log.read() else
+                        "start it with `ray start --head` or check the address")
+                raise ManifoldgenError(f"cannot join {cluster.describe()} ({first}); {hint}") from None
     try:
         _check_nodes(ray, version)
         cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
-        window = cluster.workers or 2 * cpus  # a queue as deep as the cluster: no worker waits for the driver
-        yield Pool(ray, window, version)
+        pool = Pool(ray, cluster.workers or 2 * cpus, version)  # a queue as deep as the cluster: no worker waits
+        try:
+            yield pool
+        finally:
+            pool.cancel()  # tasks drawn ahead and no longer needed
     finally:
         if started:
             ray.shutdown()

@@ -218,15 +218,16 @@ class _Shards:
 
     def __call__(self, space: ConstrainedSpace, c: int, b: int, got: int) -> np.ndarray:
         """Batch ``b`` of condition ``c`` (``got``: the rows its earlier batches gave)."""
-        self._ahead(c, b, got)
         if (c, b) not in self.arrived and (c, b) not in self.pool.pending.values():
-            self._submit(c, b)  # a saved batch that proved damaged
+            self._submit(c, b)  # first, or a saved batch that proved damaged
+        self._ahead(c, b, got)
         while (c, b) not in self.arrived:
             for (cc, bb), rows, _ in self.pool.wait():
                 self.draw.save(cc, bb, rows)
                 self.counts.setdefault(cc, []).append(len(rows))
                 if cc >= c:  # a surplus batch of a finished condition is dropped
                     self.arrived[cc, bb] = rows
+            self._ahead(c, b, got)  # the freed slots, at once
         return self.arrived.pop((c, b))
 
 
