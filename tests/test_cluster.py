@@ -25,7 +25,6 @@ from manifoldgen.tasks import get_task
 ray = pytest.importorskip("ray", reason="the [ray] extra is not installed: pip install 'manifoldgen[ray]'")
 from ray.cluster_utils import Cluster as RayCluster  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 SPHERE = dict(per_condition=120, seed=4, batch=32)  # 5 condition values, several batches each
 BENCH_METHODS = ["project=rrtconnect@project"]
 TIMINGS = {"time_s", "cpu_s", "build_s", "harness_cpu_s", "host", "node"}
@@ -159,6 +158,7 @@ def test_a_worker_killed_mid_task_loses_and_duplicates_no_row(cluster, panda_tas
     assert (tmp_path / "ray.npz").read_bytes() == (tmp_path / "local.npz").read_bytes()
 
 
+@pytest.mark.slow  # two driver processes start
 def test_a_killed_driver_resumes_to_the_same_bytes(cluster, sphere, tmp_path):
     nodes, _ = cluster
     local = tmp_path / "local.npz"
@@ -211,6 +211,7 @@ def test_a_cluster_nobody_answers_at_fails_in_one_line_and_fast(tmp_path):
     assert not (tmp_path / "x.npz").exists()
 
 
+@pytest.mark.slow  # trains models, each worker imports torch
 def test_a_sweep_on_the_cluster_ranks_and_writes_what_a_local_sweep_does(cluster, sphere, tmp_path):
     from manifoldgen.model_sweep import SWEEP_FILE, sweep
     from manifoldgen.selection import RECALL_SLACK

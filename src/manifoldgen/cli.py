@@ -446,7 +446,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
                                "panda pose task; e.g. -m rrtconnect@project -m cbirrt@uniform -m cvae=rrtconnect@cvae:DIR")
     methods = methods or default_methods(models or None)
     table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
-                         workers=workers or 1, resume=resume, pg_rows=pg_rows,
+                         workers=1 if workers is None else workers, resume=resume, pg_rows=pg_rows,
                          baseline=baseline or default_baseline(methods), snapshots=snapshots, cluster=on)
     console.print(table)
     console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")

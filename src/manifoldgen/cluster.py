@@ -42,8 +42,6 @@ class Cluster:
 def parse_cluster(text: str | None, workers: int | None = None) -> Cluster | None:
     """``--cluster`` (``ray`` or ``ray:ADDRESS``) with ``--workers`` as a :class:`Cluster`; None without one."""
     if text is None:
-        if workers is not None and workers <= 0:
-            raise ManifoldgenError(f"--workers must be positive, got {workers}")
         return None
     kind, colon, address = text.strip().partition(":")
     if kind != "ray" or (colon and not address.strip()):
@@ -157,8 +155,8 @@ class Pool:
             raise ManifoldgenError(f"a task failed on the cluster ({type(cause).__name__}: {first})") from None
         except (ray.exceptions.WorkerCrashedError, ray.exceptions.NodeDiedError, ray.exceptions.ObjectLostError,
                 ray.exceptions.RaySystemError) as exc:
-            raise ManifoldgenError(f"a task's worker died {RETRIES + 1} times ({type(exc).__name__}); the finished "
-                                   "work is saved: rerun the same command to resume") from None
+            raise ManifoldgenError(f"a task was lost on the cluster ({type(exc).__name__}, after Ray's {RETRIES} "
+                                   "reruns); the finished work is saved: rerun the same command to resume") from None
 
     def cancel(self) -> None:
         """Cancel every pending task (done, interrupted or failed: what finished is already written)."""
