@@ -156,15 +156,16 @@ def main() -> None:
     per_shard = local["wall"] / shards
     overhead = (one["wall"] - local["wall"]) / shards
     cpu_overhead = (one["cpu"] + one["workers"] - local["cpu"]) / shards
-    print(f"   an empty task costs {trivial['wall'] / 200 * 1e3:.1f} ms wall, {(trivial['cpu'] + trivial['ray']) / 200 * 1e3:.1f} "
-          "ms CPU (driver and Ray, 200 tasks on 2 workers)")
+    empty = (trivial["cpu"] + trivial["ray"]) / 200
+    print(f"   an empty task costs {trivial['wall'] / 200 * 1e3:.1f} ms wall, {empty * 1e3:.1f} ms CPU (driver and Ray, "
+          "200 tasks on 2 workers)")
     print(f"1. overhead per task at 2,048 seeds: {overhead * 1e3:+.0f} ms wall ({overhead / per_shard:+.1%} of a "
           f"shard's {per_shard:.2f} s; target <= 5 %), {cpu_overhead * 1e3:+.0f} ms CPU "
           f"({cpu_overhead / (local['cpu'] / shards):+.1%}: driver and worker); Ray's daemons "
           f"{(one['ray'] - one['workers']) / one['wall']:.1%} of a core while it ran")
     print(f"2. throughput 2 workers / 1 worker: {one['wall'] / two['wall']:.2f}x wall (target >= 1.8x); CPU per row "
-          f"{(two['cpu'] + two['workers']) / (one['cpu'] + one['workers']):.2f}x of 1 worker's ({two_tasks - one_tasks} "
-          f"surplus shards drawn ahead); files byte-identical to the local one: {same}")
+          f"{(two['cpu'] + two['workers']) / (one['cpu'] + one['workers']):.2f}x of 1 worker's "
+          f"({two_tasks - one_tasks} surplus shards drawn ahead); files byte-identical to the local one: {same}")
     print(f"   CPU of the busiest worker: 1 worker {one['busiest']:.1f} s, 2 workers {two['busiest']:.1f} s: "
           f"{one['busiest'] / max(two['busiest'], 1e-9):.2f}x, the speed-up on 2 cores no other job uses")
 

@@ -168,17 +168,18 @@ def test_a_killed_driver_resumes_to_the_same_bytes(cluster, sphere, tmp_path):
     partial = out.with_name(out.name + ".partial")
     driver_code = ("import sys; from manifoldgen.cluster import Cluster; from manifoldgen.data import collect; "
                    "from manifoldgen.tasks import get_task; "
-                   f"collect(get_task('sphere'), out=sys.argv[1], progress=False, cluster=Cluster(sys.argv[2]), "
-                   f"**{args!r})")
-    command = [sys.executable, "-c", driver_code, str(out), nodes.address]
-    driver = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                   f"collect(get_task('sphere'), out=sys.argv[1], progress=False, "
+                   f"cluster=Cluster(sys.argv[2]), **{args!r})")
+    driver = subprocess.Popen([sys.executable, "-c", driver_code, str(out), nodes.address], stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT)
     deadline = time.monotonic() + 60
     while len(list(partial.glob("c*-b*.npz"))) < 5 and driver.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     driver.kill()  # SIGKILL: no clean-up runs
     driver.wait()
     assert not out.exists() and len(list(partial.glob("c*-b*.npz"))) >= 5
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    done = subprocess.run([sys.executable, "-c", driver_code, str(out), nodes.address], capture_output=True,
+                          text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
     assert out.read_bytes() == local.read_bytes()
 

@@ -16,8 +16,9 @@ bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Exper
 app.add_typer(bench_app, name="bench")
 
 
-CLUSTER_HELP = ("Run on a Ray cluster: ray (a Ray on this machine, started for the command) or ray:ADDRESS (a "
-                "running cluster: its head's HOST:PORT, or auto); needs the [ray] extra; see docs/cluster.md")
+CLUSTER_HELP = ("Run on a Ray cluster: ray (the Ray running on this machine, else one started for the command) or "
+                "ray:ADDRESS (a running cluster: its head's HOST:PORT, or auto); needs the [ray] extra; see "
+                "docs/cluster.md")
 WORKERS_HELP = "Parallel worker processes (default 1); with --cluster: runs at once (default: one per cluster CPU)"
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
           "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive
@@ -533,8 +534,8 @@ def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: th
 def sweep(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
           model: list[str] = typer.Option(None, "--model", help=f"Models to train (repeatable; default: "
                                           f"{', '.join(CANDIDATES)}): {', '.join(_names('models'))}"),
-          latent: list[int] = typer.Option(None, help="Latent sizes (repeatable; default: the manifold's dimension); "
-                                           "models without a latent (cfm, flow) train once per seed"),
+          latent: list[int] = typer.Option(None, help="Latent sizes (repeatable; default: the manifold's "
+                                           "dimension); models without a latent (cfm, flow) train once per seed"),
           seeds: list[int] = typer.Option(None, "--seed", help="Training seeds (repeatable; default 0)"),
           epochs: int = typer.Option(None, help="Maximum epochs (default: each model's)"),
           cluster: str = typer.Option(None, help=CLUSTER_HELP),

@@ -2,9 +2,9 @@
 writes every file; a worker computes one task and returns its result.
 
 :func:`parse_cluster` reads the option (None: no cluster, nothing here is used and Ray is never imported).
-:func:`connect` joins the cluster (a Ray on this machine started for the command, or the running cluster at
-ADDRESS), checks that every node runs this machine's manifoldgen, and gives a :class:`Pool`: :meth:`Pool.submit`
-a task, :meth:`Pool.wait` for finished ones (result and node, in the order they finish), or
+:func:`connect` joins the cluster (the Ray running on this machine, else one started for the command; or the
+running cluster at ADDRESS), checks that every node runs this machine's manifoldgen, and gives a :class:`Pool`:
+:meth:`Pool.submit` a task, :meth:`Pool.wait` for finished ones (result and node, in the order they finish), or
 :meth:`Pool.map_unordered` a list of jobs. A task whose worker process dies (killed, out of memory, its node
 leaving the cluster) is run again by Ray, up to :data:`RETRIES` times: its result arrives once. Tasks are pure
 functions of their arguments, so a rerun gives the same result.
@@ -29,14 +29,15 @@ DISTRIBUTION = "manifoldgen"
 
 @dataclass(frozen=True)
 class Cluster:
-    """Where tasks run: ``address`` None starts a Ray on this machine for the command (``HOST:PORT`` or ``auto``:
-    a running cluster); ``workers`` caps the tasks running at once (None: a queue of twice the cluster's CPUs)."""
+    """Where tasks run: ``address`` None: the Ray running on this machine, else one started for the command
+    (``HOST:PORT`` or ``auto``: a running cluster); ``workers`` caps the tasks running at once (None: a queue of
+    twice the cluster's CPUs)."""
 
     address: str | None = None
     workers: int | None = None
 
     def describe(self) -> str:
-        return "a Ray on this machine" if self.address is None else f"the Ray cluster at {self.address}"
+        return "the Ray on this machine" if self.address is None else f"the Ray cluster at {self.address}"
 
 
 def parse_cluster(text: str | None, workers: int | None = None) -> Cluster | None:
@@ -221,8 +222,9 @@ def _stderr_to(file) -> Iterator[None]:
 
 @contextmanager
 def connect(cluster: Cluster) -> Iterator[Pool]:
-    """A :class:`Pool` on ``cluster``. Joins the Ray this process already runs, if any; otherwise starts a Ray on
-    this machine (``address`` None; stopped on leaving) or connects to the one at ``address``."""
+    """A :class:`Pool` on ``cluster``. Joins the Ray this process already runs, if any; otherwise ``ray.init``
+    (``address`` None: the Ray running on this machine, else a new one, stopped on leaving; or the one at
+    ``address``)."""
     ray = require("ray", "ray", "--cluster ray")
     version = _version()
     started = not ray.is_initialized()
