@@ -11,7 +11,7 @@ Starts a Ray on this machine with 2 CPUs and prints:
    machine's load (other processes' CPU share over the run: this machine is shared);
 3. the paper's Table IV at full size (100 runs x 5 planners x 4 samplers x 2 robots, 30 s limit) on N nodes of 16
    cores: the CPU of a run of each planner and sampler from this repository's PR2 measurements (docs/benchmarks.md,
-   Dual-arm tray), an unsolved run charged its full 30 s, plus the measured overhead per task.
+   Dual-arm tray), an unsolved run charged its full 30 s, plus the CPU per task measured in 1.
 """
 
 import argparse
@@ -173,7 +173,7 @@ def main() -> None:
             TABLE4.items()}
     per_run = float(np.mean([c for costs in cost.values() for c in costs]))
     runs = TABLE4_RUNS * TABLE4_ROBOTS * sum(len(c) for c in cost.values())
-    total = runs * (per_run + max(0.0, overhead))
+    total = runs * (per_run + max(0.0, cpu_overhead))
     print(f"3. Table IV at full size: {runs:,} runs, mean {per_run:.1f} CPU s each (unsolved: {TABLE4_LIMIT:.0f} s), "
           f"{total / 3600:.1f} CPU hours with the Ray overhead; on this machine's 2 cores {total / 2 / 3600:.1f} h")
     for nodes in (1, 2, 4, 8, 16):
