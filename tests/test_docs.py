@@ -411,6 +411,8 @@ def check_command(block: Block, words: list[str], env: dict) -> None:
         assert args[0] in {"serve", "build"} and (ROOT / "mkdocs.yml").is_file(), f"{block.where}: mkdocs {args[0]}"
     elif program == "bash":
         assert (ROOT / args[0]).is_file(), f"{block.where}: {args[0]}: no such file"
+    elif program == "ray":  # Ray's own command line, for a cluster of several machines (the [ray] extra)
+        assert args[0] in {"start", "stop", "status"}, f"{block.where}: ray {args[0]}"
     else:
         raise AssertionError(f"{block.where}: no check for the command '{program}' (see tests/test_docs.py)")
 

@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "manifoldgen"
 # Bottom to top. A name covers the module and everything under it (a package); the longest name that covers a
 # module decides its layer ("viz.losses" before "viz"); "" is the package's own __init__ (the `mg` namespace).
 LAYERS = [
-    ("base", ["errors", "io", "registry", "runtime", "settings", "progress"]),
+    ("base", ["errors", "io", "registry", "runtime", "settings", "progress", "cluster"]),
     ("geometry and kinematics", ["kinematics_torch", "robot", "collision", "spheres", "shapes"]),
     ("constraints", ["constraints", "provenance"]),
     ("space", ["space", "targets"]),
@@ -23,7 +23,7 @@ LAYERS = [
     ("planning", ["planning"]),
     ("problem", ["tasks", "scene"]),
     ("models", ["models"]),
-    ("pipeline", ["data", "specs", "query", "selection", "stability", "trajectory", "physics", "ompl_settings",
+    ("pipeline", ["data", "specs", "query", "selection", "model_sweep", "stability", "trajectory", "physics", "ompl_settings",
                   "ompl_bridge", "ompl_native", "api"]),
     ("front ends", ["bench", "viz", "viewer", "demos", "cli_common", "cli_view", "cli", ""]),
 ]

@@ -16,6 +16,10 @@ bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Exper
 app.add_typer(bench_app, name="bench")
 
 
+CLUSTER_HELP = ("Run on a Ray cluster: ray (the Ray running on this machine, else one started for the command) or "
+                "ray:ADDRESS (a running cluster: its head's HOST:PORT, or auto); needs the [ray] extra; see "
+                "docs/cluster.md")
+WORKERS_HELP = "Parallel worker processes (default 1); with --cluster: runs at once (default: one per cluster CPU)"
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
           "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive
 
@@ -66,15 +70,18 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
                                          "scenes (their IK branches); --no-anchors: uniform seeds only"),
             near_home: float = typer.Option(0.0, help="Seeds normal around the task's home with this standard "
                                             "deviation (rad) instead: rows on the home's IK branch (0: as above)"),
+            cluster: str = typer.Option(None, help=CLUSTER_HELP),
             output: Path = typer.Option(..., "-o", "--output", help="Dataset .npz to write")):
     """Collect constraint-satisfying configurations (resumes after an interruption) and report the modes (IK
     branches) they fall in and how near they come to every scene's start and goal."""
     import time
 
+    from manifoldgen.cluster import parse_cluster
     from manifoldgen.data import collect as run_collect, default_rows
     from manifoldgen.scene import task_anchors
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
+    on = parse_cluster(cluster)
     check_output_path(output, [_file(task)])
     task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
@@ -84,7 +91,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     if per_condition is None:
         per_condition = default_rows(len(task_obj.condition.grid) if values is None else len(values))
     dataset = run_collect(task_obj, per_condition, seed, output, conditions=values, near_home=near_home,
-                          anchors=found)
+                          anchors=found, cluster=on)
     elapsed = time.perf_counter() - start
     console.print(f"wrote {output}: {len(dataset)} rows x {dataset.q.shape[1]} joints "
                   f"({task_obj.robot.name}, {task_obj.name} task) in {elapsed:.1f} s "
@@ -399,15 +406,18 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")
 
 
-def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: float | None, output: Path,
+def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limit: float | None, output: Path,
                     methods: list[str] | None, models: list[Path] | None, resume: bool, seed: int, pg_rows: int,
                     baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
-                    config: Path | None = None, snapshots: bool = False, physics: bool = False) -> None:
+                    config: Path | None = None, snapshots: bool = False, physics: bool = False,
+                    cluster: str | None = None) -> None:
     from manifoldgen.bench.planning import (OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment, Method,
                                             default_baseline, default_methods, run_bench)
+    from manifoldgen.cluster import parse_cluster
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
     from manifoldgen.tasks import BUILTIN_DIR, get_task
+    on = parse_cluster(cluster, workers)
     _bounded("--runs", runs)
     _bounded("--time", time_limit)
     samplers = [Method.parse(m).sampler for m in methods or []]
@@ -432,8 +442,8 @@ def _bench_planning(scene: str, runs: int | None, workers: int, time_limit: floa
                                "panda pose task; e.g. -m rrtconnect@project -m cbirrt@uniform -m cvae=rrtconnect@cvae:DIR")
     methods = methods or default_methods(models or None)
     table, _ = run_bench(experiment, methods, output, runs=paper["runs"] if runs is None else runs,
-                         workers=workers, resume=resume, pg_rows=pg_rows,
-                         baseline=baseline or default_baseline(methods), snapshots=snapshots)
+                         workers=1 if workers is None else workers, resume=resume, pg_rows=pg_rows,
+                         baseline=baseline or default_baseline(methods), snapshots=snapshots, cluster=on)
     console.print(table)
     console.print(f"wrote {output}/runs.jsonl, results.md, time.png, length.png")
 
@@ -444,7 +454,7 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                scene: str = typer.Option(..., help="A scene the task names, or a scene .json file"),
                robot: str = typer.Option(None, help=ROBOT_HELP),
                runs: int = typer.Option(None, help="Runs per method (default: 20; the paper's counts for wall/maze)"),
-               workers: int = typer.Option(1, help="Parallel worker processes"),
+               workers: int = typer.Option(None, help=WORKERS_HELP),
                time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 30; 200 for wall/maze)"),
                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
                methods: list[str] = typer.Option(None, "--methods", "-m", help="see `bench wall --help`"),
@@ -460,10 +470,11 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "
                                               "method's run-0 path, when solved"),
                physics: bool = typer.Option(False, help="Balance tasks: execute every solved path quasi-statically "
-                                            "in MuJoCo and record whether the robot stays upright")):
+                                            "in MuJoCo and record whether the robot stays upright"),
+               cluster: str = typer.Option(None, help=CLUSTER_HELP)):
     """Any task's scene (a task file's or a scene .json): every method on the same query and seeds."""
     _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot, settings, config, snapshots, physics)
+                    task, robot, settings, config, snapshots, physics, cluster)
 
 
 _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler optional), repeatable, e.g. "
@@ -476,7 +487,7 @@ _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler 
 @bench_app.command("wall")
 @friendly
 def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: the paper's 1000)"),
-               workers: int = typer.Option(1, help="Parallel worker processes"),
+               workers: int = typer.Option(None, help=WORKERS_HELP),
                time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 200)"),
                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
                methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
@@ -486,16 +497,17 @@ def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: th
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP)):
+               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP),
+               cluster: str = typer.Option(None, help=CLUSTER_HELP)):
     """Table II: the wall scene, every method on the same query and seeds."""
     _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot)
+                    task, robot, cluster=cluster)
 
 
 @bench_app.command("maze")
 @friendly
 def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: the paper's 100)"),
-               workers: int = typer.Option(1, help="Parallel worker processes"),
+               workers: int = typer.Option(None, help=WORKERS_HELP),
                time_limit: float = typer.Option(None, "--time", help="Seconds per run (default: the paper's 200)"),
                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
                methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
@@ -505,10 +517,41 @@ def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: th
                seed: int = typer.Option(0, help="Run r uses seed + r"),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP)):
+               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP),
+               cluster: str = typer.Option(None, help=CLUSTER_HELP)):
     """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
     _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot)
+                    task, robot, cluster=cluster)
+
+
+@app.command()
+@friendly
+def sweep(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
+          model: list[str] = typer.Option(None, "--model", help=f"Models to train (repeatable; default: "
+                                          f"{', '.join(CANDIDATES)}): {', '.join(_names('models'))}"),
+          latent: list[int] = typer.Option(None, help="Latent sizes (repeatable; default: the manifold's "
+                                           "dimension); models without a latent (cfm, flow) train once per seed"),
+          seeds: list[int] = typer.Option(None, "--seed", help="Training seeds (repeatable; default 0)"),
+          epochs: int = typer.Option(None, help="Maximum epochs (default: each model's)"),
+          cluster: str = typer.Option(None, help=CLUSTER_HELP),
+          output: Path = typer.Option(..., "-o", "--output", help="Model directory to write (the best model; "
+                                      "candidates/ and sweep.json beside it)")):
+    """Train models x latent sizes x seeds (in parallel on --cluster), rank them on held-out rows (accuracy among
+    those near the best recall) and write the best as the model directory; sweep.json holds the table. Rerunning
+    the same command resumes."""
+    from manifoldgen.cluster import parse_cluster
+    from manifoldgen.dataset import Dataset
+    from manifoldgen.model_sweep import MODEL_FILES, SWEEP_FILE, sweep as run_sweep
+    on = parse_cluster(cluster)
+    check_output_path(output, [dataset], directory=True, writes=MODEL_FILES + (SWEEP_FILE, "candidates"))
+    set_torch_threads()
+    rows = run_sweep(Dataset.load(dataset), output, models=model or list(CANDIDATES), latents=latent or [],
+                     seeds=seeds or [0], epochs=epochs, cluster=on)
+    for row in rows:
+        console.print(f"{row['rank']:>3}. {row['name']}: {row['epochs']} epochs in {row['seconds']:.0f} s; on "
+                      f"held-out rows {row['accuracy']:.1%} of raw samples within tolerance, recall "
+                      f"{row['recall']:.2f}" + (f" [{row['host']}]" if "host" in row else ""), markup=False)
+    console.print(f"best: {rows[0]['name']} -> {output} ({', '.join(MODEL_FILES)}, {SWEEP_FILE}, candidates/)")
 
 
 from manifoldgen import cli_view  # noqa: E402,F401  (registers view, trajectory)

@@ -12,16 +12,23 @@ nearest row. ``<out>.partial/meta.json`` records
 everything that defines the output (task spec with the robot's identity, condition values, rows
 per condition, seed, batch settings); a rerun that differs in any of them is refused, naming the
 difference, instead of mixing rows. A run that fails with an error removes its partial folder.
+
+With a :class:`~manifoldgen.cluster.Cluster`, every batch (the shard: one condition, one seed block) is a task on
+the cluster (:func:`draw_batch` on a worker, the task rebuilt there from its spec); the driver submits batches
+ahead of the one it needs, saves each as it arrives and takes them in order, so the file is byte for byte the
+one a local run writes, whatever the number of workers or the order they finish in.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 
+from manifoldgen.cluster import Cluster, Pool, connect
 from manifoldgen.constraints import project
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.dataset import FORMAT_VERSION, Dataset
@@ -31,7 +38,7 @@ from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import task_checker
 from manifoldgen.space import ConstrainedSpace
-from manifoldgen.tasks import Task
+from manifoldgen.tasks import Task, code_types, task_from_spec
 
 MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
 DEFAULT_ROWS = 10_000  # rows a collection makes by default, shared by its condition values ...
@@ -47,7 +54,7 @@ def default_rows(conditions: int) -> int:
 def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = None, *,
             conditions: np.ndarray | None = None, batch: int = 2048, max_batches: int = 1000,
             give_up: int = 20, progress: bool = True, near_home: float = 0.0,
-            anchors: Anchors | None = None) -> Dataset:
+            anchors: Anchors | None = None, cluster: Cluster | None = None) -> Dataset:
     """Collect ``per_condition`` valid rows at each condition value (default: the task's).
 
     The seeds projected onto the manifold are uniform in the joint limits; with ``anchors`` (see
@@ -60,7 +67,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
 
     A condition that yields no valid row in its first ``give_up`` batches is an error.
     With ``out``, batches are saved as they finish and the dataset is written atomically
-    at the end; rerunning the same command after an interruption resumes.
+    at the end; rerunning the same command after an interruption resumes. With ``cluster``, the batches are
+    drawn on it (the same file; a run on a cluster and one without resume each other).
     """
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be a positive number of rows, got {per_condition}")
@@ -77,6 +85,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     if per_condition * len(values) > MAX_ROWS:
         raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
                                f"{MAX_ROWS:,} rows; collect several smaller datasets")
+    if cluster is not None and code_types(task.spec()):
+        raise ManifoldgenError("--cluster rebuilds the task on every node, which never imports a user's module:Class "
+                               "constraint; collect this task without --cluster")
     anchors = anchors if anchors is not None and len(anchors) else None
     if near_home and anchors is not None:
         raise ManifoldgenError("--near-home and query anchors are two seedings; give one (--no-anchors with "
@@ -98,8 +109,13 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
             _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
                                        "max_batches": max_batches, "give_up": give_up})
             owned = True
-        dataset = _collect(task, values, per_condition, seed, partial, batch, max_batches, give_up, progress, meta,
-                           near_home, anchors)
+        draw = _Draw(task, seed, batch, near_home, anchors, partial)
+        if cluster is None:
+            dataset = _collect(task, values, per_condition, max_batches, give_up, progress, meta, draw)
+        else:
+            with connect(cluster) as pool:
+                dataset = _collect(task, values, per_condition, max_batches, give_up, progress, meta,
+                                   _Shards(draw, pool, values, per_condition, max_batches))
         dataset.meta["coverage"] = coverage(dataset, anchors, seed)
         if out is not None:
             dataset.save(out)
@@ -112,10 +128,112 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     return dataset
 
 
-def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, partial: Path | None, batch: int,
-             max_batches: int, give_up: int, progress: bool, meta: dict, near_home: float = 0.0,
-             anchors: Anchors | None = None) -> Dataset:
-    checker, robot = task_checker(task), task.robot
+def draw_batch(task: Task, space: ConstrainedSpace, c: int, b: int, seed: int, batch: int, near_home: float = 0.0,
+               anchors: Anchors | None = None) -> np.ndarray:
+    """The valid rows (R, n) of batch ``b`` at condition value ``c`` (``space``'s): ``batch`` seeds drawn from
+    ``default_rng([seed, c, b])``, projected, kept where valid."""
+    robot = task.robot
+    rng = np.random.default_rng([seed, c, b])
+    seeds = (np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper)
+             if near_home else robot.sample_uniform(batch, rng))
+    if anchors is not None:
+        seeds[1::2] = anchor_seeds(anchors, batch // 2, rng, robot)  # interleaved: any prefix is half
+    res = project(task.constraint, seeds, space.y)
+    return res.q[space.valid(res.q)]
+
+
+class _Draw:
+    """Batches drawn here, each saved under ``partial`` (when given) as it is drawn."""
+
+    def __init__(self, task: Task, seed: int, batch: int, near_home: float, anchors: Anchors | None,
+                 partial: Path | None):
+        self.task, self.seed, self.batch, self.near_home, self.anchors = task, seed, batch, near_home, anchors
+        self.partial = partial
+
+    def save(self, c: int, b: int, rows: np.ndarray) -> None:
+        if self.partial is not None:
+            save_npz(self.partial / f"c{c}-b{b}.npz", {}, q=rows)
+
+    def __call__(self, space: ConstrainedSpace, c: int, b: int, got: int) -> np.ndarray:
+        """Batch ``b`` of condition ``c`` (``got``: the rows its earlier batches gave)."""
+        rows = draw_batch(self.task, space, c, b, self.seed, self.batch, self.near_home, self.anchors)
+        self.save(c, b, rows)
+        return rows
+
+
+@functools.lru_cache(maxsize=4)
+def _worker_task(spec: str) -> tuple[Task, object]:
+    """The task (and its collision checker) a worker rebuilds from its spec, once per worker process."""
+    task = task_from_spec(json.loads(spec))
+    return task, task_checker(task)
+
+
+def _remote_batch(spec: str, y: np.ndarray, c: int, b: int, seed: int, batch: int, near_home: float,
+                  anchors: Anchors | None) -> np.ndarray:
+    """:func:`draw_batch` on a cluster's worker."""
+    task, checker = _worker_task(spec)
+    return draw_batch(task, ConstrainedSpace(task.constraint, y, checker), c, b, seed, batch, near_home, anchors)
+
+
+class _Shards:
+    """Batches drawn on a cluster: the one asked for, and ahead of it those that the rows seen so far say will be
+    needed (a surplus batch is drawn for nothing; the file never depends on which). Each is saved as it arrives."""
+
+    def __init__(self, draw: _Draw, pool: Pool, values: np.ndarray, per_condition: int, max_batches: int):
+        self.draw, self.pool, self.values = draw, pool, values
+        self.partial, self.batch = draw.partial, draw.batch
+        self.per_condition, self.max_batches = per_condition, max_batches
+        self.spec = pool.put(json.dumps(draw.task.spec(), sort_keys=True))
+        self.arrived: dict[tuple[int, int], np.ndarray] = {}
+        self.counts: dict[int, list[int]] = {}  # condition -> rows of each batch seen
+
+    def _rate(self, c: int) -> float:
+        """Expected rows of a batch at condition ``c`` (optimistic before any has arrived)."""
+        seen = self.counts.get(c) or [n for counts in self.counts.values() for n in counts]
+        return sum(seen) / len(seen) if seen else float(self.per_condition)
+
+    def _submit(self, c: int, b: int) -> None:
+        d = self.draw
+        self.pool.submit((c, b), _remote_batch, self.spec, self.values[c], c, b, d.seed, d.batch, d.near_home,
+                         d.anchors)
+
+    def _ahead(self, c: int, b: int, got: int) -> None:
+        """Fill the free slots with the first batches, from (c, b) on, not yet expected to complete a condition."""
+        running = set(self.pool.pending.values())
+        for cc in range(c, len(self.values)):
+            expected, rate = (got, self._rate(cc)) if cc == c else (0, self._rate(cc))
+            for bb in range(b if cc == c else 0, self.max_batches):
+                if expected >= self.per_condition or not self.pool.free():
+                    break
+                if (cc, bb) in self.arrived:
+                    expected += len(self.arrived[cc, bb])
+                    continue
+                if (cc, bb) not in running and not (self.partial is not None and
+                                                    (self.partial / f"c{cc}-b{bb}.npz").exists()):
+                    self._submit(cc, bb)
+                expected += rate
+            if not self.pool.free():
+                return
+
+    def __call__(self, space: ConstrainedSpace, c: int, b: int, got: int) -> np.ndarray:
+        """Batch ``b`` of condition ``c`` (``got``: the rows its earlier batches gave)."""
+        if (c, b) not in self.arrived and (c, b) not in self.pool.pending.values():
+            self._submit(c, b)  # first, or a saved batch that proved damaged
+        self._ahead(c, b, got)
+        while (c, b) not in self.arrived:
+            for (cc, bb), rows, _ in self.pool.wait():
+                self.draw.save(cc, bb, rows)
+                self.counts.setdefault(cc, []).append(len(rows))
+                if cc >= c:  # a surplus batch of a finished condition is dropped
+                    self.arrived[cc, bb] = rows
+            self._ahead(c, b, got)  # the freed slots, at once
+        return self.arrived.pop((c, b))
+
+
+def _collect(task: Task, values: np.ndarray, per_condition: int, max_batches: int, give_up: int, progress: bool,
+             meta: dict, draw) -> Dataset:
+    """Take batches in order (saved ones first, the others from ``draw``) until every condition has its rows."""
+    checker = task_checker(task)
     qs, ys = [], []
     with progress_bar("collecting", total=per_condition * len(values), enabled=progress) as bar:
         for c, y in enumerate(values):
@@ -124,19 +242,11 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
             for b in range(max_batches):
                 if sum(len(g) for g in got) >= per_condition:
                     break
-                rows = _load_batch(partial, c, b, task.robot.n)
+                rows = _load_batch(draw.partial, c, b, task.robot.n)
                 if rows is not None and not space.valid(rows).all():
                     rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
-                    rng = np.random.default_rng([seed, c, b])
-                    seeds = (np.clip(task.home + rng.normal(0.0, near_home, (batch, robot.n)), robot.lower, robot.upper)
-                             if near_home else robot.sample_uniform(batch, rng))
-                    if anchors is not None:
-                        seeds[1::2] = anchor_seeds(anchors, batch // 2, rng, robot)  # interleaved: any prefix is half
-                    res = project(task.constraint, seeds, y)
-                    rows = res.q[space.valid(res.q)]
-                    if partial is not None:
-                        save_npz(partial / f"c{c}-b{b}.npz", {}, q=rows)
+                    rows = draw(space, c, b, sum(len(g) for g in got))
                 got.append(rows)
                 if b + 1 >= give_up and not sum(len(g) for g in got):
                     break
@@ -144,7 +254,7 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, seed: int, part
             q = np.concatenate(got)[:per_condition]
             if len(q) < per_condition:
                 raise ManifoldgenError(f"only {len(q)} valid rows at condition {y.tolist()} after "
-                                       f"{len(got)} batches of {batch}; the condition is probably unreachable: "
+                                       f"{len(got)} batches of {draw.batch}; the condition is probably unreachable: "
                                        f"choose values inside {task.condition.describe()}")
             qs.append(q)
             ys.append(np.broadcast_to(y, (per_condition, len(y))))

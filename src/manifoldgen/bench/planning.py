@@ -28,6 +28,10 @@ Every solved path is re-validated here, independently of the planner, by the spa
 (``ValidationSettings.resolution``); a run counts as solved only when that check passes and the
 planner answered within the time limit. ``results.md`` and box plots summarise the records
 (:mod:`manifoldgen.bench.report`).
+
+With a :class:`~manifoldgen.cluster.Cluster`, every run is a task on the cluster instead: its CPU time is
+measured on the worker, and its record adds the ``host`` and Ray ``node`` it ran on; the driver appends the
+records as they arrive. Inputs (models, datasets, scene and task files) must be at the same path on every node.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.bench.report import MethodSummary, write_report
+from manifoldgen.cluster import Cluster, connect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_name, locks_output
 from manifoldgen.progress import progress_bar
@@ -423,11 +428,52 @@ def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
                                    "resume with the same scene, time limit and seed, or choose another folder")
 
 
+def _run_local(experiment: Experiment, todo: list[tuple[Method, int]], workers: int, runs_path: Path, done: int):
+    """Records of the ``todo`` runs from ``workers`` processes here, in the order they finish."""
+    with worker_pool(workers) as pool:
+        pending = {pool.submit(run_once, experiment, m, r) for m, r in todo}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    yield future.result()
+                    done += 1
+        except BaseException as exc:  # an interrupt or a crashed run: finished runs are already on disk
+            for future in pending:
+                future.cancel()
+            if isinstance(exc, BrokenProcessPool):
+                raise ManifoldgenError(f"a benchmark worker process died (killed, or out of memory); the "
+                                       f"{done} finished runs are in {runs_path}: rerun with --resume "
+                                       "(fewer --workers if memory ran out)") from None
+            raise
+
+
+def _inputs(experiment: Experiment, methods: list[Method]) -> list[str]:
+    """The files every node must read: the scene and task files, and the methods' models and datasets."""
+    from manifoldgen.specs import parse_spec
+
+    named = [experiment.scene, experiment.task] + [parse_spec(m.sampler)[1] for m in methods
+                                                   if m.sampler not in (None, BLIND, FEET_ONLY)]
+    return [p for p in named if p and Path(p).exists()]
+
+
+def _run_on_cluster(experiment: Experiment, methods: list[Method], todo: list[tuple[Method, int]],
+                    cluster: Cluster):
+    """Records of the ``todo`` runs, each a task on ``cluster``, with the ``host`` and ``node`` it ran on."""
+    with connect(cluster) as pool:
+        shared = pool.put(experiment)
+        for _, record, node in pool.map_unordered(run_once, [(shared, m, r) for m, r in todo],
+                                                  inputs=_inputs(experiment, methods)):
+            yield {**record, **node}
+
+
 @locks_output("out_dir")  # one benchmark per output folder
 def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *, runs: int, workers: int = 1,
               resume: bool = False, pg_rows: int = 10_000, baseline: str | None = None,
-              progress: bool = True, snapshots: bool = False) -> tuple[str, list[MethodSummary]]:
-    """Run ``runs`` runs of every method (skipping finished ones with ``resume``); write
+              progress: bool = True, snapshots: bool = False, cluster: Cluster | None = None
+              ) -> tuple[str, list[MethodSummary]]:
+    """Run ``runs`` runs of every method (skipping finished ones with ``resume``; in ``workers`` processes here,
+    or as tasks on ``cluster``); write
     ``runs.jsonl`` (every run's record with its path), ``config.json``, ``problem.json`` (:func:`problem_meta`),
     ``results.md``, ``time.png``, ``length.png`` in ``out_dir``;
     return the Markdown table and the summaries."""
@@ -466,30 +512,18 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
         build(experiment, method, experiment.seed)
     done = {(r["method"], r["run"]) for r in records}
     todo = [(m, r) for r in range(runs) for m in parsed if (m.label, r) not in done]
-    with progress_bar(f"{experiment.scene}: runs", total=len(todo), enabled=progress) as bar, \
-            worker_pool(workers) as pool:
-        pending = {pool.submit(run_once, experiment, m, r) for m, r in todo}
-        try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    record = future.result()
-                    _append(runs_path, record)
-                    records.append(record)
-                    bar.advance(1)
-        except BaseException as exc:  # an interrupt or a crashed run: finished runs are already on disk
-            for future in pending:
-                future.cancel()
-            if isinstance(exc, BrokenProcessPool):
-                raise ManifoldgenError(f"a benchmark worker process died (killed, or out of memory); the "
-                                       f"{len(records)} finished runs are in {runs_path}: rerun with --resume "
-                                       "(fewer --workers if memory ran out)") from None
-            raise
+    with progress_bar(f"{experiment.scene}: runs", total=len(todo), enabled=progress) as bar:
+        for record in (_run_local(experiment, todo, workers, runs_path, len(records)) if cluster is None else
+                       _run_on_cluster(experiment, parsed, todo, cluster)):
+            _append(runs_path, record)
+            records.append(record)
+            bar.advance(1)
     kept = [r for r in records if r["method"] in labels and r["run"] < runs]
     if snapshots:
         _draw_snapshots(experiment, [r for r in kept if r["run"] == 0 and "path" in r], out_dir)
+    where = f"{workers} worker process(es)" if cluster is None else f"on {cluster.describe()}"
     notes = (f"Scene `{experiment.scene}` ({experiment.task} task, {experiment.robot}), {runs} runs per method "
-             f"(seeds {experiment.seed}..{experiment.seed + runs - 1}), {workers} worker process(es). Methods:\n\n"
+             f"(seeds {experiment.seed}..{experiment.seed + runs - 1}), {where}. Methods:\n\n"
              + "\n".join(f"- `{m.label}`: `{m.spec}`" for m in parsed))
     return write_report(kept, out_dir, f"{experiment.scene} benchmark", methods=labels, baseline=baseline,
                         notes=notes)
