@@ -2,7 +2,7 @@
 
 Objects ``attached`` to a robot joint (a held tool) are checked against the obstacles and
 the robot links that are not adjacent to their joint. Configurations run through a coal
-broad phase (dynamic AABB tree), 3-5x faster than checking pair by pair.
+broad phase (dynamic AABB tree) rather than pair by pair.
 Pairs are pruned as MoveIt's setup assistant does: pairs the SRDF disables, pairs whose
 relative pose the planning group cannot change, and, when the SRDF disables fewer than
 ``MIN_SRDF_PAIRS`` (centauro's disables none), pairs found never or always colliding

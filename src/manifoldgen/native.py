@@ -238,12 +238,11 @@ def _layout(space: ConstrainedSpace, compile: bool = True, refused: dict | None 
     return out
 
 
-# The Jacobian of a Python part without an analytic one (measured on the xarm7 user task, 2 cores, CPU per call:
-# benchmarks/bench_user_constraint.py --jacobians): torch autograd costs ~3 ms at any batch up to ~128 rows (its
-# per-operation overhead), central differences of the numpy residual 0.20 ms at 1 row, 0.69 ms at 32, 3.5 ms at
-# 128 (autograd 3.7); the core's sequential searches (a projected walk's steps, a lazily refined sample) ask for
-# single rows.
-FD_STEP = 3e-6  # central-difference step, times max(1, |q_j|): near eps^(1/3); user task: |J - autograd's| <= 1e-10
+# The Jacobian of a Python part without an analytic one: central differences of its numpy residual for small
+# batches, where torch autograd's per-operation overhead dominates, autograd for large ones (the core's sequential
+# searches, a projected walk's steps or a lazily refined sample, ask for single rows); the costs are measured in
+# docs/benchmarks.md, "Python constraints in the core" (benchmarks/bench_user_constraint.py --jacobians).
+FD_STEP = 3e-6  # central-difference step, times max(1, |q_j|): near eps^(1/3), where truncation and rounding meet
 FD_ROWS = 2048  # above (2n + 1) x B residual rows a call, autograd is cheaper (n = 7: B > 136)
 FD_AGREE = 1e-6  # first use: central differences must match autograd within this x max(1, max |J|)
 

@@ -34,9 +34,8 @@ class RRTConnectSettings(PlannerSettings):
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
     says which and why), the final dense check of a path stays exact; ``reach``: a pooled sample is a
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
-    straight motions to stones: in the maze fewer of them collide; shipped CVAE, sphere checks, held-out
-    seeds 90-189, median CPU wall / maze: 11.3 / 80.8 ms at 0.6 (= range), 12.5 / 53.1 ms at 0.5, 13.4 /
-    43.4 ms at 0.4; docs/benchmarks.md "Compiled core"); ``edges``: how the core's search checks a motion for
+    straight motions to stones: in the maze fewer of them collide; measured in docs/benchmarks.md, "Fairness");
+    ``edges``: how the core's search checks a motion for
     collision: ``coarse:K`` checks its planning-resolution states every K-th (and at the node it ends at) while
     the trees grow, the others only when the edge lies on a candidate path (a colliding one is cut from its tree),
     so every returned path is still checked at every planning-resolution state and then densely (``coarse:1``:
