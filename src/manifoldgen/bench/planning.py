@@ -80,8 +80,12 @@ class Method:
     def parse(cls, text: str) -> Method:
         text = text.strip()
         label, _, body = text.partition("=") if "=" in text.split("@")[0] else ("", "", text)
-        head, _, sampler = body.partition("@")
-        planner, _, local = head.partition(":")
+        head, at, sampler = body.partition("@")
+        planner, colon, local = head.partition(":")
+        if (at and not sampler) or (colon and not local):
+            missing = "sampler after @" if at and not sampler else "local planner after :"
+            raise ManifoldgenError(f"method '{text}' names no {missing}; write [LABEL=]PLANNER[:LOCAL][@SAMPLER] or "
+                                   "leave out the mark")
         if not planner:
             raise ManifoldgenError(f"method '{text}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
                                    "e.g. rrtconnect:interpolate@cvae:models/cvae or ompl-projected-rrtconnect")
@@ -433,6 +437,10 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     return the Markdown table and the summaries."""
     if runs <= 0 or workers <= 0:
         raise ManifoldgenError(f"--runs and --workers must be positive, got {runs} and {workers}")
+    check_seed(experiment.seed + runs - 1, "--seed (+ --runs - 1: run r uses seed + r)")
+    if workers > 2 * (os.cpu_count() or 1):  # each worker is a Python process with torch: more only fill memory
+        raise ManifoldgenError(f"--workers must be from 1 to {2 * (os.cpu_count() or 1)} (twice this machine's CPU "
+                               f"count), got {workers}")
     if pg_rows <= 0:
         raise ManifoldgenError(f"--pg-rows must be a positive number of dataset rows, got {pg_rows}")
     check_seed(experiment.seed)
