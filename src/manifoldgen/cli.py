@@ -17,7 +17,8 @@ app.add_typer(bench_app, name="bench")
 
 
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
-          "--epochs": (1, 100_000), "--settle": (0.0, 600.0), "--friction": (0.01, 10.0), "--tilt": (0.1, 45.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive
+          "--epochs": (1, 100_000), "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0),
+          "--friction": (0.01, 10.0), "--tilt": (0.1, 45.0)}  # inclusive
 
 
 DEMO_FILES = ("pose.npz", "dualarm.npz", "balance.npz", "model", "cvae", "wall-", "reach-", "tray-over")  # and

@@ -121,6 +121,9 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     if path.shape[1] != task.robot.n:
         raise ManifoldgenError(f"{path_file}: its states have {path.shape[1]} coordinates, {task.robot.name}'s "
                                f"{task.name} task has {task.robot.n} joints")
+    if meta.get("tolerance") != task.constraint.tolerance.tolist():  # what an outside checker checks against
+        raise ManifoldgenError(f"{path_file}: meta 'tolerance' {meta.get('tolerance')!r} is not its task's "
+                               f"{task.constraint.tolerance.tolist()}; the file was edited: plan the query again")
     if meta.get("robot") != task.robot.name:  # an outside checker reads this name: it must be the task's robot
         raise ManifoldgenError(f"{path_file}: meta 'robot' {meta.get('robot')!r} is not its task's robot "
                                f"{task.robot.name!r}; the file was edited: plan the query again")

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.bench.report import MethodSummary, write_report
+from manifoldgen.data import MAX_ROWS
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_name, locks_output
 from manifoldgen.progress import progress_bar
@@ -441,8 +442,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     if workers > 2 * (os.cpu_count() or 1):  # each worker is a Python process with torch: more only fill memory
         raise ManifoldgenError(f"--workers must be from 1 to {2 * (os.cpu_count() or 1)} (twice this machine's CPU "
                                f"count), got {workers}")
-    if pg_rows <= 0:
-        raise ManifoldgenError(f"--pg-rows must be a positive number of dataset rows, got {pg_rows}")
+    if not 0 < pg_rows <= MAX_ROWS:
+        raise ManifoldgenError(f"--pg-rows must be from 1 to {MAX_ROWS:,} dataset rows, got {pg_rows}")
     check_seed(experiment.seed)
     if not np.isfinite(experiment.time_limit) or experiment.time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {experiment.time_limit}")

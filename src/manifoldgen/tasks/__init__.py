@@ -351,6 +351,9 @@ def is_task_file(task: str) -> bool:
 @lru_cache(maxsize=None)
 def get_task(task: str, robot: str | None = None) -> Task:
     """A built-in task by name (for ``robot``, default: the task's default robot) or a task file."""
+    if not isinstance(task, str) or not isinstance(robot, (str, type(None))):
+        raise ManifoldgenError(f"a task is named by a string (and its robot by a string or None), got {task!r}, "
+                               f"{robot!r}")
     if is_task_file(task):
         loaded = load_task_file(task)
         if robot is not None and robot not in (loaded.robot.name, loaded.robot.source):
