@@ -76,7 +76,7 @@ def test_trajectory_bad_inputs_get_one_line(wall, tmp_path):
     save_npz(rows, {"robot": "panda"}, q=np.zeros((2, 7)), y=np.zeros((2, 1)))
     for args, expected in ((["--vel-scale", "0"], "--vel-scale must be in (0, 1]"),
                            (["--acc-scale", "1.5"], "--acc-scale must be in (0, 1]"),
-                           (["--dt", "-1"], "--dt must be a positive number"),
+                           (["--dt", "-1"], "--dt must be from 0.0001 to 10 seconds"),
                            (["-o", str(tmp_path / "t.txt")], "-o must end in .json or .csv")):
         command = ["trajectory", str(wall), *args] + ([] if "-o" in args else ["-o", str(tmp_path / "t.json")])
         result = runner.invoke(app, command)

@@ -21,7 +21,12 @@ CLUSTER_HELP = ("Run on a Ray cluster: ray (the Ray running on this machine, els
                 "docs/cluster.md")
 WORKERS_HELP = "Parallel worker processes (default 1); with --cluster: runs at once (default: one per cluster CPU)"
 RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
-          "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0)}  # inclusive
+          "--epochs": (1, 100_000), "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0),
+          "--friction": (0.01, 10.0), "--tilt": (0.1, 45.0)}  # inclusive
+
+
+DEMO_FILES = ("pose.npz", "dualarm.npz", "balance.npz", "model", "cvae", "wall-", "reach-", "tray-over")  # and
+# what collect and train keep beside them (.partial, .lock)
 
 
 def _bounded(option: str, value):
@@ -172,6 +177,11 @@ def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda,
     """The whole pipeline for one experiment on its embedded default (default: the panda pose task)."""
     from manifoldgen.demos import run
     check_output_path(output, directory=True)
+    foreign = sorted(p.name for p in output.iterdir() if not p.name.startswith(DEMO_FILES)) if output.is_dir() else []
+    if foreign:
+        raise ManifoldgenError(f"-o {output} holds files no demo wrote ({', '.join(foreign[:3])}"
+                               f"{', ...' if len(foreign) > 3 else ''}); a demo writes its dataset and model among "
+                               "them: give a new or empty folder (or a demo's own, to resume it)")
     run(name, output, seed, console)
 
 
@@ -262,7 +272,8 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
     """Execute the path quasi-statically in MuJoCo (feet on the ground, base free, joints servoed): upright?"""
     from manifoldgen.io import atomic_write_text, check_output_path
     from manifoldgen.physics import PhysicsSettings, check_path_file, summary, to_json
-    for option, value in (("--settle", settle), ("--hold", hold), ("--duration-scale", duration_scale)):
+    for option, value in (("--settle", settle), ("--hold", hold), ("--duration-scale", duration_scale),
+                          ("--friction", friction), ("--tilt", tilt)):
         _bounded(option, value)
     pace = PhysicsSettings()
     settings = PhysicsSettings(seconds_per_rad=pace.seconds_per_rad * duration_scale,
@@ -306,6 +317,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
         raise ManifoldgenError("--set and --config set one model's hyper-parameters; name it with --model (e.g. "
                                "--model cvae)")
     set_torch_threads(_bounded("--threads", threads))
+    _bounded("--epochs", epochs)
     data = Dataset.load(dataset)
     task_obj = task_from_meta(data.meta, task=made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
     if model == "auto":
@@ -398,9 +410,9 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
     from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
     check_output_path(output, [*model_dirs, _file(task)], directory=True, writes=OUTPUT_FILES)
-    set_torch_threads(threads)
+    set_torch_threads(_bounded("--threads", threads))
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
-                       repeats=repeats, seed=seed, threads=max(1, threads), seen=_condition_rows(seen),
+                       repeats=repeats, seed=seed, threads=threads, seen=_condition_rows(seen),
                        unseen=_condition_rows(unseen), task=made_for(task), trust_code=trust_code)
     console.print((output / "table.md").read_text())
     console.print(f"wrote {output}/results.json, table.md, fig2_samples.png, residuals.png, coverage.png")

@@ -42,7 +42,35 @@ def friendly(command):
             console.print(Text.assemble(("error: ", "red"), f"{where}{exc.strerror or exc}; check the path and its "
                                         "permissions"))
             raise typer.Exit(2) from None
+        except (Exception, SystemExit) as exc:
+            blamed = user_code(exc)
+            if blamed is None or isinstance(exc, (typer.Exit, typer.Abort)):
+                raise
+            why = str(exc).strip().splitlines()[0][:200] if str(exc).strip() else ""
+            console.print(Text.assemble(("error: ", "red"), f"user code {blamed} raised {type(exc).__name__}"
+                                        f"{': ' + why if why else ''}; fix that module (see docs/tasks.md)"))
+            raise typer.Exit(2) from None
     return wrapper
+
+
+def user_code(exc: BaseException) -> str | None:
+    """``FILE, line N`` of the innermost frame of ``exc`` in a user's module (not this package, not an installed
+    package nor the standard library; a syntax error's own file and line), or None."""
+    import os
+    import sys
+    import sysconfig
+    import traceback
+    from pathlib import Path
+
+    ours = [str(Path(__file__).resolve().parent), *{sysconfig.get_paths()[k] for k in ("stdlib", "purelib",
+                                                                                        "platlib")}, sys.prefix]
+    frames = [(f.filename, f.lineno) for f in traceback.extract_tb(exc.__traceback__)]
+    if isinstance(exc, SyntaxError) and exc.filename:
+        frames.append((exc.filename, exc.lineno))
+    for filename, line in reversed(frames):
+        if not filename.startswith("<") and not any(os.path.realpath(filename).startswith(o) for o in ours):
+            return f"{filename}, line {line}"
+    return None
 
 
 TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"

@@ -29,6 +29,9 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
     """Show a file in the browser (viser): a path animated, a dataset's rows, a scene's start and goal."""
     from manifoldgen.io import check_output_path
     start = time.perf_counter()
+    if export is not None and snapshots is not None:
+        raise ManifoldgenError("--export and --snapshots each write one file instead of serving; give one of them "
+                               "per run")
     for out, option in ((export, "--export"), (snapshots, "--snapshots")):
         if out is not None:
             check_output_path(out, [file], what=option)

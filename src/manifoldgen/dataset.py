@@ -28,6 +28,9 @@ class Dataset:
         return len(self.q)
 
     def save(self, path: str | Path) -> None:
+        """Write the file (atomic); rows with NaN or infinite values are refused (no reader would take them)."""
+        if not (np.isfinite(self.q).all() and np.isfinite(self.y).all()):
+            raise ManifoldgenError(f"dataset rows hold NaN or infinite values; {path} not written")
         save_npz(path, self.meta, q=self.q, y=self.y)
 
     @classmethod

@@ -215,6 +215,20 @@ def locks_output(parameter: str):
     return wrap
 
 
+def _unique_keys(pairs: list) -> dict:
+    keys = [k for k, _ in pairs]
+    twice = next((k for k in keys if keys.count(k) > 1), None)
+    if twice is not None:
+        raise ValueError(f"key '{twice}' appears twice in one object (which one counts is ambiguous)")
+    return dict(pairs)
+
+
+def read_json(text: str):
+    """``text`` parsed as JSON, refusing a key given twice in one object (ValueError, as for bad syntax; too
+    deep a nesting: RecursionError)."""
+    return json.loads(text, object_pairs_hook=_unique_keys)
+
+
 def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:
     """Atomically write ``arrays`` (any names, ``path`` included) and ``meta`` (a JSON string) to an .npz."""
     import numpy as np
@@ -244,8 +258,8 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
     if missing:
         raise ManifoldgenError(f"{path} is not a manifoldgen file: missing {', '.join(missing)}")
     try:
-        meta = json.loads(str(arrays.pop("meta")))
-    except ValueError as exc:
+        meta = read_json(str(arrays.pop("meta")))
+    except (ValueError, RecursionError) as exc:
         raise ManifoldgenError(f"{path} has a corrupted meta field: {exc}") from None
     if not isinstance(meta, dict):
         raise ManifoldgenError(f"{path} has a corrupted meta field (not a JSON object); regenerate it")

@@ -121,11 +121,17 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     if path.shape[1] != task.robot.n:
         raise ManifoldgenError(f"{path_file}: its states have {path.shape[1]} coordinates, {task.robot.name}'s "
                                f"{task.name} task has {task.robot.n} joints")
+    if meta.get("tolerance") != task.constraint.tolerance.tolist():  # what an outside checker checks against
+        raise ManifoldgenError(f"{path_file}: meta 'tolerance' {meta.get('tolerance')!r} is not its task's "
+                               f"{task.constraint.tolerance.tolist()}; the file was edited: plan the query again")
+    if meta.get("robot") != task.robot.name:  # an outside checker reads this name: it must be the task's robot
+        raise ManifoldgenError(f"{path_file}: meta 'robot' {meta.get('robot')!r} is not its task's robot "
+                               f"{task.robot.name!r}; the file was edited: plan the query again")
     try:
         y = np.asarray(meta.get("condition", []), dtype=float).reshape(-1)
     except (TypeError, ValueError):
         y = np.array([np.nan])
-    if len(y) != task.condition.k or not np.isfinite(y).all():
+    if not isinstance(meta.get("condition"), list) or len(y) != task.condition.k or not np.isfinite(y).all():
         raise ManifoldgenError(f"{path_file}: meta 'condition' must be {task.condition.k} finite numbers, got "
                                f"{meta.get('condition')!r}")
     return meta, path, task

@@ -294,6 +294,11 @@ class Robot:
         for joint, value in (reference or {}).items():
             if not model.existJointName(joint):
                 raise ManifoldgenError(f"unknown joint '{joint}' in reference for robot {name}")
+            jm = model.joints[model.getJointId(joint)]
+            low, high = model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q]
+            if jm.nq == 1 and not low - 1e-9 <= value <= high + 1e-9:
+                raise ManifoldgenError(f"locked joint '{joint}' = {value:g} is outside its limits [{low:g}, {high:g}] "
+                                       f"on robot {name}")
             _set_joint(model, q_ref, joint, value)
         return cls(name, model, collision, srdf, joints, q_ref, floating_base,
                    np.asarray(base_bounds, dtype=float), source=source, urdf_path=urdf)

@@ -19,7 +19,7 @@ import numpy as np
 from manifoldgen.collision import CollisionChecker
 from manifoldgen.coverage import Anchors
 from manifoldgen.errors import ManifoldgenError, check_keys, file_reader, not_a_file
-from manifoldgen.io import atomic_write_text
+from manifoldgen.io import atomic_write_text, read_json
 from manifoldgen.robot import Robot
 from manifoldgen.shapes import Attached, Obstacle, float_list, held_checker
 from manifoldgen.targets import parse_target, resolve_query
@@ -93,8 +93,8 @@ class Scene:
     @classmethod
     def from_json(cls, text: str, source: str = "scene") -> Scene:
         try:
-            data = json.loads(text)
-        except ValueError as exc:
+            data = read_json(text)
+        except (ValueError, RecursionError) as exc:
             raise ManifoldgenError(f"{source} is not valid JSON ({exc}); fix the file") from exc
         if not isinstance(data, dict):
             raise ManifoldgenError(f"{source} must be a JSON object with 'obstacles', 'start', 'goal', 'condition'")
@@ -113,6 +113,9 @@ class Scene:
         start, goal = (parse_target(data[k], f"{source} {k}") if isinstance(data[k], dict)
                        else float_list(data[k], f"{source} {k}") for k in ("start", "goal"))
         condition = float_list(data["condition"], f"{source} condition")
+        for key in ("name", "robot"):
+            if not isinstance(data.get(key, ""), str):
+                raise ManifoldgenError(f"{source}: '{key}' must be a string, got {data[key]!r}")
         return cls(str(data.get("name", Path(source).stem)), obstacles, attached, start, goal, condition,
                    str(data.get("robot", "")))
 

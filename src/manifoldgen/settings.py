@@ -8,6 +8,7 @@ file is a TOML table of the same keys; ``--set`` wins over the file.
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
 
@@ -22,8 +23,8 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
             raise ManifoldgenError(f"{not_a_file(config, 'config file')}; give a TOML file of KEY = VALUE lines")
         try:
             values.update(tomllib.loads(Path(config).read_text()))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ManifoldgenError(f"{config}: not valid TOML ({exc}); fix the file") from exc
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
+            raise ManifoldgenError(f"{config}: not valid TOML ({type(exc).__name__}: {exc}); fix the file") from None
     for pair in pairs or []:
         key, eq, text = pair.partition("=")
         if not eq or not key.strip():
@@ -32,6 +33,8 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
             values[key.strip()] = json.loads(text)
         except ValueError:
             values[key.strip()] = text
+        except RecursionError:
+            raise ManifoldgenError(f"--set '{key.strip()}' is nested too deeply; give a plain value") from None
     return check_settings(values, known, what)
 
 
@@ -53,6 +56,8 @@ def _fit(key: str, value, default, what: str):
         if isinstance(value, bool) and isinstance(default, bool):
             return value
     elif isinstance(default, float) and isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise ManifoldgenError(f"{what} setting {key} must be a finite number, got {value!r}")
         return float(value)
     elif isinstance(value, type(default)):
         return value

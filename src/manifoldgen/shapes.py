@@ -33,6 +33,8 @@ def _bounded(values: np.ndarray, what: str) -> np.ndarray:
 
 
 def _vector(value, size: int, what: str) -> np.ndarray:
+    if any(isinstance(v, bool) for v in np.ravel(np.asarray(value, dtype=object))):
+        raise ManifoldgenError(f"{what} must be {size} numbers, not true/false, got {value!r}")
     try:
         out = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError) as exc:
@@ -223,6 +225,8 @@ class Attached:
 
     @classmethod
     def from_dict(cls, data) -> Attached:
+        if isinstance(data, dict):
+            check_keys(data, OBSTACLE_KEYS + HELD_KEYS, "attached")
         if not isinstance(data, dict) or "attached_to" not in data:
             raise ManifoldgenError("the attached tool needs 'attached_to' (a robot frame), 'type' and 'pose' "
                                    "(its placement in that frame)")

@@ -178,11 +178,15 @@ def manifold_dimension(task: TaskLike, q: np.ndarray, y: np.ndarray) -> int:
 
 def _check_size(model: Trainable, width: int) -> None:
     """Refuse, before anything is allocated, hidden layers whose weights, gradients and optimiser state would take
-    more than :data:`MAX_MODEL_BYTES` (float32; ``width``: joints + condition values, about a layer's in or out)."""
+    more than :data:`MAX_MODEL_BYTES` (float32; ``width``: joints + condition values (+ the latent size), about a
+    layer's in or out)."""
     layers = [v for k, v in model.config.items() if k.endswith("hidden") and isinstance(v, list)]
+    width += model.config.get("latent", 0) if isinstance(model.config.get("latent"), int) else 0
     parameters = sum(sum(a * b for a, b in zip([width, *widths], [*widths, width])) for widths in layers)
     if 4 * 4 * parameters > MAX_MODEL_BYTES:
-        raise ManifoldgenError(f"hidden layers {layers} make about {parameters:,} parameters, {16 * parameters / 2**30:.1f} "
+        latent = f" and latent {model.config['latent']}" if "latent" in model.config else ""
+        raise ManifoldgenError(f"hidden layers {layers}{latent} make about {parameters:,} parameters, "
+                               f"{16 * parameters / 2**30:.1f} "
                                f"GiB to train (weights, gradients, optimiser state); keep it under "
                                f"{MAX_MODEL_BYTES / 2**30:.0f} GiB (e.g. --set 'hidden=[256,256]')")
 

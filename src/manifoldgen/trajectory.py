@@ -38,6 +38,8 @@ ACC_PER_VELOCITY = 2.0  # reference acceleration limit per unit of velocity limi
 BASE_VELOCITY = 0.5  # m/s or rad/s for floating-base coordinates (no URDF joint)
 GRID_PER_STATE = 2  # TOPP-RA grid points per densified state
 STRETCH_STEPS = 20
+DT_RANGE = (1e-4, 10.0)  # seconds between trajectory samples (inclusive)
+MAX_STATES = 10_000_000  # trajectory samples one file may hold (refused before they are allocated)
 
 
 @dataclass
@@ -122,6 +124,9 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
     stretch = 1.0
     for _ in range(STRETCH_STEPS):
         duration = timed.duration * stretch
+        if duration / dt >= MAX_STATES:
+            raise ManifoldgenError(f"the trajectory lasts {duration:.3g} s: {duration / dt:.3g} states at --dt {dt:g} "
+                                   f"exceed {MAX_STATES:,}; raise --dt, --vel-scale or --acc-scale")
         t = np.linspace(0.0, duration, int(np.ceil(duration / dt)) + 1)
         qd, qdd = timed(t / stretch, 1) / stretch, timed(t / stretch, 2) / stretch ** 2
         ratio = max(np.abs(qd / velocity).max(), np.sqrt(np.abs(qdd / acceleration).max()))
@@ -140,8 +145,8 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
     from manifoldgen.scene import Scene
 
     vel_scale, acc_scale = check_scale(vel_scale, "--vel-scale"), check_scale(acc_scale, "--acc-scale")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ManifoldgenError(f"--dt must be a positive number of seconds, got {dt}")
+    if not (np.isfinite(dt) and DT_RANGE[0] <= dt <= DT_RANGE[1]):
+        raise ManifoldgenError(f"--dt must be from {DT_RANGE[0]:g} to {DT_RANGE[1]:g} seconds, got {dt}")
     meta, path, task = read_path_file(path_file, task, trust_code=trust_code)
     robot = task.robot
     urdf_velocity = velocity_limits(robot)

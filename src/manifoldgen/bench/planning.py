@@ -50,6 +50,7 @@ import numpy as np
 
 from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.cluster import Cluster, connect
+from manifoldgen.data import MAX_ROWS
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_name, locks_output
 from manifoldgen.progress import progress_bar
@@ -85,8 +86,12 @@ class Method:
     def parse(cls, text: str) -> Method:
         text = text.strip()
         label, _, body = text.partition("=") if "=" in text.split("@")[0] else ("", "", text)
-        head, _, sampler = body.partition("@")
-        planner, _, local = head.partition(":")
+        head, at, sampler = body.partition("@")
+        planner, colon, local = head.partition(":")
+        if (at and not sampler) or (colon and not local):
+            missing = "sampler after @" if at and not sampler else "local planner after :"
+            raise ManifoldgenError(f"method '{text}' names no {missing}; write [LABEL=]PLANNER[:LOCAL][@SAMPLER] or "
+                                   "leave out the mark")
         if not planner:
             raise ManifoldgenError(f"method '{text}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
                                    "e.g. rrtconnect:interpolate@cvae:models/cvae or ompl-projected-rrtconnect")
@@ -479,8 +484,12 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     return the Markdown table and the summaries."""
     if runs <= 0 or workers <= 0:
         raise ManifoldgenError(f"--runs and --workers must be positive, got {runs} and {workers}")
-    if pg_rows <= 0:
-        raise ManifoldgenError(f"--pg-rows must be a positive number of dataset rows, got {pg_rows}")
+    check_seed(experiment.seed + runs - 1, "--seed (+ --runs - 1: run r uses seed + r)")
+    if cluster is None and workers > 2 * (os.cpu_count() or 1):  # each a local process with torch: more fill memory
+        raise ManifoldgenError(f"--workers must be from 1 to {2 * (os.cpu_count() or 1)} (twice this machine's CPU "
+                               f"count), got {workers}")
+    if not 0 < pg_rows <= MAX_ROWS:
+        raise ManifoldgenError(f"--pg-rows must be from 1 to {MAX_ROWS:,} dataset rows, got {pg_rows}")
     check_seed(experiment.seed)
     if not np.isfinite(experiment.time_limit) or experiment.time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {experiment.time_limit}")

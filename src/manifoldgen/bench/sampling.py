@@ -87,6 +87,8 @@ def _rows(values, k: int) -> list[tuple]:
         if len(row) != k:
             raise ManifoldgenError(f"condition {list(row)} has {len(row)} value(s); the task has {k}: give "
                                    f"{k} comma-separated values")
+        if not np.isfinite(row).all():
+            raise ManifoldgenError(f"condition {list(row)} must be finite numbers; give values inside the task's range")
         out.append(row)
     return out
 
@@ -111,7 +113,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     if not model_dirs:
         raise ManifoldgenError("give at least one model directory to benchmark")
     limits = {"--samples": (samples, MIN_ROWS, 10**6), "--reference": (reference_rows, MIN_ROWS, 10**6),
-              "--repeats": (repeats, 1, 1000), "--refine": (refine, 0, 1000), "--threads": (threads, 1, 1024)}
+              "--repeats": (repeats, 1, 1000), "--refine": (refine, 0, 1000), "--threads": (threads, 1, 256)}
     for option, (value, low, high) in limits.items():
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise ManifoldgenError(f"{option} must be an integer from {low} to {high:,}, got {value!r}")

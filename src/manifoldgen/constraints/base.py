@@ -43,6 +43,18 @@ class Condition:
     units: tuple[str, ...]
     values: np.ndarray = field(repr=False)
 
+    def __post_init__(self):
+        try:
+            grid = self.grid
+        except (TypeError, ValueError):
+            raise ManifoldgenError(f"condition values must be numbers, got {self.values!r}") from None
+        if not np.isfinite(grid).all():
+            raise ManifoldgenError(f"condition values must be finite numbers, got {grid.tolist()}")
+        rows = [tuple(row) for row in grid.tolist()]
+        twice = next((row for row in rows if rows.count(row) > 1), None)
+        if self.k and twice is not None:
+            raise ManifoldgenError(f"condition value {list(twice)} is given twice in values; give each once")
+
     @property
     def k(self) -> int:
         return len(self.names)
@@ -229,6 +241,8 @@ def check_arguments(cls: type, arguments: dict, name: str) -> None:
             number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
             if key.endswith("tolerance"):
                 ok, need = number and value > 0, "a positive number"
+                if ok and value > 1:
+                    ok, need = False, "at most 1 (m or rad: a wider one accepts almost any configuration)"
             elif key == "margin":
                 ok, need = number and value >= 0, "a number >= 0"
             else:

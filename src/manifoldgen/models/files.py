@@ -19,6 +19,7 @@ import safetensors.numpy
 
 from manifoldgen.constraints import Condition
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import read_json
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
@@ -43,7 +44,7 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
             raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "
                                    "(retrain, or copy both model.json and model.safetensors)")
     try:
-        doc = json.loads((path / CONFIG_FILE).read_text())
+        doc = read_json((path / CONFIG_FILE).read_text())
     except (ValueError, UnicodeDecodeError, RecursionError) as exc:
         raise ManifoldgenError(f"{path}/{CONFIG_FILE} is not valid JSON ({exc}); restore or retrain it") from None
     _validate_doc(path, doc)

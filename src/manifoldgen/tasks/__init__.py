@@ -164,6 +164,12 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
     if seeds.shape[1] != robot.n:
         raise ManifoldgenError(f"home has {seeds.shape[1]} values but the group has {robot.n} joints "
                                f"({', '.join(robot.joints)}); give one value per joint")
+    residual, m = np.asarray(constraint.residual(seeds, y), float), len(constraint.tolerance)
+    if residual.shape != (len(seeds), m) or not np.isfinite(residual).all():
+        what = (f"has shape {residual.shape}, not ({len(seeds)}, {m}) (one value per tolerance)"
+                if residual.shape != (len(seeds), m) else "holds NaN or infinite values")
+        raise ManifoldgenError(f"task '{name}': the residual of constraint {type(constraint).__module__}:"
+                               f"{type(constraint).__name__} {what}; fix its residual()")
     res = project(constraint, seeds, y)
     if not res.converged.any():
         where = "home" if home is not None else f"{HOME_SEEDS} uniform configurations"
@@ -221,6 +227,9 @@ def load_task_file(path: str | Path) -> Task:
         if key not in data:
             raise ManifoldgenError(f"{path}: missing '{key}' ({TASK_KEYS[key]}); every task file needs name, robot "
                                    "and at least one [[constraints]] table")
+    if "base_bounds" in data and not data.get("floating_base", False):
+        raise ManifoldgenError(f"{where('base_bounds')}: 'base_bounds' bounds a floating base; this task's robot has "
+                               "a fixed base: drop it, or set floating_base = true")
     base = path.resolve().parent
     source = str(data["robot"])
     if source.endswith(".urdf") or "/" in source:
@@ -245,6 +254,10 @@ def load_task_file(path: str | Path) -> Task:
             raise ManifoldgenError(f"{path}, line {_nth_table_line(text, 'constraints', i)}: constraint {i + 1}: "
                                    f"{exc}") from None
     constraint = parts[0] if len(parts) == 1 else ConstraintSet(parts)
+    bad = next((k for k, v in data.get("scenes", {}).items() if not isinstance(v, str)), None)
+    if bad is not None:
+        raise ManifoldgenError(f"{where('scenes')}: scene '{bad}' must be a scene file path (a string), got "
+                               f"{data['scenes'][bad]!r}")
     scenes = {str(k): (base / str(v)).resolve() for k, v in data.get("scenes", {}).items()}
     try:
         task = _finish(str(data["name"]), robot_obj, constraint, data.get("home"), data.get("home_condition"),
@@ -312,8 +325,9 @@ def _importable_from(folder: Path):
 
 
 def _floats_table(table, where) -> dict[str, float]:
-    if not isinstance(table, dict) or not all(isinstance(v, (int, float)) for v in table.values()):
-        raise ManifoldgenError(f"{where('locked')}: 'locked' must be a table of joint = number")
+    if not isinstance(table, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              and np.isfinite(v) for v in table.values()):
+        raise ManifoldgenError(f"{where('locked')}: 'locked' must be a table of joint = finite number, got {table!r}")
     return {str(k): float(v) for k, v in table.items()}
 
 
@@ -337,6 +351,9 @@ def is_task_file(task: str) -> bool:
 @lru_cache(maxsize=None)
 def get_task(task: str, robot: str | None = None) -> Task:
     """A built-in task by name (for ``robot``, default: the task's default robot) or a task file."""
+    if not isinstance(task, str) or not isinstance(robot, (str, type(None))):
+        raise ManifoldgenError(f"a task is named by a string (and its robot by a string or None), got {task!r}, "
+                               f"{robot!r}")
     if is_task_file(task):
         loaded = load_task_file(task)
         if robot is not None and robot not in (loaded.robot.name, loaded.robot.source):
@@ -344,6 +361,8 @@ def get_task(task: str, robot: str | None = None) -> Task:
                                    "--robot (a task file names its robot) or edit the file's 'robot'")
         return loaded
     tasks = builtin_tasks()
+    if task not in tasks and Path(task).exists():  # a folder or a device: not "unknown"
+        raise ManifoldgenError(f"{not_a_file(task, 'task file')}; give a .toml task file or a built-in task name")
     if task not in tasks:
         raise unknown_name("task", task, list(tasks))
     robots = tasks[task]
