@@ -57,21 +57,21 @@ def test_same_seed_same_dataset_and_other_seed_differs(panda_task, small):
 def test_interrupted_collection_resumes_to_the_same_file(panda_task, small, tmp_path, monkeypatch):
     dataset, _ = small
     path = tmp_path / "resumed.npz"
-    real_project, calls = data_module.project, []
+    real_draw, calls = data_module.draw_batch, []
 
-    def project_then_die(*args, **kwargs):
+    def draw_then_die(*args, **kwargs):
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return real_project(*args, **kwargs)
+        return real_draw(*args, **kwargs)
 
-    monkeypatch.setattr(data_module, "project", project_then_die)
+    monkeypatch.setattr(data_module, "draw_batch", draw_then_die)
     with pytest.raises(KeyboardInterrupt):
         collect(panda_task, 40, 3, path, batch=256, progress=False)
     partial = tmp_path / "resumed.npz.partial"
     assert len(list(partial.glob("c*-b*.npz"))) == 2 and not path.exists()
     calls.clear()
-    monkeypatch.setattr(data_module, "project", lambda *a, **k: (calls.append(1), real_project(*a, **k))[1])
+    monkeypatch.setattr(data_module, "draw_batch", lambda *a, **k: (calls.append(1), real_draw(*a, **k))[1])
     resumed = collect(panda_task, 40, 3, path, batch=256, progress=False)
     np.testing.assert_array_equal(resumed.q, dataset.q)
     assert not partial.exists() and path.exists()

@@ -85,3 +85,21 @@ def test_unknown_frames_are_refused_as_before():
             robot.frame_pose(np.zeros(7), "link_ef")
     with pytest.raises(ManifoldgenError, match=r"expected configurations of shape \(B, 7\), got \(1, 6\)"):
         robot.frame_pose(np.zeros(6), "link_eef")
+
+
+
+def test_torch_gradients_equal_the_analytic_jacobians(case):
+    """Autograd through the torch step products gives each frame's position Jacobian and the CoM Jacobian of the
+    numpy path (what the training penalty's gradient rests on)."""
+    robot, frames = case
+    q = robot.sample_uniform(4, np.random.default_rng(6))
+    w = np.random.default_rng(7).normal(size=(4, 3))
+    for frame in [*frames, "com"]:
+        qt = torch.as_tensor(q).requires_grad_(True)
+        out = robot.com(qt) if frame == "com" else robot.frame_pose(qt, frame)[0]
+        J = robot.com(q, jacobian=True)[1] if frame == "com" else robot.frame_jacobian(q, frame)[2][:, :3]
+        if not out.requires_grad:  # a frame no group joint moves
+            assert not J.any()
+            continue
+        (out * torch.as_tensor(w)).sum().backward()
+        np.testing.assert_allclose(qt.grad.numpy(), np.einsum("bi,bin->bn", w, J), rtol=0, atol=1e-10)

@@ -1,7 +1,8 @@
 """Collecting datasets of constraint-satisfying configurations (:class:`~manifoldgen.dataset.Dataset`).
 
 A collected file's ``meta`` holds ``format_version``, ``robot``, ``joints``, ``locked``, ``constraint``, ``seed``
-(see :meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch;
+(see :meth:`manifoldgen.tasks.Task.meta`). Collection projects uniform seeds batch by batch (in the compiled
+core where it takes the task: :func:`manifoldgen.native.fast_space`);
 batch ``b`` of condition ``c`` draws from ``default_rng([seed, c, b])``, and every
 finished batch is saved under ``<out>.partial/``, so an interrupted run resumes where it
 stopped and produces the same file as an uninterrupted one. Given query anchors (the start and
@@ -29,11 +30,11 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.cluster import Cluster, Pool, connect
-from manifoldgen.constraints import project
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.dataset import FORMAT_VERSION, Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
+from manifoldgen.native import fast_space
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import task_checker
@@ -138,8 +139,9 @@ def draw_batch(task: Task, space: ConstrainedSpace, c: int, b: int, seed: int, b
              if near_home else robot.sample_uniform(batch, rng))
     if anchors is not None:
         seeds[1::2] = anchor_seeds(anchors, batch // 2, rng, robot)  # interleaved: any prefix is half
-    res = project(task.constraint, seeds, space.y)
-    return res.q[space.valid(res.q)]
+    fast = fast_space(space)  # the compiled core's projection and validity where it takes the task
+    res = fast.project(seeds)
+    return res.q[fast.valid(res.q)]
 
 
 class _Draw:
@@ -243,7 +245,7 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, max_batches: in
                 if sum(len(g) for g in got) >= per_condition:
                     break
                 rows = _load_batch(draw.partial, c, b, task.robot.n)
-                if rows is not None and not space.valid(rows).all():
+                if rows is not None and not fast_space(space).valid(rows).all():
                     rows = None  # a saved batch that is not valid here (damaged, or from elsewhere) is recomputed
                 if rows is None:
                     rows = draw(space, c, b, sum(len(g) for g in got))

@@ -1,15 +1,26 @@
 """The differentiable torch path of the robot's batched kinematics.
 
-Walks the same tree description as :class:`manifoldgen.robot.Robot`'s numpy path (its
-``_links``: placements and elementary motions of the planning group), on ``q (B, n)``
-tensors of any float dtype, so that any constraint's residual, written once against
-``Robot.frame_pose`` / ``Robot.com``, is differentiable for the models' training penalty.
+Evaluates the same step products as :class:`manifoldgen.robot.Robot`'s numpy path (each elementary motion an
+affine function ``A + u B + v C`` of ``sin`` and ``1 - cos`` of its angle; a frame is the product of its chain's
+steps, taken pairwise; the centre of mass composes the body-moving steps depth by depth), on ``q (B, n)`` tensors
+of any float dtype, so that any constraint's residual, written once against ``Robot.frame_pose`` / ``Robot.com``,
+is differentiable for the models' training penalty. A whole chain costs a handful of tensor operations (not a few
+per joint), which keeps the penalty's forward and backward passes cheap on robots with many joints.
 :class:`Robot` dispatches here when it is given a tensor.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
+
+
+def _step_transforms(constants: torch.Tensor, columns: np.ndarray, revolute: torch.Tensor, prismatic: bool,
+                     q: torch.Tensor) -> torch.Tensor:
+    """(B, S, 4, 4) transforms ``A + u B + v C`` of the steps with ``constants`` (3, S, 4, 4) at ``q`` (B, n)."""
+    angle = q[:, columns]
+    u = torch.where(revolute, torch.sin(angle), angle) if prismatic else torch.sin(angle)
+    return constants[0] + u[..., None, None] * constants[1] + (1 - torch.cos(angle))[..., None, None] * constants[2]
 
 
 class TorchKinematics:
@@ -17,58 +28,45 @@ class TorchKinematics:
 
     def __init__(self, robot):
         self.robot = robot
-        self._constants: dict[torch.dtype, dict] = {}
+        self._tensors: dict[tuple, tuple] = {}  # (frame or "com", dtype) -> its constants as tensors
 
-    def _link_constants(self, dtype: torch.dtype) -> dict:
-        """Per joint id: placement rotation (3, 3), translation (3,), motions [(kind, axis, K, K @ K, col)]."""
-        if dtype not in self._constants:
-            table = {}
-            for jid, link in self.robot._links.items():
-                P = torch.as_tensor(link.placement, dtype=dtype)
-                motions = []
-                for m in link.motions:
-                    axis = torch.as_tensor(m.axis, dtype=dtype)
-                    x, y, z = m.axis
-                    K = torch.tensor([[0, -z, y], [z, 0, -x], [-y, x, 0]], dtype=dtype)
-                    motions.append((m.kind, axis, K, K @ K, m.index))
-                table[jid] = (P[:3, :3], P[:3, 3], motions)
-            self._constants[dtype] = table
-        return self._constants[dtype]
-
-    def world(self, q: torch.Tensor, joint_ids: list[int]) -> dict[int, tuple[torch.Tensor, torch.Tensor]]:
-        """World rotation (B, 3, 3) and position (B, 3) of the given joints (and their ancestors)."""
-        table = self._link_constants(q.dtype)
-        needed = sorted({a for j in joint_ids for a in self.robot._ancestors(j)})
-        eye = torch.eye(3, dtype=q.dtype)
-        world = {0: (eye.expand(len(q), 3, 3), torch.zeros(len(q), 3, dtype=q.dtype))}
-        for jid in needed:
-            R, p = world[self.robot._links[jid].parent]
-            PR, Pp, motions = table[jid]
-            p = p + R @ Pp
-            R = R @ PR
-            for kind, axis, K, K2, col in motions:
-                angle = q[:, col]
-                if kind == "P":
-                    p = p + (R @ axis) * angle[:, None]
-                else:
-                    s, c = torch.sin(angle)[:, None, None], torch.cos(angle)[:, None, None]
-                    R = R @ (eye + s * K + (1 - c) * K2)
-            world[jid] = (R, p)
-        return world
+    def _chain(self, frame: str, dtype: torch.dtype) -> tuple:
+        key = (frame, dtype)
+        if key not in self._tensors:
+            chain = self.robot.chain_of(frame)
+            if isinstance(chain, np.ndarray):  # nothing in the planning group moves the frame
+                self._tensors[key] = (torch.as_tensor(chain, dtype=dtype),)
+            else:
+                self._tensors[key] = (torch.as_tensor(chain.constants, dtype=dtype), chain.columns,
+                                      torch.as_tensor(chain.revolute), chain.prismatic)
+        return self._tensors[key]
 
     def frame_pose(self, q: torch.Tensor, frame: str) -> tuple[torch.Tensor, torch.Tensor]:
         """World position (B, 3) and rotation (B, 3, 3) of ``frame``."""
-        f = self.robot.model.frames[self.robot.frame_id(frame)]
-        R, p = self.world(q, [f.parentJoint])[f.parentJoint]
-        placement = torch.as_tensor(f.placement.homogeneous, dtype=q.dtype)
-        return p + R @ placement[:3, 3], R @ placement[:3, :3]
+        chain = self._chain(frame, q.dtype)
+        if len(chain) == 1:
+            T = chain[0].expand(len(q), 4, 4)
+        else:
+            M = _step_transforms(*chain, q)
+            while M.shape[1] > 1:
+                M = M[:, 0::2] @ M[:, 1::2]
+            T = M[:, 0]
+        return T[:, :3, 3], T[:, :3, :3]
 
     def com(self, q: torch.Tensor) -> torch.Tensor:
         """Centre of mass (B, 3)."""
-        bodies = self.robot._bodies
-        world = self.world(q, [j for j, _, _ in bodies])
-        total = torch.zeros(len(q), 3, dtype=q.dtype)
-        for jid, mass, lever in bodies:
-            R, p = world[jid]
-            total = total + mass * (p + R @ torch.as_tensor(lever[:3], dtype=q.dtype))
-        return total / self.robot.mass
+        key = ("com", q.dtype)
+        if key not in self._tensors:
+            tree = self.robot._tree
+            self._tensors[key] = (torch.as_tensor(tree.constants, dtype=q.dtype), tree.columns,
+                                  torch.as_tensor(tree.revolute), not tree.revolute.all(), tree.levels,
+                                  torch.as_tensor(tree.weights, dtype=q.dtype),
+                                  torch.as_tensor(tree.fixed, dtype=q.dtype))
+        constants, columns, revolute, prismatic, levels, weights, fixed = self._tensors[key]
+        M = _step_transforms(constants, columns, revolute, prismatic, q)
+        world = [M[:, :levels[0][0].start]] if levels else [M]  # depth 0 is in the world already
+        for steps, parents in levels:
+            done = torch.cat(world, dim=1) if len(world) > 1 else world[0]
+            world.append(done[:, parents] @ M[:, steps])
+        world = torch.cat(world, dim=1) if len(world) > 1 else world[0]
+        return (world.reshape(len(q), -1) @ weights + fixed) / self.robot.mass

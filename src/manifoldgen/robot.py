@@ -467,14 +467,19 @@ class Robot:
         if is_traced(q):
             return q.traced_frame_pose(self, frame)
         q = as_batch(q, self.n)
-        chain = self._chains.get(frame) if isinstance(frame, str) else None
-        if chain is None:
-            chain = self._chains[frame] = self._chain(self.frame_id(frame))
+        chain = self.chain_of(frame)
         if isinstance(chain, np.ndarray):  # nothing in the planning group moves the frame
             T = np.broadcast_to(chain, (len(q), 4, 4)).copy()
         else:
             T = _in_chunks(_chain_product, chain, q, chain.columns.size)
         return T[:, :3, 3], T[:, :3, :3]
+
+    def chain_of(self, frame: str) -> _Chain | np.ndarray:
+        """The steps from the world to ``frame`` (see :class:`_Chain`), or its constant pose (4, 4); built once."""
+        chain = self._chains.get(frame) if isinstance(frame, str) else None
+        if chain is None:
+            chain = self._chains[frame] = self._chain(self.frame_id(frame))
+        return chain
 
     def _chain(self, fid: int) -> _Chain | np.ndarray:
         """The steps from the world to frame ``fid`` (see :class:`_Chain`), or its constant pose (4, 4)."""

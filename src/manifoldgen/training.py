@@ -279,7 +279,7 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
                 val = model._validation_loss(q_val, y_val, torch.Generator().manual_seed(seed + epoch))
                 if not np.isfinite(val):
                     raise ManifoldgenError(f"training diverged at epoch {epoch + 1} (validation loss {val}); "
-                                           "lower the learning rate or try another seed")
+                                           "lower the learning rate (lr) or the loss weights you set, or try another seed")
                 log.history.append({"epoch": epoch + 1, "train": {k: v / steps for k, v in sums.items()},
                                     "val": val, "seconds": time.perf_counter() - tic})
                 if val < log.best_val:

@@ -292,6 +292,10 @@ def dataset_task(dataset: Dataset, task: Task | None = None) -> Task:
     return task_from_meta(dataset.meta, task=task, what="the dataset")
 
 
+MAX_LR = 10.0  # a learning rate above it only diverges
+MAX_WEIGHT = 1e6  # a loss weight (beta, residual weights, fractions) above it overflows the float32 losses
+
+
 def _check_hyper(model: str, key: str, value, default) -> None:
     """Refuse a hyper-parameter value no model can train with (raw torch errors otherwise)."""
     if isinstance(default, list):
@@ -303,11 +307,11 @@ def _check_hyper(model: str, key: str, value, default) -> None:
     elif isinstance(default, float):
         number = isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
         if key == "lr":
-            ok, need = number and value > 0, "a positive number"
+            ok, need = number and 0 < value <= MAX_LR, f"a number in (0, {MAX_LR:g}]"
         elif key == "beta1":
             ok, need = number and 0 <= value < 1, "a number in [0, 1)"
-        else:
-            ok, need = number and value >= 0, "a finite number >= 0"
+        else:  # a loss weight: larger ones overflow the float32 losses
+            ok, need = number and 0 <= value <= MAX_WEIGHT, f"a number from 0 to {MAX_WEIGHT:g}"
     else:
         return
     if not ok:

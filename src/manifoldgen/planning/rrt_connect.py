@@ -1,12 +1,12 @@
 """RRT-Connect (Kuffner & LaValle 2000): two trees, extend one toward a sample, connect the other.
 
-The search runs in the compiled core (:mod:`manifoldgen.native`) when it is built and can take the
-space (``core="auto"``, the default), else here in Python, which stays the reference
-the core is tested against. Two things differ there, for speed, not in what a path must pass: the core
-takes the sampler's raw rows and refines and checks each only when the search first uses it (lazy samples;
-here every row is refined and checked when drawn), and its stepping-stone pool tracks only whether a
-sample is within range of each tree (the same decisions as :class:`~manifoldgen.planning.base.SamplePool`).
-"""
+Two searches, one planner name: :class:`CoreRRTConnect` runs in the compiled core (:mod:`manifoldgen.native`),
+:class:`RRTConnect` here in Python, the reference the core is tested against. Constructing ``RRTConnect`` picks
+the core's when it is built and can take the space (``core="auto"``, the default). Two things differ there, for
+speed, not in what a path must pass: the core takes the sampler's raw rows and refines and checks each only when
+the search first uses it (lazy samples; here every row is refined and checked when drawn), and its
+stepping-stone pool tracks only whether a sample is within range of each tree (the same decisions as
+:class:`~manifoldgen.planning.base.SamplePool`)."""
 
 from __future__ import annotations
 
@@ -71,51 +71,32 @@ class RRTConnectSettings(PlannerSettings):
 
 class RRTConnect(Planner):
     """Bidirectional RRT, the paper's main planner: the trees take turns to extend toward a
-    sample, and after each extension the other tree greedily connects toward the new node."""
+    sample, and after each extension the other tree greedily connects toward the new node.
+
+    This class is the search in Python, the reference. Constructing it gives a :class:`CoreRRTConnect` instead
+    where the compiled core can run the query (``settings.core``: ``auto`` or ``native``, see
+    :class:`RRTConnectSettings`); ``extras['core']`` says which searched, ``extras['core_fallback']`` why not
+    the core."""
 
     name = "rrtconnect"
     settings_type = RRTConnectSettings
 
+    def __new__(cls, space, *args, settings: RRTConnectSettings | None = None, **kwargs):
+        if cls is RRTConnect and _core_refusal(space, settings) is None:
+            cls = CoreRRTConnect
+        return super().__new__(cls)
+
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.core, self.fallback = None, ""
-        self.compiled = {"compiled": [], "callbacks": {}}  # Python parts compiled in the core, and why not the others
-        self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
-        wanted = getattr(self.settings, "core", "python")  # subclasses (CBiRRT) search in Python
-        if wanted != "python":
-            problem = native.core_problem()  # not built, or built against another pinocchio: says the fix
-            reason = problem or native.unsupported(self.space)
-            if reason and wanted == "native":
-                raise ManifoldgenError(problem or f"{reason}; use core='python' or 'auto'")
-            self.core = None if reason else native.core_space(self.space)
-            self.compiled = native.compile_report(self.space) if self.core is not None else self.compiled
-            if self.core is not None and getattr(self.settings, "spheres", False) and self.space.checker is not None:
-                spheres = native.space_spheres(self.space)
-                native.set_spheres(self.core, spheres)
-                self.sphere_fallback = spheres["fallback"]
-            self.fallback = reason or ""
+        self.core = None
+        self.fallback = (_core_refusal(self.space, self.settings) or "") if type(self) is RRTConnect else ""
         self.native_nodes: list[int] = []
         self.cut_edges = self.reattached = self.verified_states = 0
-        self._core_counts = self.core.counts() if self.core is not None else {}  # when the latest query began
 
     def _stone_radius(self) -> float:
         return min(getattr(self.settings, "reach", self.settings.range), self.settings.range)
 
-    def _direct(self, start, goal):
-        return None if self.core is not None else super()._direct(start, goal)
-
-    def solve(self, start, goal, time_limit):
-        if self.core is not None:
-            self._core_counts = self.core.counts()  # the query's sphere and sweep tests, callbacks: from here on
-        return super().solve(start, goal, time_limit)
-
-    def _query_state(self, q, what):
-        valid = None if self.core is None else native.valid_query_state(self.space, self.core, q)
-        return valid if valid is not None else super()._query_state(q, what)  # the space says what is wrong
-
     def _solve(self, start, goal, deadline):
-        if self.core is not None:
-            return native.plan_rrt_connect(self, self.core, start, goal, deadline)
         trees = self.trees = [Tree(start), Tree(goal)]
         self._start_pool(trees, deadline)
         while time.perf_counter() < deadline:
@@ -134,19 +115,7 @@ class RRTConnect(Planner):
         return None
 
     def _extras(self) -> dict:
-        if self.core is None:
-            return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
-        now, then = self.core.counts(), self._core_counts
-        callbacks = {k: now[f"callback_{k}"] - then[f"callback_{k}"] for k in ("calls", "rows")}  # into a Python constraint
-        return {"core": "native", "nodes": list(self.native_nodes),
-                "sphere_checks": now["sphere_checks"] - then["sphere_checks"],
-                "sweep_checks": now["sweep_checks"] - then["sweep_checks"],
-                "cut_edges": self.cut_edges, "reattached": self.reattached, "verified_states": self.verified_states,
-                **({"callbacks": callbacks} if callbacks["calls"] else {}),
-                **({"compiled": list(self.compiled["compiled"])} if self.compiled["compiled"] else {}),
-                **({"compile_fallback": "; ".join(f"{kind}: {why}" for kind, why in self.compiled["callbacks"].items())}
-                   if self.compiled["callbacks"] else {}),
-                **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
+        return {"core": "python", **({"core_fallback": self.fallback} if self.fallback else {})}
 
     def _target(self) -> np.ndarray:
         """The configuration to grow toward: a sample."""
@@ -177,3 +146,62 @@ class RRTConnect(Planner):
         waypoints = np.concatenate([a.q[pa], b.q[pb[-2::-1]]])
         edges = [(a, k) for k in pa[1:]] + [(b, k) for k in pb[:0:-1]]
         return self._finish(waypoints, edges)
+
+
+class CoreRRTConnect(RRTConnect):
+    """RRT-Connect in the compiled core (:func:`manifoldgen.native.plan_rrt_connect`): the same search as
+    :class:`RRTConnect` on the same validity rule, with the differences the module docstring names (lazy samples,
+    the pool's range bookkeeping, ``edges``); the tests hold both to the same verdicts and, at ``coarse:1`` with
+    eager samples, the same paths. Made by :class:`RRTConnect` when the core takes the space."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.core = native.core_space(self.space)
+        self.compiled = native.compile_report(self.space)  # Python parts compiled in the core, and why not the others
+        self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
+        if self.settings.spheres and self.space.checker is not None:
+            spheres = native.space_spheres(self.space)
+            native.set_spheres(self.core, spheres)
+            self.sphere_fallback = spheres["fallback"]
+        self._core_counts = self.core.counts()  # when the latest query began
+
+    def _direct(self, start, goal):
+        return None
+
+    def solve(self, start, goal, time_limit):
+        self._core_counts = self.core.counts()  # the query's sphere and sweep tests, callbacks: from here on
+        return super().solve(start, goal, time_limit)
+
+    def _query_state(self, q, what):
+        valid = native.valid_query_state(self.space, self.core, q)
+        return valid if valid is not None else super()._query_state(q, what)  # the space says what is wrong
+
+    def _solve(self, start, goal, deadline):
+        return native.plan_rrt_connect(self, self.core, start, goal, deadline)
+
+    def _extras(self) -> dict:
+        now, then = self.core.counts(), self._core_counts
+        callbacks = {k: now[f"callback_{k}"] - then[f"callback_{k}"] for k in ("calls", "rows")}  # into a Python constraint
+        return {"core": "native", "nodes": list(self.native_nodes),
+                "sphere_checks": now["sphere_checks"] - then["sphere_checks"],
+                "sweep_checks": now["sweep_checks"] - then["sweep_checks"],
+                "cut_edges": self.cut_edges, "reattached": self.reattached, "verified_states": self.verified_states,
+                **({"callbacks": callbacks} if callbacks["calls"] else {}),
+                **({"compiled": list(self.compiled["compiled"])} if self.compiled["compiled"] else {}),
+                **({"compile_fallback": "; ".join(f"{kind}: {why}" for kind, why in self.compiled["callbacks"].items())}
+                   if self.compiled["callbacks"] else {}),
+                **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
+
+
+def _core_refusal(space, settings) -> str | None:
+    """Why the compiled core does not run this RRT-Connect query: None when it does, '' when ``core='python'``
+    asks for Python, else the reason (the core not built, a space it cannot take); with ``core='native'`` the
+    reason is a one-line error."""
+    wanted = getattr(settings, "core", "python") if settings is not None else RRTConnectSettings.core
+    if wanted == "python":
+        return ""
+    problem = native.core_problem()
+    reason = problem or native.unsupported(space)
+    if reason and wanted == "native":
+        raise ManifoldgenError(problem or f"{reason}; use core='python' or 'auto'")
+    return reason or None
