@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "manifoldgen"
 # module decides its layer ("viz.losses" before "viz"); "" is the package's own __init__ (the `mg` namespace).
 LAYERS = [
     ("base", ["errors", "io", "registry", "runtime", "settings", "progress", "cluster"]),
-    ("geometry and kinematics", ["kinematics_torch", "robot", "collision", "spheres", "shapes"]),
+    ("geometry and kinematics", ["robot", "collision", "spheres", "shapes"]),
     ("constraints", ["constraints", "provenance"]),
     ("space", ["space"]),
     ("compiled core", ["native", "targets"]),

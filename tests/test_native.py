@@ -211,7 +211,7 @@ def test_sphere_models_are_conservative_and_plan_valid_paths(panda_task, wall):
 
 
 def test_the_spheres_setting_fits_the_robot_and_keeps_the_search(panda_task, wall):
-    """``spheres=True``: the robot's fitted sphere models (spheres.py) as the broad phase of every check."""
+    """``spheres=True``: the robot's fitted sphere models (manifoldgen.spheres) as the broad phase of every check."""
     _, with_spheres = _planner(panda_task, wall, 1, spheres=True)
     _, plain = _planner(panda_task, wall, 1)
     assert with_spheres.core.has_spheres and not plain.core.has_spheres

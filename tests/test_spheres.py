@@ -65,7 +65,7 @@ def _check_covered(geom: pin.GeometryModel, model: spheres.SphereModel, i: int, 
     assert mine.any(), f"{g.name} has no spheres"
     assert np.all(model.joint[mine] == g.parentJoint)
     M = g.placement.homogeneous
-    inside = _solid_points(tris, rng) if spheres._volume(tris) == abs(np.einsum(
+    inside = _solid_points(tris, rng) if spheres.solid_volume(tris) == abs(np.einsum(
         "ti,ti->", tris[:, 0], np.cross(tris[:, 1], tris[:, 2]))) / 6 else np.zeros((0, 3))
     for points in (_surface_points(tris, rng), inside):
         in_joint = points @ M[:3, :3].T + M[:3, 3]
@@ -176,7 +176,7 @@ def test_unsupported_geometry_gets_no_spheres(panda_task):
 def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model, monkeypatch):
     files = list((cache_dir() / "spheres").glob("panda-*.npz"))
     assert len(files) == 1
-    monkeypatch.setattr(spheres, "fit_model", lambda *a, **k: pytest.fail("refitted despite a valid cache"))
+    monkeypatch.setattr(spheres.cache, "fit_model", lambda *a, **k: pytest.fail("refitted despite a valid cache"))
     again = spheres.sphere_model(panda_task.robot)
     assert np.array_equal(again.center, panda_model.center) and again.unfitted == panda_model.unfitted
     data = dict(np.load(files[0]))
@@ -193,7 +193,7 @@ def test_tight_pairs_go_to_coal_and_stay_conservative(panda_task, panda_model, r
     q = robot.sample_uniform(400, rng)
     exact = checker.in_collision(q)
     default = spheres.SphereChecker(checker, panda_model)
-    monkeypatch.setattr(spheres, "TIGHT_RATE", 0.01)  # nearly every self pair whose spheres touch goes to coal
+    monkeypatch.setattr(spheres.checker, "TIGHT_RATE", 0.01)  # nearly every self pair whose spheres touch goes to coal
     strict = spheres.SphereChecker(checker, panda_model, typical=q[200:])
     assert strict.pairs["tight"] > default.pairs["tight"] and strict.pairs["exact"] == strict.pairs["tight"]
     assert len(strict.exact_pairs) == strict.pairs["exact"]

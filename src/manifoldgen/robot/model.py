@@ -1,229 +1,44 @@
-"""Robot models: planning groups, joint limits, batched kinematics.
-
-Pinocchio loads the URDF (+ SRDF) and owns the full model; this module builds, once,
-a vectorised description of the tree restricted to a planning group (active joints),
-so that forward kinematics, frame Jacobians and the centre of mass run on whole
-batches ``q (B, n)`` in numpy. Frame poses and the centre of mass take a faster form of
-it: each elementary motion is an affine function of the sine and cosine of its angle
-(constants precomputed), and a frame's pose is the pairwise product of its chain's steps.
-A floating base is six Euclidean coordinates ``(x, y, z, yaw, pitch, roll)`` (ZYX Euler),
-mapped to pinocchio's free flyer.
+"""The :class:`Robot`: a pinocchio model (URDF + SRDF) with a planning group of active joints, its limits, and its
+batched kinematics (frame poses, Jacobians, centre of mass) on ``q (B, n)`` in numpy (:mod:`.steps`) or torch
+(:mod:`.kinematics_torch`). A floating base is six Euclidean coordinates ``(x, y, z, yaw, pitch, roll)`` (ZYX
+Euler), mapped to pinocchio's free flyer.
 """
 
 from __future__ import annotations
 
 import contextlib
 import difflib
-import functools
-import hashlib
 import os
-import re
-import site
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
 from collections import Counter
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from manifoldgen.errors import ManifoldgenError, not_a_file
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.robot.catalogue import file_sha256, is_path, resolve_robot, robots_dir
+from manifoldgen.robot.steps import (Chain, Link, Motion, Step, Tree, as_batch, chain_product, in_chunks,
+                                     is_tensor, is_traced, motion_transform, tree_com)
 
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
+
+
 _BASE_AXES = (("P", (1, 0, 0)), ("P", (0, 1, 0)), ("P", (0, 0, 1)),
               ("R", (0, 0, 1)), ("R", (0, 1, 0)), ("R", (1, 0, 0)))
+
+
 # pinocchio joint types that can be in a planning group: one revolute or prismatic axis
 _ALIGNED_TYPES = ("RX", "RY", "RZ", "RUBX", "RUBY", "RUBZ", "PX", "PY", "PZ")
+
+
 _UNALIGNED_TYPES = ("RevoluteUnaligned", "RevoluteUnboundedUnaligned", "PrismaticUnaligned")
+
+
 _GROUP_TYPES = frozenset(_ALIGNED_TYPES + _UNALIGNED_TYPES)
-# Names that no file stem gives, or gives ambiguously: name -> (folder, URDF stem).
-_ALIASES = {
-    "anymal": ("anymal_b_simple_description", "anymal"),  # anymal.urdf is in both ANYmal folders
-    "anymal_b": ("anymal_b_simple_description", "anymal"),
-    "anymal_c": ("anymal_c_simple_description", "anymal"),
-    "g1": ("g1_description", "g1_29dof_rev_1_0"),
-    "so_arm": ("so_arm_description", "so101"),
-    "talos": ("talos_data", "talos_reduced"),
-}
-# URDFs that are not robots Robot.load can plan for: (folder, URDF stem).
-_EXCLUDED = {
-    ("ur_description", "ur3"),  # a xacro stub without a robot name: pinocchio cannot parse it (ur3 is ur3_robot)
-    ("hector_description", "quadrotor_base"),  # a single body without joints: nothing to plan for
-    ("iris_description", "iris_simple"),  # a single body without joints (iris has its rotor joints)
-}
-
-
-def robots_dir() -> Path:
-    """Folder of example-robot-data's robots (the package ships no Python module)."""
-    for root in [*site.getsitepackages(), site.getusersitepackages()]:
-        path = Path(root) / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
-        if path.is_dir():
-            return path
-    raise ManifoldgenError("example-robot-data is not installed: run `pip install example-robot-data`")
-
-
-def known_robots() -> list[str]:
-    """Sorted names that :meth:`Robot.load` accepts for example-robot-data robots."""
-    return list(_catalogue(robots_dir()))
-
-
-@functools.cache
-def _catalogue(root: Path) -> dict[str, tuple[Path, Path | None]]:
-    """Name -> (URDF, SRDF or None) for every robot under ``root``, read from the files.
-
-    Each ``*_description`` / ``*_data`` folder's ``urdf/`` and ``robots/`` URDFs are named by
-    their stem (lower case, ``-``/``.`` as ``_``), by the stem without ``_robot`` (``ur5_robot``
-    -> ``ur5``) and, for a folder's only URDF or the one named after it, by the folder; an
-    explicit alias wins, then a stem, then the shorter names; ties go to the first folder.
-    """
-    ranked: dict[str, tuple[int, Path, Path | None]] = {}
-    by_file: dict[tuple[str, str], tuple[Path, Path | None]] = {}
-    for folder in sorted([*root.glob("*_description"), *root.glob("*_data")]):
-        package = folder.name.removesuffix("_description").removesuffix("_data")
-        urdfs = [u for sub in ("urdf", "robots") for u in sorted((folder / sub).glob("*.urdf"))
-                 if (folder.name, u.stem) not in _EXCLUDED]
-        srdfs = sorted((folder / "srdf").glob("*.srdf"))
-        for urdf in urdfs:
-            files = by_file[folder.name, urdf.stem] = (urdf, _matching_srdf(urdf.stem, package, srdfs))
-            stem = re.sub(r"[^a-z0-9]+", "_", urdf.stem.lower())
-            names = [(stem, 1), (stem.removesuffix("_robot"), 2)]
-            if len(urdfs) == 1 or stem == package:
-                names.append((package, 3))
-            for name, rank in names:
-                if name not in ranked or rank < ranked[name][0]:
-                    ranked[name] = (rank, *files)
-    for name, key in _ALIASES.items():
-        if key in by_file:
-            ranked[name] = (0, *by_file[key])
-    return {name: (urdf, srdf) for name, (_, urdf, srdf) in sorted(ranked.items())}
-
-
-def _matching_srdf(stem: str, package: str, srdfs: list[Path]) -> Path | None:
-    """The SRDF of a URDF: same stem (or without ``_robot``), else the folder's only one or its namesake."""
-    by_stem = {s.stem: s for s in srdfs}
-    for candidate in (stem, stem.removesuffix("_robot")):
-        if candidate in by_stem:
-            return by_stem[candidate]
-    return srdfs[0] if len(srdfs) == 1 else by_stem.get(package)
-
-
-def _is_path(robot: str) -> bool:
-    return robot.endswith(".urdf") or os.sep in robot
-
-
-def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Path, Path | None]:
-    """Map an example-robot-data name or a URDF path to ``(urdf, srdf or None)``.
-
-    srdf: an explicit SRDF path; by default the robot's own (for a path: the ``.srdf`` beside it).
-    """
-    if _is_path(robot):
-        urdf = Path(robot)
-        if not urdf.is_file():
-            raise ManifoldgenError(f"{not_a_file(urdf, 'URDF file')}; give an existing path or a robot name")
-        beside = urdf.with_suffix(".srdf")
-        default = beside if beside.is_file() else None
-    else:
-        catalogue = _catalogue(robots_dir())
-        if robot not in catalogue:
-            close = difflib.get_close_matches(robot, list(catalogue), n=3)
-            hint = f" (did you mean {', '.join(close)}?)" if close else ""
-            raise ManifoldgenError(
-                f"unknown robot '{robot}'{hint}; known: {', '.join(catalogue)}, or a path to a .urdf")
-        urdf, default = catalogue[robot]
-    if srdf is None:
-        return urdf, default
-    if not Path(srdf).is_file():
-        raise ManifoldgenError(f"{not_a_file(srdf, 'SRDF file')}; give an existing .srdf path, "
-                               f"or none to use {default or 'no SRDF'}")
-    return urdf, Path(srdf)
-
-
-def find_robot(identity: dict, hint: str | None = None) -> str:
-    """What to pass to :meth:`Robot.load` for the robot of ``identity`` (see :attr:`Robot.identity`).
-
-    The example-robot-data name if its URDF has the identity's hash, else ``hint`` (a URDF path
-    or robot name) if its URDF has it: files are compared by content, not by path.
-    """
-    name, digest = identity.get("name"), identity.get("urdf_sha256")
-    if not digest:
-        raise ManifoldgenError(f"robot identity {identity} has no urdf_sha256; "
-                               "give an identity from Robot.identity")
-    catalogue = _catalogue(robots_dir())
-    tried = []
-    for source in ([name] if name in catalogue else []) + ([str(hint)] if hint is not None else []):
-        urdf = Path(source) if _is_path(source) else catalogue.get(source, (None,))[0]
-        if urdf is not None and urdf.is_file():
-            found = _sha256(urdf)
-            if found == digest:
-                return source
-            tried.append(f"{source} has {found[:12]}")
-        else:
-            tried.append(f"{source} is not a URDF file or robot name")
-    if name not in catalogue:
-        tried.insert(0, f"'{name}' is not an example-robot-data robot")
-    raise ManifoldgenError(f"no URDF with sha256 {digest[:12]} (robot '{name}'): {'; '.join(tried)}; "
-                           "pass the path of the URDF the robot was built from")
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-@dataclass(frozen=True)
-class _Motion:
-    """One elementary joint motion: rotation about or translation along a local axis."""
-
-    kind: str  # "R" or "P"
-    axis: np.ndarray  # (3,) unit axis in the joint frame
-    index: int  # column in q
-
-
-@dataclass(frozen=True)
-class _Link:
-    """A joint of the full model seen from the planning group."""
-
-    parent: int  # full-model joint id of the parent (0 = universe)
-    placement: np.ndarray  # (4, 4) parent joint frame -> this joint, before motion
-    motions: tuple[_Motion, ...]  # empty for a locked joint (its motion is in placement)
-
-
-@dataclass(frozen=True)
-class _Step:
-    """One elementary motion of the tree as an affine function of two numbers: its transform from the
-    previous step's frame (after that step's motion) is ``A + u B + v C``, with ``u = sin, v = 1 - cos`` of
-    the angle for a revolute motion and ``u`` = the displacement (``C = 0``) for a prismatic one."""
-
-    parent: int  # index of the previous step (-1: the world)
-    constants: np.ndarray  # (3, 4, 4) A (the fixed transforms before the motion), A @ E, A @ E @ E
-    column: int  # column in q
-    revolute: bool
-
-
-@dataclass(frozen=True)
-class _Chain:
-    """The steps from the world to one frame, padded with identities to a power of two (>= 1) steps:
-    the frame's transform is the ordered product of the steps', the frame's own placement folded into
-    the last one."""
-
-    constants: np.ndarray  # (3, P, 4, 4) A, B, C of each step
-    columns: np.ndarray  # (P,) column in q (0 for padding)
-    revolute: np.ndarray  # (P,) bool
-    prismatic: bool  # any prismatic step (else u = sin of every angle)
-
-
-@dataclass(frozen=True)
-class _Tree:
-    """The steps that move the robot's bodies, by depth, and each step's mass-weighted body points."""
-
-    constants: np.ndarray  # (3, S, 4, 4)
-    columns: np.ndarray  # (S,)
-    revolute: np.ndarray  # (S,) bool
-    levels: tuple[tuple[slice, slice | np.ndarray], ...]  # per depth from 1: (its steps, their parents)
-    weights: np.ndarray  # (S * 16, 3): flattened world transforms (B, S * 16) @ weights = sum of mass * world point
-    fixed: np.ndarray  # (3,) sum of mass * world point of the bodies no step moves
 
 
 class Robot:
@@ -242,8 +57,8 @@ class Robot:
         self.model = model
         self.collision_model = collision_model
         self.srdf = srdf
-        self._urdf_sha256 = _sha256(urdf_path)
-        self._srdf_sha256 = _sha256(srdf) if srdf is not None else None
+        self._urdf_sha256 = file_sha256(urdf_path)
+        self._srdf_sha256 = file_sha256(srdf) if srdf is not None else None
         self.joints = list(joints)
         self.reference = reference  # (model.nq,) full pinocchio configuration for locked joints
         self.floating_base = floating_base
@@ -252,7 +67,7 @@ class Robot:
         self.lower, self.upper = self._limits(base_bounds)
         self._links = self._build_links()
         self._steps, self._anchors = self._build_steps()
-        self._chains: dict[str, _Chain | np.ndarray] = {}  # frame name -> its chain, or its constant (4, 4) pose
+        self._chains: dict[str, Chain | np.ndarray] = {}  # frame name -> its chain, or its constant (4, 4) pose
         self._jacobians: tuple[bytes, dict] = (b"", {})  # the latest q's frame Jacobians (see frame_jacobian)
 
     # ------------------------------------------------------------------ construction
@@ -272,7 +87,7 @@ class Robot:
         """
         source = os.fspath(robot)
         urdf, srdf = resolve_robot(source, srdf)
-        name = urdf.stem if _is_path(source) else source
+        name = urdf.stem if is_path(source) else source
         share = str(robots_dir().parent.parent)
         mimics = _urdf_mimics(urdf)  # parses the XML first: a broken file gets our one line, not urdfdom's
         with _native_stderr() as said:
@@ -326,7 +141,7 @@ class Robot:
                 upper.append(min(hi, np.pi) if hi > 1e10 else hi)
         return np.array(lower), np.array(upper)
 
-    def _build_links(self) -> dict[int, _Link]:
+    def _build_links(self) -> dict[int, Link]:
         model, data = self.model, self.model.createData()
         pin.forwardKinematics(model, data, self.reference)
         col = {jid: i + (6 if self.floating_base else 0) for i, jid in enumerate(self._joint_ids)}
@@ -335,16 +150,16 @@ class Robot:
             jm = model.joints[jid]
             placement = model.jointPlacements[jid].homogeneous
             if self.floating_base and jid == 1:
-                motions = tuple(_Motion(k, np.array(a, float), i) for i, (k, a) in enumerate(_BASE_AXES))
+                motions = tuple(Motion(k, np.array(a, float), i) for i, (k, a) in enumerate(_BASE_AXES))
             elif jid in col:
                 kind, axis = _joint_axis(jm)
-                motions = (_Motion(kind, axis, col[jid]),)
+                motions = (Motion(kind, axis, col[jid]),)
             else:
                 placement, motions = data.liMi[jid].homogeneous, ()
-            links[jid] = _Link(model.parents[jid], placement, motions)
+            links[jid] = Link(model.parents[jid], placement, motions)
         return links
 
-    def _build_steps(self) -> tuple[list[_Step], dict[int, tuple[int, np.ndarray]]]:
+    def _build_steps(self) -> tuple[list[Step], dict[int, tuple[int, np.ndarray]]]:
         """The elementary motions of ``_links`` in tree order, and per joint id its anchor: (index of the last
         step above it or -1, the fixed (4, 4) transform from that step's frame to the joint's)."""
         steps, anchors = [], {0: (-1, np.eye(4))}
@@ -359,7 +174,7 @@ class Robot:
                 else:
                     E[:3, 3] = m.axis
                 E2 = E @ E if m.kind == "R" else np.zeros((4, 4))
-                steps.append(_Step(step, np.stack([pending, pending @ E, pending @ E2]), m.index, m.kind == "R"))
+                steps.append(Step(step, np.stack([pending, pending @ E, pending @ E2]), m.index, m.kind == "R"))
                 step, pending = len(steps) - 1, np.eye(4)
             anchors[jid] = (step, pending)
         return steps, anchors
@@ -456,7 +271,7 @@ class Robot:
             for m in link.motions:
                 if axes:
                     met[m.index] = (T[:, :3, :3] @ m.axis, T[:, :3, 3].copy(), m.kind)
-                T = T @ _motion(m, q[:, m.index])
+                T = T @ motion_transform(m, q[:, m.index])
             world[jid] = T
         return (world, met) if axes else world
 
@@ -471,18 +286,18 @@ class Robot:
         if isinstance(chain, np.ndarray):  # nothing in the planning group moves the frame
             T = np.broadcast_to(chain, (len(q), 4, 4)).copy()
         else:
-            T = _in_chunks(_chain_product, chain, q, chain.columns.size)
+            T = in_chunks(chain_product, chain, q, chain.columns.size)
         return T[:, :3, 3], T[:, :3, :3]
 
-    def chain_of(self, frame: str) -> _Chain | np.ndarray:
-        """The steps from the world to ``frame`` (see :class:`_Chain`), or its constant pose (4, 4); built once."""
+    def chain_of(self, frame: str) -> Chain | np.ndarray:
+        """The steps from the world to ``frame`` (see :class:`Chain`), or its constant pose (4, 4); built once."""
         chain = self._chains.get(frame) if isinstance(frame, str) else None
         if chain is None:
             chain = self._chains[frame] = self._chain(self.frame_id(frame))
         return chain
 
-    def _chain(self, fid: int) -> _Chain | np.ndarray:
-        """The steps from the world to frame ``fid`` (see :class:`_Chain`), or its constant pose (4, 4)."""
+    def _chain(self, fid: int) -> Chain | np.ndarray:
+        """The steps from the world to frame ``fid`` (see :class:`Chain`), or its constant pose (4, 4)."""
         f = self.model.frames[fid]
         step, tail = self._anchors[f.parentJoint]
         tail = tail @ f.placement.homogeneous
@@ -501,7 +316,7 @@ class Robot:
         constants[:, len(path) - 1] = constants[:, len(path) - 1] @ tail
         columns = np.array([self._steps[i].column for i in path] + [0] * (size - len(path)))
         revolute = np.array([self._steps[i].revolute for i in path] + [True] * (size - len(path)))
-        return _Chain(constants, columns, revolute, not revolute.all())
+        return Chain(constants, columns, revolute, not revolute.all())
 
     def frame_jacobian(self, q: np.ndarray, frame: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position (B, 3), rotation (B, 3, 3) and world-aligned Jacobian (B, 6, n) of ``frame``.
@@ -539,7 +354,7 @@ class Robot:
     @cached_property
     def torch_kinematics(self):
         """The differentiable torch path of :meth:`frame_pose` and :meth:`com` (built on first use)."""
-        from manifoldgen.kinematics_torch import TorchKinematics
+        from manifoldgen.robot.kinematics_torch import TorchKinematics
         return TorchKinematics(self)
 
     @cached_property
@@ -548,8 +363,8 @@ class Robot:
                 for j in range(1, self.model.njoints) if self.model.inertias[j].mass > 0]
 
     @cached_property
-    def _tree(self) -> _Tree:
-        """The steps that move a body and their mass-weighted body points (see :class:`_Tree`)."""
+    def _tree(self) -> Tree:
+        """The steps that move a body and their mass-weighted body points (see :class:`Tree`)."""
         points, fixed = {}, np.zeros(3)  # step -> sum of mass * homogeneous body point in its frame
         for jid, mass, lever in self._bodies:
             step, pending = self._anchors[jid]
@@ -578,7 +393,7 @@ class Robot:
         weights = np.zeros((len(order), 4, 4, 3))  # [step, i, j, i] = the step's weighted point's j-th entry
         for i in range(3):
             weights[:, i, :, i] = np.array([points.get(s, np.zeros(4)) for s in order]).reshape(len(order), 4)
-        return _Tree(np.stack([self._steps[s].constants for s in order], axis=1) if order else np.zeros((3, 0, 4, 4)),
+        return Tree(np.stack([self._steps[s].constants for s in order], axis=1) if order else np.zeros((3, 0, 4, 4)),
                      np.array([self._steps[s].column for s in order], int),
                      np.array([self._steps[s].revolute for s in order], bool), tuple(levels),
                      weights.reshape(-1, 3), fixed)
@@ -596,7 +411,7 @@ class Robot:
             return q.traced_com(self)
         q = as_batch(q, self.n)
         if not jacobian:
-            return _in_chunks(_tree_com, self._tree, q, self._tree.columns.size) / self.mass
+            return in_chunks(tree_com, self._tree, q, self._tree.columns.size) / self.mass
         world, met = self._world(q, [j for j, _, _ in self._bodies], axes=True)
         com, J = np.zeros((len(q), 3)), np.zeros((len(q), 3, self.n))
         for jid, mass, lever in self._bodies:
@@ -607,26 +422,6 @@ class Robot:
                 J += mass * self._point_jacobian(c, {k: met[k] for k in ancestors}, len(q), False)
         com, J = com / self.mass, J / self.mass
         return (com, J) if jacobian else com
-
-
-def is_tensor(x) -> bool:
-    """True for a torch tensor (checked without importing torch)."""
-    return type(x).__module__.startswith("torch")
-
-
-def is_traced(x) -> bool:
-    """True for a traced array (:mod:`manifoldgen.constraints.trace`): its kinematics are recorded, not computed."""
-    return hasattr(type(x), "traced_frame_pose")
-
-
-def as_batch(q: np.ndarray, n: int) -> np.ndarray:
-    """Promote (n,) to (1, n) and check the width."""
-    q = np.asarray(q, dtype=float)
-    if q.ndim == 1:
-        q = q[None]
-    if q.ndim != 2 or q.shape[1] != n:
-        raise ManifoldgenError(f"expected configurations of shape (B, {n}), got {q.shape}")
-    return q
 
 
 def _planning_group(model: pin.Model, mimics: dict[str, str], robot: str, joints: list[str] | None,
@@ -729,59 +524,6 @@ def _zyx_quaternion(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.
     cr, sr = np.cos(roll / 2), np.sin(roll / 2)
     return np.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
                      cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], axis=1)
-
-
-_CELLS = 2048  # rows x steps per evaluation of step products: larger batches go in chunks that stay in cache
-
-
-def _in_chunks(evaluate, steps, q: np.ndarray, count: int) -> np.ndarray:
-    """``evaluate(steps, q)`` on chunks of ``q`` (B, n) of at most ``_CELLS / count`` rows, concatenated."""
-    rows = max(1, _CELLS // max(count, 1))
-    if len(q) <= rows:
-        return evaluate(steps, q)
-    return np.concatenate([evaluate(steps, q[i:i + rows]) for i in range(0, len(q), rows)])
-
-
-def _step_transforms(constants: np.ndarray, columns: np.ndarray, revolute: np.ndarray, prismatic: bool,
-                     q: np.ndarray) -> np.ndarray:
-    """(B, S, 4, 4) transforms ``A + u B + v C`` of the steps with ``constants`` (3, S, 4, 4) at ``q`` (B, n)."""
-    angle = q[:, columns]
-    u = np.where(revolute, np.sin(angle), angle) if prismatic else np.sin(angle)
-    M = u[..., None, None] * constants[1]
-    M += constants[0]
-    M += (1 - np.cos(angle))[..., None, None] * constants[2]
-    return M
-
-
-def _chain_product(chain: _Chain, q: np.ndarray) -> np.ndarray:
-    """(B, 4, 4) world transform of a chain's frame: the steps' product, pairwise (log2 P batched products)."""
-    M = _step_transforms(chain.constants, chain.columns, chain.revolute, chain.prismatic, q)
-    while M.shape[1] > 1:
-        M = M[:, 0::2] @ M[:, 1::2]
-    return M[:, 0]
-
-
-def _tree_com(tree: _Tree, q: np.ndarray) -> np.ndarray:
-    """(B, 3) mass-weighted sum of the body points of ``tree`` at ``q`` (B, n), depth by depth."""
-    M = _step_transforms(tree.constants, tree.columns, tree.revolute, not tree.revolute.all(), q)
-    for steps, parents in tree.levels:  # depth 0 is in the world already
-        M[:, steps] = M[:, parents] @ M[:, steps]
-    return M.reshape(len(q), -1) @ tree.weights + tree.fixed
-
-
-def _motion(m: _Motion, angle: np.ndarray) -> np.ndarray:
-    """(B, 4, 4) homogeneous transform of a revolute or prismatic motion."""
-    T = np.zeros((len(angle), 4, 4))
-    T[:, 3, 3] = 1.0
-    if m.kind == "P":
-        T[:, :3, :3] = np.eye(3)
-        T[:, :3, 3] = angle[:, None] * m.axis
-        return T
-    x, y, z = m.axis
-    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    T[:, :3, :3] = np.eye(3) + s * K + (1 - c) * (K @ K)
-    return T
 
 
 def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None:
