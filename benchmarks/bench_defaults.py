@@ -23,6 +23,7 @@ import statistics
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,6 +61,8 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
     """Pipeline and benchmark of one ``TASK@SCENE``; one summary row per method."""
     name, _, scene = entry.partition("@")
     task = task_path(name)
+    if scene not in tomllib.loads(task.read_text()).get("scenes", {}):
+        raise SystemExit(f"{entry}: task file {task.name} names no scene '{scene}'")
     folder = out / f"{task.stem}-{scene}"
     folder.mkdir(parents=True, exist_ok=True)
     log = folder / "log.txt"
@@ -89,6 +92,8 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
                           *(["--resume"] if (bench / "runs.jsonl").exists() else [])], log)
         if code == 0:
             break
+    if not (bench / "runs.jsonl").exists():
+        raise SystemExit(f"bench plan failed for {entry}; see {log}")
     records = [json.loads(line) for line in (bench / "runs.jsonl").read_text().splitlines() if line.strip()]
     rows = []
     for method in ("learned", "project", atlas.partition("=")[0]):

@@ -256,7 +256,7 @@ def test_talos_balanced_path_stays_up_and_unbalanced_falls(talos_task):
 def test_each_segment_is_eased_from_rest_within_speed_and_acceleration_limits(talos_task):
     """A short base shift is paced by the base's acceleration limit, a long joint swing by its speed limit; the
     planned motion is at rest at every waypoint and never exceeds either limit (no kick at the waypoints)."""
-    from manifoldgen.physics import _Simulation
+    from manifoldgen.physics.simulate import Simulation as _Simulation
 
     settings, home, n = PhysicsSettings(), talos_task.home, talos_task.robot.n
     path = np.stack([home, home + 0.01 * np.eye(n)[0], home + 0.01 * np.eye(n)[0] + 0.5 * np.eye(n)[20]])
