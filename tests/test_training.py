@@ -195,3 +195,36 @@ def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_p
     saved = load_model(tmp_path / "m")
     assert saved.name == winner["model"] and saved.mix == winner["mix"]
     assert json.loads((tmp_path / "m" / "selection.json").read_text())["race"] == raced
+
+
+def test_a_step_with_a_non_finite_loss_is_skipped_and_a_divergence_keeps_the_best_epoch(tiny, monkeypatch):
+    """A NaN loss leaves the weights and the optimiser as they were (the step counts as skipped); a validation score
+    that is not finite after good epochs stops training there and keeps the best epoch before it."""
+    model = CVAE(**TINY)
+    real_losses, calls = CVAE._losses, []
+
+    def nan_once(self, *args):
+        calls.append(1)
+        losses = real_losses(self, *args)
+        return {**losses, "loss": losses["loss"] * float("nan")} if len(calls) == 2 else losses
+
+    monkeypatch.setattr(CVAE, "_losses", nan_once)
+    log = model.fit(tiny, epochs=1, seed=0, progress=False)
+    assert log.history[0]["train"]["skipped"] > 0 and np.isfinite(log.best_val)
+    assert all(torch.isfinite(p).all() for p in model.nets.parameters())
+    monkeypatch.setattr(CVAE, "_losses", real_losses)
+
+    real_val, epochs = CVAE._validation_loss, []
+
+    def diverge_at_three(self, *args):
+        epochs.append(1)
+        return float("nan") if len(epochs) == 3 else real_val(self, *args)
+
+    monkeypatch.setattr(CVAE, "_validation_loss", diverge_at_three)
+    model = CVAE(**TINY)
+    log = model.fit(tiny, epochs=6, seed=0, progress=False)
+    assert log.diverged_at == 3 and log.stopped_early and len(log.history) == 2 and log.best_epoch in (1, 2)
+    assert np.isfinite(model.sample([0.4], 20)).all()
+    monkeypatch.setattr(CVAE, "_validation_loss", lambda self, *a: float("nan"))
+    with pytest.raises(ManifoldgenError, match="diverged at epoch 1"):
+        CVAE(**TINY).fit(tiny, epochs=3, seed=0, progress=False)

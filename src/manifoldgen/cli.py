@@ -324,8 +324,10 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
         net, table, raced = select_model(data, output, seed=seed, epochs=epochs, resume=resume, task=task_obj)
         for row in table:
             verdict = ("kept  " if raced else "chosen") if row["chosen"] else "tried "  # raced: the race chooses
+            diverged = (f" (diverged at epoch {row['diverged_at']}: epoch {row['best_epoch']} kept)"
+                        if row.get("diverged_at") else "")
             console.print(f"{verdict} {row['model']}: {row['epochs']} epochs in "
-                          f"{row['seconds']:.0f} s; on held-out rows {row['accuracy']:.1%} of raw samples within "
+                          f"{row['seconds']:.0f} s{diverged}; on held-out rows {row['accuracy']:.1%} of raw samples within "
                           f"tolerance, recall {row['recall']:.2f}", markup=False)
         for row in raced:
             console.print(f"{'chosen' if row['chosen'] else 'raced '} {row['label']} on the task's scenes: "
@@ -341,6 +343,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
         log = net.fit(data, epochs=epochs, seed=seed, out=output, resume=resume, task=task_obj)
         console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
                       f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}"
+                      f"{f', diverged at epoch {log.diverged_at}' if log.diverged_at else ''}"
                       f") -> {output} (model.json, model.safetensors, loss.png)")
     gaps = _model_gap_lines(net, seed)
     if gaps:

@@ -98,7 +98,9 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
         models[name] = load_model(folder)
         log = json.loads((folder / "training.json").read_text())
         table.append({"model": name, **score(models[name], task, dataset.q[held_out], dataset.y[held_out], seed),
-                      "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1)})
+                      "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1),
+                      **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]}
+                         if log.get("diverged_at") else {})})
     best_recall = max(row["recall"] for row in table)
     ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
     raced = race(models, ruled["model"], task, dataset.meta.get("scenes") or [], progress=progress) \

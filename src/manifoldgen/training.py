@@ -94,6 +94,7 @@ class TrainingLog:
     best_val: float = float("inf")
     stopped_early: bool = False
     resumed_at: int | None = None
+    diverged_at: int | None = None  # the epoch whose validation score was not finite (training stopped there)
 
     @property
     def seconds(self) -> float:
@@ -278,8 +279,11 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
                                      + f" | val {log.best_val:.4g}")
                 val = model._validation_loss(q_val, y_val, torch.Generator().manual_seed(seed + epoch))
                 if not np.isfinite(val):
-                    raise ManifoldgenError(f"training diverged at epoch {epoch + 1} (validation loss {val}); "
-                                           "lower the learning rate (lr) or the loss weights you set, or try another seed")
+                    if not log.best_epoch:
+                        raise ManifoldgenError(f"training diverged at epoch {epoch + 1} (validation loss {val}); lower "
+                                               "the learning rate (lr) or the loss weights you set, or try another seed")
+                    log.diverged_at, log.stopped_early = epoch + 1, True  # the best epoch before it is kept
+                    break
                 log.history.append({"epoch": epoch + 1, "train": {k: v / steps for k, v in sums.items()},
                                     "val": val, "seconds": time.perf_counter() - tic})
                 if val < log.best_val:

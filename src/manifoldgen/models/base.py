@@ -328,12 +328,18 @@ class SingleLossSampler(ConditionalSampler):
         """The losses on a normalised batch; ``"loss"`` is minimised, the others are logged."""
 
     def _train_step(self, q, y, y_free, optimizers, generator):
+        """One update, skipped when the loss or a gradient is not finite (a NaN would poison the optimiser's
+        moments for good); ``skipped`` (0 or 1) says which."""
         self.nets.train()
         losses = self._losses(q, y, y_free, generator)
         optimizers[0].zero_grad()
-        losses["loss"].backward()
-        optimizers[0].step()
-        return {key: float(v.detach()) for key, v in losses.items()}
+        finite = bool(torch.isfinite(losses["loss"]))
+        if finite:
+            losses["loss"].backward()
+            finite = all(bool(torch.isfinite(p.grad).all()) for p in self.nets.parameters() if p.grad is not None)
+        if finite:
+            optimizers[0].step()
+        return {**{key: float(v.detach()) for key, v in losses.items()}, "skipped": float(not finite)}
 
     def _validation_loss(self, q, y, generator):
         self.nets.eval()

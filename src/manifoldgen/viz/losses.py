@@ -31,11 +31,12 @@ def plot_training(log: TrainingLog, path: str | Path) -> None:
     epochs = [h["epoch"] for h in log.history]
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.6))
     for key in (log.history[0]["train"] if log.history else {}):
-        values = [h["train"][key] for h in log.history]
-        left.plot(epochs, values, label=key)
+        if key != "skipped":  # the share of steps skipped for a non-finite loss: said in the title
+            left.plot(epochs, [h["train"][key] for h in log.history], label=key)
     left.set_yscale("symlog", linthresh=1e-2)
     left.set_xlabel("epoch")
-    left.set_title(f"{log.model}: training losses")
+    skipped = sum(h["train"].get("skipped", 0.0) for h in log.history)
+    left.set_title(f"{log.model}: training losses" + (" (steps with a non-finite loss skipped)" if skipped else ""))
     left.legend(fontsize=8)
     right.plot(epochs, [h["val"] for h in log.history], color="k")
     if log.best_epoch:
