@@ -1,6 +1,7 @@
 """The planning benchmark harness: same seeds for every method, JSONL records, reports, resume."""
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -116,12 +117,32 @@ def test_summary_counts_failures_at_the_limit():
     assert "speed-up" not in none.splitlines()[0] and "the baseline a solved none of its runs" in none
 
 
+RECORD = {"method": "a", "spec": "a=rrtconnect@project", "run": 0, "seed": 0, "scene": "wall", "time_limit": 1.0,
+          "solved": False, "planner_solved": False, "valid": False, "time_s": 1.0, "length": 0.0, "iterations": 3,
+          "samples_drawn": 10, "projections": 0, "waypoints": 0, "cpu_s": 0.9}
+
+
 def test_truncated_last_line_is_ignored(tmp_path):
     path = tmp_path / "runs.jsonl"
-    path.write_text('{"method": "a", "run": 0}\n{"method": "a", "ru')
-    assert read_records(path) == [{"method": "a", "run": 0}]
+    line = json.dumps(RECORD)
+    path.write_text(line + '\n{"method": "a", "ru')
+    assert read_records(path) == [RECORD]
     drop_truncated_line(path)
-    assert path.read_text() == '{"method": "a", "run": 0}\n'
-    path.write_text('{"method": "a", "ru\n{"method": "a", "run": 0}\n')
+    assert path.read_text() == line + "\n"
+    path.write_text('{"method": "a", "ru\n' + line + "\n")
     with pytest.raises(ManifoldgenError, match="line 1"):
+        read_records(path)
+
+
+@pytest.mark.parametrize("change, problem", [
+    ({"solved": "yes"}, "solved is 'yes'"), ({"cpu_s": -5}, "cpu_s is -5"), ({"time_s": float("nan")}, "time_s is nan"),
+    ({"run": True}, "run is True"), ({"method": None}, "method is None"), ({"solved": True, "valid": True},
+                                                                          "a solved run without its path")])
+def test_a_tampered_record_is_refused_on_reading(tmp_path, change, problem):
+    path = tmp_path / "runs.jsonl"
+    path.write_text(json.dumps(RECORD) + "\n" + json.dumps({**RECORD, "run": 1, **change}) + "\n")
+    with pytest.raises(ManifoldgenError, match=f"line 2 is not a run record as bench writes it \\({re.escape(problem)}"):
+        read_records(path)
+    path.write_text(json.dumps(RECORD) + "\n" + json.dumps(RECORD) + "\n")
+    with pytest.raises(ManifoldgenError, match="a second record of run 0 of 'a'"):
         read_records(path)

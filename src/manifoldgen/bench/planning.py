@@ -363,7 +363,7 @@ def read_records(path: Path) -> list[dict]:
     """Records of a ``runs.jsonl``; a truncated last line (an interrupted write) is ignored."""
     if not path.is_file():
         return []
-    records = []
+    records, seen = [], set()
     lines = path.read_text().splitlines()
     for i, line in enumerate(lines):
         if not line.strip():
@@ -375,12 +375,45 @@ def read_records(path: Path) -> list[dict]:
                 break
             raise ManifoldgenError(f"{path} line {i + 1} is not JSON ({exc}); remove that line or rerun into "
                                    "another folder") from None
-        if not (isinstance(record, dict) and isinstance(record.get("method"), str)
-                and isinstance(record.get("run"), int)):
-            raise ManifoldgenError(f"{path} line {i + 1} is not a run record (method, run, ...); remove that line "
-                                   "or rerun into another folder")
+        problem = record_problem(record)
+        key = (record.get("method"), record.get("run")) if isinstance(record, dict) else None
+        if not problem and key in seen:
+            problem = f"a second record of run {key[1]} of '{key[0]}'"
+        if problem:
+            raise ManifoldgenError(f"{path} line {i + 1} is not a run record as bench writes it ({problem}); remove "
+                                   "that line or rerun into another folder")
+        seen.add(key)
         records.append(record)
     return records
+
+
+# what every run record holds (run_once): its type, and for numbers the least value
+_RECORD_FIELDS = {"method": str, "spec": str, "run": int, "seed": int, "scene": str, "time_limit": float,
+                  "solved": bool, "planner_solved": bool, "valid": bool, "time_s": float, "length": float,
+                  "iterations": int, "samples_drawn": int, "projections": int, "waypoints": int}
+
+
+def record_problem(record) -> str:
+    """What is wrong with a run record read back from a ``runs.jsonl`` ('' when nothing): a missing field, a wrong
+    type, a negative or non-finite number, a solved run without its path."""
+    if not isinstance(record, dict):
+        return "not an object"
+    for key, kind in _RECORD_FIELDS.items():
+        value = record.get(key)
+        if kind is float:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value) and value >= 0
+        elif kind is int:
+            ok = isinstance(value, int) and not isinstance(value, bool) and (value >= 0 or key == "seed")
+        else:
+            ok = isinstance(value, kind)
+        if not ok:
+            return f"{key} is {value!r}"
+    cpu = record.get("cpu_s", 0.0)
+    if not (isinstance(cpu, (int, float)) and not isinstance(cpu, bool) and np.isfinite(cpu) and cpu >= 0):
+        return f"cpu_s is {cpu!r}"
+    if record["solved"] and not isinstance(record.get("path"), list):
+        return "a solved run without its path"
+    return ""
 
 
 def drop_truncated_line(path: Path) -> None:
