@@ -249,3 +249,22 @@ def test_benchmark_workers_die_with_their_parent(tmp_path):
     finally:
         parent.kill()
         parent.wait()
+
+
+@pytest.mark.parametrize("field, value, problem", [("accuracy", 5.0, "accuracy is 5.0, not a share from 0 to 1"),
+                                                   ("recall", "high", "recall is 'high'"),
+                                                   ("seed", None, "its model or seed is missing")])
+def test_a_tampered_sweep_file_is_refused_on_resume(tmp_path, field, value, problem):
+    """A sweep's scores rank its candidates: a resume reads them back whole and refuses a row that is not what a
+    sweep writes, naming the row and the field."""
+    from manifoldgen.model_sweep import SWEEP_FILE, sweep
+    from manifoldgen.tasks import get_task
+    dataset = collect(get_task("sphere"), 60, 0, batch=64, progress=False)
+    args = dict(models=["cvae"], latents=[2], seeds=[0], epochs=1, progress=False)
+    rows = sweep(dataset, tmp_path / "s", **args)
+    path = tmp_path / "s" / SWEEP_FILE
+    table = json.loads(path.read_text())
+    table["candidates"][0][field] = value
+    path.write_text(json.dumps(table))
+    with pytest.raises(ManifoldgenError, match=f"is damaged \\({rows[0]['name']}: {problem}"):
+        sweep(dataset, tmp_path / "s", **args)

@@ -102,13 +102,28 @@ def _finished(out: Path, settings: dict) -> dict[str, dict]:
     try:
         old = json.loads(path.read_text())
         rows = {row["name"]: row for row in old["candidates"]}
+        damaged = next((f"{name}: {why}" for name, row in rows.items() if (why := _row_problem(row))), "")
     except (ValueError, KeyError, TypeError):
-        raise ManifoldgenError(f"{path} is damaged; delete it to start the sweep over") from None
+        damaged = "not the JSON a sweep writes"
+    if damaged:
+        raise ManifoldgenError(f"{path} is damaged ({damaged}); delete it to start the sweep over")
     if old.get("settings") != settings:
         raise ManifoldgenError(f"{out} holds a sweep made with other settings (dataset, models, latent sizes, seeds "
                                "or epochs); rerun the same command to resume it, or choose another folder")
     return {name: row for name, row in rows.items()
             if all((out / "candidates" / name / file).is_file() for file in MODEL_FILES)}
+
+
+def _row_problem(row: dict) -> str:
+    """What is wrong with a candidate's row read back from a sweep file ('' when nothing): its scores rank the
+    candidates, so they must be what :func:`train_candidate` writes."""
+    for key in ("accuracy", "recall"):
+        value = row.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
+            return f"{key} is {value!r}, not a share from 0 to 1"
+    if not isinstance(row.get("model"), str) or isinstance(row.get("seed"), bool) or not isinstance(row.get("seed"), int):
+        return "its model or seed is missing"
+    return ""
 
 
 def _write(out: Path, settings: dict, rows: list[dict]) -> None:
