@@ -211,3 +211,20 @@ def test_pretrained_model_ships_and_samples(task):
     assert abs(task.constraint.satisfied(native, [0.45]).mean() - rate) < 0.05
     with pytest.raises(ManifoldgenError, match="no pretrained model"):
         pretrained_model_dir("nope")
+
+
+def test_a_cvae_posterior_variance_too_large_for_float32_keeps_the_losses_finite(trained, tiny):
+    """An encoder whose log-variance runs away (exp overflows float32 past 88) still gives finite losses: the
+    log-variance is clamped to LOGVAR_RANGE, so one wild batch cannot turn the KL and the reconstruction infinite."""
+    from manifoldgen.models.cvae import LOGVAR_RANGE
+    model = MODELS.get("cvae")(**_hyper("cvae"))
+    model.fit(tiny, epochs=1, seed=1, progress=False)
+    last = [m for m in model.nets["encoder"].modules() if isinstance(m, torch.nn.Linear)][-1]
+    with torch.no_grad():
+        last.bias[model.config["latent"]:] = 1e3  # the log-variance half
+    q = model.normalise_q(torch.as_tensor(tiny.q[:16], dtype=torch.float32))
+    y = model.normalise_y(torch.as_tensor(tiny.y[:16], dtype=torch.float32))
+    _, logvar, z = model._encode(q, y, torch.Generator().manual_seed(0))
+    assert float(logvar.detach().max()) == LOGVAR_RANGE[1] and torch.isfinite(z).all()
+    losses = model._losses(q, y, y, torch.Generator().manual_seed(0))
+    assert all(torch.isfinite(v) for v in losses.values())

@@ -13,6 +13,10 @@ import torch
 from manifoldgen.models.adam import Adam
 from manifoldgen.models.base import SingleLossSampler, mlp
 
+# the posterior's log-variance is kept here: beyond it exp() overflows float32 (an infinite KL and reconstruction,
+# seen on centauro's 39 coordinates at the defaults) or the variance is below any joint's resolution
+LOGVAR_RANGE = (-30.0, 20.0)
+
 
 class CVAE(SingleLossSampler):
     """Encoder q(z | q, y), decoder q = D(z, y); reconstruction is squared error in normalised units."""
@@ -42,6 +46,7 @@ class CVAE(SingleLossSampler):
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Posterior mean, log-variance and a reparametrised sample, each (B, latent)."""
         mu, logvar = self.nets["encoder"](torch.cat([q, y], dim=1)).chunk(2, dim=1)
+        logvar = logvar.clamp(*LOGVAR_RANGE)
         return mu, logvar, mu + torch.exp(0.5 * logvar) * torch.randn(mu.shape, generator=generator)
 
     def _losses(self, q, y, y_free, generator) -> dict[str, torch.Tensor]:
