@@ -26,6 +26,8 @@ import time
 import tomllib
 from pathlib import Path
 
+from manifoldgen.bench.planning import read_records
+
 ROOT = Path(__file__).resolve().parents[1]
 HELDOUT = ["dualarm-tiago.toml@tray-over", "balance-g1.toml@reach", "sphere-ur5.toml@shelves",
            "pose-kinova.toml@pillars"]
@@ -92,9 +94,9 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
                           *(["--resume"] if (bench / "runs.jsonl").exists() else [])], log)
         if code == 0:
             break
-    if not (bench / "runs.jsonl").exists():
+    else:
         raise SystemExit(f"bench plan failed for {entry}; see {log}")
-    records = [json.loads(line) for line in (bench / "runs.jsonl").read_text().splitlines() if line.strip()]
+    records = read_records(bench / "runs.jsonl")
     rows = []
     for method in ("learned", "project", atlas.partition("=")[0]):
         mine = [r for r in records if r["method"] == method]

@@ -75,7 +75,8 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
         half = SEEDS // 2
         seeds[:half] = np.clip(near + rng.normal(0.0, NEAR_SPREAD, (half, robot.n)), robot.lower, robot.upper)
     # the compiled core's projection and validity where it takes the task (the same algorithm, faster)
-    reached = fast_space(ConstrainedSpace(both, yy, checker)).project(seeds, max_iters=100).q
+    on_target = fast_space(ConstrainedSpace(both, yy, checker))
+    reached = on_target.project(seeds, max_iters=100).q
     # tight on the task's manifold; the target need not lie exactly on it
     on = fast_space(ConstrainedSpace(constraint, np.asarray(y, float), checker)).project(reached)
     if not on.converged.any():
@@ -84,7 +85,7 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
                                f"({SEEDS} projected seeds); choose a condition inside "
                                f"{constraint.condition.describe()}")
     q = on.q[on.converged]
-    valid = q[ConstrainedSpace(both, yy, checker).valid(q)]
+    valid = q[on_target.valid(q)]
     if not len(valid):
         at = f"at condition {np.round(y, 4).tolist()} puts {frame} at the {what} target {target}"
         reaching = reach.satisfied(q, np.broadcast_to(target["position"], (len(q), 3)))
