@@ -278,3 +278,23 @@ def test_reach_bounds_the_stepping_stones_in_both_searches(panda_task, wall):
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ManifoldgenError, match="reach must be a positive distance"):
             RRTConnectSettings(reach=bad).check()
+
+
+def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_callbacks(panda_task, wall):
+    """What collect and the scene targets use: the core's projection and validity where it takes the constraint
+    whole (the same iterations, states and verdicts as the numpy reference), the space itself where a part would
+    run through Python callbacks."""
+    from manifoldgen.constraints import PlaneConstraint, project
+    space, _ = _planner(panda_task, wall, 0)
+    fast = native.fast_space(space)
+    assert isinstance(fast, native.NativeSpace) and native.fast_space(space) is fast  # built once per space
+    seeds = panda_task.robot.sample_uniform(64, np.random.default_rng(0))
+    ours, theirs = fast.project(seeds.copy()), project(space.constraint, seeds.copy(), space.y)
+    np.testing.assert_array_equal(ours.converged, theirs.converged)
+    np.testing.assert_array_equal(ours.iterations, theirs.iterations)
+    np.testing.assert_allclose(ours.q, theirs.q, rtol=0, atol=1e-8)
+    np.testing.assert_array_equal(fast.valid(ours.q), space.valid(ours.q))
+    plane = ConstrainedSpace(PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]]), [0.5])
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(native, "COMPILE", False)  # the plane then reaches the core through callbacks
+        assert native.fast_space(plane) is plane
