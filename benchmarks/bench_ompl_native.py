@@ -13,8 +13,8 @@ retry policy. Prints per scene and method: success, median CPU and wall time (an
 counts as slower than every solved one; CPU includes the dense check of the returned paths; the C++
 baseline's is its program's plus that check, not the harness that starts it and passes paths), and the median coal collision checks, sphere tests (ours with
 ``--set spheres=true``), FK evaluations, samples drawn (ours: rows decoded by the CVAE; OMPL's: by its
-own sampler) and, ours, samples used (refined and checked when the search first used them, valid) of
-the solved runs, with spheres also the certified sweep tests of the dense checks and the collision queries (sphere
+own sampler) and, ours, samples used (refined and checked when the search first used them, valid), and the
+path length (joint-space, rad) of the solved runs, with spheres also the certified sweep tests of the dense checks and the collision queries (sphere
 tests + sweep tests); each
 scene's full report (``results.md``, every run in ``runs.jsonl``) is in OUT/SCENE.
 """
@@ -53,6 +53,7 @@ def summary(records: list[dict], methods: list[str], scene: str) -> list[str]:
         sweeps = [r["extras"].get("sweep_checks", 0) for r in solved]
         queries = [a + b for a, b in zip(spheres, sweeps)]
         used = [r["extras"]["sampler"]["accepted"] for r in solved if "sampler" in r.get("extras", {})]
+        length = f"{np.median([r['length'] for r in solved]):.2f}" if solved else "-"
         native = [r["extras"]["native_cpu_s"] for r in solved if "native_cpu_s" in r.get("extras", {})]
         rows.append(f"| {scene} | {method} | {len(solved)}/{len(runs)} | "
                     f"{_median([r['cpu_s'] for r in solved], failed)} | "
@@ -61,7 +62,8 @@ def summary(records: list[dict], methods: list[str], scene: str) -> list[str]:
                     f"{f'{np.median(spheres):,.0f}' if any(spheres) else '-'} | "
                     f"{f'{np.median(sweeps):,.0f}' if any(sweeps) else '-'} | "
                     f"{f'{np.median(queries):,.0f}' if any(sweeps) else '-'} | {ops['fk']} | {ops['samples']} | "
-                    f"{f'{np.median(used):,.0f}' if used else '-'} |")
+                    f"{f'{np.median(used):,.0f}' if used else '-'} | "
+                    f"{length} |")
     return rows
 
 
@@ -91,8 +93,10 @@ def main() -> None:
     labels = [m.split("=")[0] for m in methods]
     lines = ["| scene | method | solved | median CPU (s) | of which C++ OMPL, solved (s) | median wall (s) "
              "| coal collision checks, solved (median) | sphere tests | sweep tests | collision queries (sphere + sweep "
-             "tests) | FK evaluations, solved (median) | samples drawn, solved (median) | samples used (made valid) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "tests) | FK evaluations, solved (median) | samples drawn, solved (median) | samples used (made valid) "
+             "| path length, solved (rad, median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    Path(args.out).mkdir(parents=True, exist_ok=True)
     for scene in args.scenes:
         out = Path(args.out) / scene
         run_bench(Experiment(scene, time_limit=args.time, seed=args.seed, planner_settings=settings), methods, out,

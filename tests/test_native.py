@@ -249,6 +249,30 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeyp
     assert 2 * lazy_jacobians < eager_space.counts()["jacobians"] - before["jacobians"]
 
 
+def test_the_core_shortens_its_paths_within_the_query(panda_task, wall):
+    """The core's shortcuts (``shortcut`` attempts, native/src/planner.cpp ``Search::shorten``) start from the path
+    its search found (the same search with shortcut=0) and end shorter, with the same ends, valid state by state."""
+    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.specs import make_sampler
+
+    def plan(shortcut):
+        space = ConstrainedSpace(panda_task.constraint, wall.condition, wall.checker(panda_task.robot))
+        planner = RRTConnect(space, make_sampler(f"cvae:{pretrained_model_dir()}", space, 3), seed=3,
+                             settings=RRTConnectSettings(core="native", shortcut=shortcut))
+        return space, planner.solve(wall.start, wall.goal, 20.0)
+
+    _, found = plan(0)
+    space, short = plan(50)
+    assert found.solved and short.solved and short.extras["core"] == "native" and "shortcuts" not in found.extras
+    assert short.extras["found_length"] == pytest.approx(found.length, rel=1e-12)
+    assert short.extras["shortcuts"] > 0 and short.length < found.length
+    np.testing.assert_array_equal(short.path[[0, -1]], found.path[[0, -1]])
+    states = densify(short.path, space.settings.resolution)[0]
+    assert panda_task.constraint.violation(states, space.y).max() <= 1.0
+    assert panda_task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+
+
 def test_reach_bounds_the_stepping_stones_in_both_searches(panda_task, wall):
     """``reach``: a pooled sample is a stepping stone within min(reach, range) of a tree; the core takes the
     setting (another search, its path valid state by state), the Python search's pool gets the same radius,

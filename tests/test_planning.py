@@ -172,14 +172,20 @@ def test_sbl_moves_the_nodes_beyond_a_failed_edge_to_the_other_tree():
     assert planner._extras()["lazy"] == {"edges_checked": 2, "edges_removed": 1}
 
 
-def test_shortcut_keeps_the_constraint_and_never_lengthens():
-    planner, space, start, goal = _planner("rrt", "interpolate", corridor_problem, seed=1)
-    result = planner.solve(start, goal, 20.0)
-    short = shortcut(result.path, planner.local, np.random.default_rng(0), attempts=200)
-    assert np.allclose(short[0], start) and np.allclose(short[-1], goal)
+def test_shortcut_keeps_the_constraint_and_shortens():
+    """Shortcuts (the planners' ``shortcut`` setting, ``--smooth``): the same ends, a path valid by the dense check,
+    shorter than the path as found; 0 attempts (the default) keep the path as found."""
+    planner, space, start, goal = _planner("rrt", "interpolate", corridor_problem, seed=1, shortcut=0)
+    found = planner.solve(start, goal, 20.0)
+    assert "shortcuts" not in found.extras
+    short, kept = shortcut(found.path, planner.local, attempts=200)
+    assert kept > 0 and np.allclose(short[0], start) and np.allclose(short[-1], goal)
     assert space.validate_path(short).valid
-    length = np.linalg.norm(np.diff(short, axis=0), axis=1).sum()
-    assert length <= result.length + 1e-9 and len(short) <= len(result.path)
+    assert np.linalg.norm(np.diff(short, axis=0), axis=1).sum() < found.length - 0.1
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=50)
+    result = planner.solve(start, goal, 20.0)
+    _check(result, space, start, goal)
+    assert result.extras["shortcuts"] > 0 and result.length < result.extras["found_length"] - 0.1
 
 
 @pytest.mark.slow

@@ -285,6 +285,9 @@ struct PlannerSettings {
   // reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of one of its nodes
   // (else range)
   double reach;
+  // shortcut > 0: a found path is shortened by that many shortcut attempts (planner.cpp Search::shorten; the
+  // Python planners' planning/smoothing.py draws the same points), each kept only when its stretch passes the path check
+  int shortcut;
 };
 
 struct PlanOutput {
@@ -293,6 +296,8 @@ struct PlanOutput {
   long verified_states = 0;  // states of coarse edges checked for collision on candidate paths (Search::verify)
   long reattached = 0;  // cut edges whose node found another parent (the rest left the search with their subtrees)
   long refined = 0, accepted = 0;  // raw candidates made samples when first used (refine >= 0), and of those valid
+  long shortcuts = 0;  // shortcuts kept (settings.shortcut)
+  double found_length = 0;  // the path's length before its shortcuts
   std::vector<long> nodes;
 };
 

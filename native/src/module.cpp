@@ -452,25 +452,27 @@ NB_MODULE(manifoldgen_core, m) {
           "__init__",
           [](mgcore::PlannerSettings* s, double range, double resolution, double step, bool partial, int pool,
              int pool_batch, int candidates, int target_batch, const std::string& local, int edge_stride,
-             bool dense_edges, int refine, double reach) {
+             bool dense_edges, int refine, double reach, int shortcut) {
             if (edge_stride < 1) throw std::invalid_argument("edge_stride must be at least 1 (1: every state checked at once)");
             new (s) mgcore::PlannerSettings{range, resolution, step, partial, pool, pool_batch, candidates,
-                                            target_batch, local, edge_stride, dense_edges, refine, reach};
+                                            target_batch, local, edge_stride, dense_edges, refine, reach, shortcut};
           },
           nb::kw_only(), "range"_a, "resolution"_a, "step"_a, "partial"_a, "pool"_a, "pool_batch"_a, "candidates"_a,
-          "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a,
+          "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a, "shortcut"_a,
           "RRT-Connect's settings, every field given (no defaults: manifoldgen.native.core_settings fills them from "
           "the planner's settings). edge_stride > 1: motions are checked for collision at every edge_stride-th state "
           "and at nodes while searching, the rest on candidate paths; dense_edges: each motion passes the path check "
           "when it is made (after a pre-check of every edge_stride-th state), so no candidate path is rejected; "
           "refine >= 0: draw gives raw candidates, each refined (refine projection iterations) and checked when the "
           "search first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
-          "of its nodes (else range).")
+          "of its nodes (else range); shortcut > 0: that many shortcut attempts on a found path, each kept when "
+          "its stretch passes the path check.")
       .def_ro("range", &mgcore::PlannerSettings::range)
       .def_ro("edge_stride", &mgcore::PlannerSettings::edge_stride)
       .def_ro("dense_edges", &mgcore::PlannerSettings::dense_edges)
       .def_ro("refine", &mgcore::PlannerSettings::refine)
-      .def_ro("reach", &mgcore::PlannerSettings::reach);
+      .def_ro("reach", &mgcore::PlannerSettings::reach)
+      .def_ro("shortcut", &mgcore::PlannerSettings::shortcut);
 
   m.def(
       "rrt_connect",
@@ -496,6 +498,8 @@ NB_MODULE(manifoldgen_core, m) {
         d["reattached"] = out.reattached;
         d["refined"] = out.refined;
         d["accepted"] = out.accepted;
+        d["shortcuts"] = out.shortcuts;
+        d["found_length"] = out.found_length;
         d["nodes"] = out.nodes;
         return d;
       },
@@ -504,5 +508,6 @@ NB_MODULE(manifoldgen_core, m) {
       "(valid samples, or raw candidates where settings.refine >= 0). A dict: path (K, n) (0 rows: unsolved), "
       "iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, verified_states (coarse edges' "
       "states checked on candidate paths), reattached (cut edges whose node got another parent), refined, "
-      "accepted (raw candidates made samples, and of those valid), nodes.");
+      "accepted (raw candidates made samples, and of those valid), shortcuts (kept), found_length (before them), "
+      "nodes.");
 }

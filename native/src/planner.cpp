@@ -791,6 +791,94 @@ struct Search {
     return finish(waypoints, edges);
   }
 
+  // Shortcuts (settings.shortcut attempts while time is left; planning/smoothing.py is the same in Python): attempt
+  // a = 1, 2, ... joins the points A and B at arc-length fractions u < v of the current path, (u, v) the sorted
+  // (a * ALPHA[0], a * ALPHA[1]) mod 1 (an additive recurrence: evenly spread pairs, no random state), by a straight
+  // motion, else (the chord leaves the manifold) by a projected walk. The new stretch, from the waypoint before A
+  // to the one after B, replaces the old one only when it is shorter and passes the path check (Space::validate_path:
+  // every dense state, the same check as any path's; the new motion is checked at the planning resolution first, as
+  // the search checks its motions), so the path stays valid at every step.
+  static constexpr double ALPHA[2] = {0.7548776662466927, 0.5698402909980532};
+  void shorten() {
+    RowMat& path = out.path;
+    const int nn = space.n();
+    out.found_length = length(path);
+    local.dense = false;
+    for (int a = 1; a <= s.shortcut && path.rows() > 2 && time_left(); ++a) {
+      std::vector<double> cum(path.rows(), 0.0);
+      for (long k = 1; k < path.rows(); ++k) cum[k] = cum[k - 1] + (path.row(k) - path.row(k - 1)).norm();
+      double u = std::fmod(a * ALPHA[0], 1.0), v = std::fmod(a * ALPHA[1], 1.0);
+      if (u > v) std::swap(u, v);
+      const double total = cum.back(), from = u * total, to = v * total;
+      const long i = segment_at(cum, from), j = segment_at(cum, to);
+      if (i == j) continue;  // one straight segment already
+      const Vec A = point_at(path, cum, i, from), B = point_at(path, cum, j, to);
+      if ((B - A).norm() >= to - from - 1e-9) continue;
+      // the new motion at the planning resolution first (most attempts end there), then densely, then the flanks
+      RowMat piece = B.transpose();
+      const States chord = local.segment_states(A.data(), B.data());
+      if (!local.all_valid(chord, static_cast<int>(chord.rows()), true, true)) {
+        if (space.stop != CONSTRAINT || !local.walks) continue;
+        auto w = local.walk(A.data(), B.data(), INF, false);
+        if (!w.second || length(A, w.first) >= to - from - 1e-9) continue;
+        piece = w.first;
+      }
+      RowMat motion(piece.rows() + 1, nn);
+      motion << A.transpose(), piece;
+      if (!space.validate_path(motion.data(), static_cast<int>(motion.rows()), true).valid ||
+          !flank_valid(path.row(i).transpose(), A) || !flank_valid(B, path.row(j + 1).transpose()))
+        continue;
+      const RowMat stretch = stretch_of(path, i, A, piece, j);
+      RowMat shorter(i + stretch.rows() + (path.rows() - j - 2), nn);
+      shorter.topRows(i) = path.topRows(i);
+      shorter.middleRows(i, stretch.rows()) = stretch;
+      shorter.bottomRows(path.rows() - j - 2) = path.bottomRows(path.rows() - j - 2);
+      path = drop_repeats(shorter);
+      ++out.shortcuts;
+    }
+  }
+  // Whether the straight motion a -> b passes the path check.
+  bool flank_valid(const Vec& a, const Vec& b) {
+    RowMat ends(2, space.n());
+    ends << a.transpose(), b.transpose();
+    return space.validate_path(ends.data(), 2, true).valid;
+  }
+  static double length(const RowMat& p) {
+    double l = 0.0;
+    for (long k = 1; k < p.rows(); ++k) l += (p.row(k) - p.row(k - 1)).norm();
+    return l;
+  }
+  static double length(const Vec& a, const RowMat& rest) {  // a, then rest's rows
+    return (rest.row(0).transpose() - a).norm() + length(rest);
+  }
+  // The segment k (path rows k, k + 1) holding arc length t, cum the rows' arc lengths (K,).
+  static long segment_at(const std::vector<double>& cum, double t) {
+    const long k = std::upper_bound(cum.begin(), cum.end(), t) - cum.begin() - 1;
+    return std::clamp<long>(k, 0, static_cast<long>(cum.size()) - 2);
+  }
+  static Vec point_at(const RowMat& path, const std::vector<double>& cum, long k, double t) {
+    const double span = cum[k + 1] - cum[k], f = span > 0 ? (t - cum[k]) / span : 0.0;
+    return (path.row(k) + (path.row(k + 1) - path.row(k)) * f).transpose();
+  }
+  // Rows path[i], A, piece (ending at B), path[j + 1].
+  static RowMat stretch_of(const RowMat& path, long i, const Vec& A, const RowMat& piece, long j) {
+    RowMat out(piece.rows() + 3, path.cols());
+    out.row(0) = path.row(i);
+    out.row(1) = A.transpose();
+    out.middleRows(2, piece.rows()) = piece;
+    out.row(out.rows() - 1) = path.row(j + 1);
+    return out;
+  }
+  // path without rows equal to the one before them (a shortcut point on a waypoint).
+  static RowMat drop_repeats(const RowMat& path) {
+    std::vector<long> keep{0};
+    for (long k = 1; k < path.rows(); ++k)
+      if ((path.row(k).array() != path.row(keep.back()).array()).any()) keep.push_back(k);
+    RowMat out(keep.size(), path.cols());
+    for (std::size_t r = 0; r < keep.size(); ++r) out.row(r) = path.row(keep[r]);
+    return out;
+  }
+
   void run(const Vec& start, const Vec& goal) {
     // the direct motion is checked at every state (a coarse direct walk would cross obstacles), or with dense edges
     // at every edge_stride-th (the path check follows); not in a tree, its progress is dropped when it fails
@@ -822,6 +910,7 @@ PlanOutput rrt_connect(Space& space, const Vec& start, const Vec& goal, const Dr
     throw std::runtime_error("start and goal must have one value per active coordinate");
   Search search(space, draw, settings, time_limit);
   search.run(start, goal);
+  if (search.out.path.rows()) search.shorten();
   for (const Tree& t : search.trees) search.out.nodes.push_back(t.size());
   search.out.projections = search.local.projections;
   if (!search.out.path.rows()) search.out.path = RowMat(0, space.n());

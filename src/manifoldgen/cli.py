@@ -197,7 +197,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
                                    "they leave the manifold), interpolate or project"),
          seed: int = typer.Option(0),
          time_limit: float = typer.Option(30.0, "--time", help="Planning time limit in seconds"),
-         smooth: bool = typer.Option(False, help="Shortcut the path (re-validated) after planning"),
+         smooth: bool = typer.Option(False, help="Shorten the path within the query (shortcut attempts, each stretch "
+                                     "checked densely); the same as --set shortcut=50"),
          settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE (repeatable), e.g. "
                                             "--set range=0.8; unknown keys list the known ones"),
          config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),

@@ -639,7 +639,7 @@ def core_settings(planner, refine: int):
     return core_module().PlannerSettings(
         range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=s.pool, pool_batch=s.pool_batch,
         candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
-        dense_edges=dense, refine=refine, reach=planner._stone_radius())
+        dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut)
 
 
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
@@ -673,6 +673,7 @@ def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadlin
     planner.cut_edges = out["cut_edges"]
     planner.verified_states = out["verified_states"]
     planner.reattached = out["reattached"]
+    planner.shortcuts, planner.found_length = out["shortcuts"], out["found_length"]
     if lazy:
         sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
         sampler.stats.accepted += out["accepted"]

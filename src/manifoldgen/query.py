@@ -17,10 +17,9 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
-from manifoldgen.planning.base import Planner
+from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
-from manifoldgen.planning.result import PlanResult, path_length
-from manifoldgen.planning.smoothing import shortcut
+from manifoldgen.planning.result import PlanResult
 from manifoldgen.runtime import check_seed
 from manifoldgen.scene import Scene
 from manifoldgen.space import ConstrainedSpace
@@ -57,12 +56,11 @@ def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label
     """:func:`run_query` with a sampler object made for ``space`` (the scene's condition and checker); ``label``
     names the sampler in the path file's ``meta``."""
     planner_type = get_planner(planner)
-    solver = planner_type(space, sampler, local=local, seed=seed,
-                          settings=planner_type.settings_type(**task_settings(task, planner, settings)))
+    values = task_settings(task, planner, settings)
+    if smooth:  # shortened within the query, by the planner (the core's search in the core)
+        values.setdefault("shortcut", SMOOTH_SHORTCUTS)
+    solver = planner_type(space, sampler, local=local, seed=seed, settings=planner_type.settings_type(**values))
     result = solver.solve(scene.start, scene.goal, time_limit)
-    if result.solved and smooth:
-        result.path = shortcut(result.path, solver.local, np.random.default_rng(seed))
-        result.length = path_length(result.path)
     report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")

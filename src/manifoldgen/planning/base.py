@@ -21,9 +21,11 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.planning.smoothing import shortcut
 from manifoldgen.sampling import Sampler
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
+SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/benchmarks.md, "Shorter paths")
 
 @dataclass
 class PlannerSettings:
@@ -35,7 +37,9 @@ class PlannerSettings:
     (walks, halved where a segment fails); partial: a blocked straight extension keeps its valid
     part; pool / pool_batch: stepping stones drawn up front / whenever a tree has none within
     range (see :class:`SamplePool`); candidates: stepping stones checked (in one batch) per
-    extension.
+    extension; shortcut: attempts to shorten a found path within the time limit (each new stretch
+    kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
+    0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`).
     """
 
     range: float = 0.6
@@ -45,12 +49,13 @@ class PlannerSettings:
     pool: int = 2048
     pool_batch: int = 256
     candidates: int = 8
+    shortcut: int = 0
 
     def check(self) -> None:
         if (self.range <= 0 or self.step <= 0 or self.resolution <= 0 or self.pool < 0 or self.pool_batch <= 0
-                or self.candidates <= 0):
+                or self.candidates <= 0 or self.shortcut < 0):
             raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, resolution, step, pool_batch "
-                                   "and candidates must be positive, pool >= 0")
+                                   "and candidates must be positive, pool and shortcut >= 0")
 
 
 class Tree:
@@ -146,10 +151,13 @@ class Planner(ABC):
         failure = ""
         begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
         note = begin_query(start, goal) if begin_query else ""
+        self.found_length, self.shortcuts = np.nan, 0
         try:
             path = self._direct(start, goal)
             if path is None:
                 path = self._solve(start, goal, began + time_limit)
+            if path is not None:
+                path = self._shorten(path, began + time_limit)
         except SamplerFailed as exc:
             path, failure = None, str(exc)
         elapsed = time.perf_counter() - began
@@ -161,6 +169,8 @@ class Planner(ABC):
                   "nodes": [len(t) for t in self.trees], "rejected": {**rejected, "range": self.out_of_reach},
                   "rejected_paths": self.rejected, "evaluations": now["evaluations"] - counts["evaluations"],
                   "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
+        if path is not None and self.settings.shortcut:
+            extras["shortcuts"], extras["found_length"] = self.shortcuts, self.found_length
         if failure:
             extras["failure"] = failure
         if note:
@@ -173,6 +183,16 @@ class Planner(ABC):
     @abstractmethod
     def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
         """A path (K, n) that passed :meth:`_accept`, or None at the deadline."""
+
+    def _shorten(self, path: np.ndarray, deadline: float) -> np.ndarray:
+        """``path (K, n)`` after ``settings.shortcut`` shortcut attempts until ``deadline``; sets ``found_length``
+        (before them) and ``shortcuts`` (kept)."""
+        self.found_length = path_length(path)
+        if not self.settings.shortcut:
+            return path
+        shorter, self.shortcuts = shortcut(path, self.local, attempts=self.settings.shortcut,
+                                           time_limit=max(deadline - time.perf_counter(), 0.0))
+        return shorter
 
     def _extras(self) -> dict:
         return {}

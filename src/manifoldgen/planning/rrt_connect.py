@@ -179,6 +179,9 @@ class CoreRRTConnect(RRTConnect):
     def _solve(self, start, goal, deadline):
         return native.plan_rrt_connect(self, self.core, start, goal, deadline)
 
+    def _shorten(self, path, deadline):
+        return path  # the core shortened it (found_length and shortcuts booked by plan_rrt_connect)
+
     def _extras(self) -> dict:
         now, then = self.core.counts(), self._core_counts
         callbacks = {k: now[f"callback_{k}"] - then[f"callback_{k}"] for k in ("calls", "rows")}  # into a Python constraint
