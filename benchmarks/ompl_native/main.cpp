@@ -8,7 +8,10 @@
 // Protocol (one line each, stdout answers, stdin asks): "ready LOAD_S" -> "go TIME_LIMIT";
 // then for every exact OMPL solution "path K" and K lines of n numbers -> "valid" or "invalid"
 // (manifoldgen's dense check decides; on "invalid" the search restarts within the remaining time,
-// the atlas keeps its charts); finally "done {JSON}" with the outcome and the operation counts
+// the atlas keeps its charts); with settings.shortcut > 0, an accepted path is shortened by OMPL's
+// PathSimplifier::shortcutPath (that many attempts, interpolated on the manifold) and sent again the same
+// way: "valid" makes it the answer, "invalid" keeps the accepted one; finally "done {JSON}" with the outcome,
+// the accepted path's length before shortening (found_length) and the operation counts
 // (constraint FK evaluations, Jacobians, inequality evaluations (each with its own FK), collision checks,
 // samples OMPL's sampler drew).
 //
@@ -25,6 +28,7 @@
 #include <ompl/base/PlannerData.h>
 #include <ompl/base/spaces/RealVectorStateSpace.h>
 #include <ompl/base/spaces/constraint/AtlasStateSpace.h>
+#include <ompl/geometric/PathSimplifier.h>
 #include <ompl/geometric/SimpleSetup.h>
 #include <ompl/geometric/planners/rrt/RRTConnect.h>
 #include <ompl/util/Console.h>
@@ -173,24 +177,38 @@ int plan(mgnative::Problem& problem, double load_s) {
   setup.setPlanner(planner);
   setup.setup();
 
+  auto answer = [&](og::PathGeometric& path) {
+    write_path(path, n);  // the caller's dense check answers
+    std::string verdict;
+    std::getline(std::cin, verdict);
+    return verdict == "valid";
+  };
+  double found_length = 0.0;
   const ompl_common::Outcome run =
       ompl_common::solve_with_retries(setup, si, time_limit, wall0, [&](og::PathGeometric& path) {
-        write_path(path, n);  // the caller's dense check answers
-        std::string verdict;
-        std::getline(std::cin, verdict);
-        return verdict == "valid";
+        found_length = path.length();
+        return answer(path);
       });
+  bool shortened = false;
+  if (run.solved && settings.shortcut > 0) {  // OMPL's shortcuts on the accepted path, checked by the caller again
+    og::PathGeometric path = setup.getSolutionPath();
+    og::PathSimplifier(si).shortcutPath(path, settings.shortcut, settings.shortcut);
+    path.interpolate();
+    shortened = answer(path);
+  }
   const double wall = wall_seconds() - wall0, cpu = cpu_seconds() - cpu0;
   long charts = settings.space == "projected" ? 0 : std::static_pointer_cast<ob::AtlasStateSpace>(space)->getChartCount();
   std::printf(
       "done {\"solved\": %s, \"status\": \"%s\", \"attempts\": %d, \"rejected_paths\": %d, \"vertices\": %ld, "
       "\"charts\": %ld, \"projections\": %ld, \"samples\": %ld, \"fk\": %ld, \"jacobians\": %ld, \"inequalities\": %ld, \"collision_checks\": %ld, "
+      "\"found_length\": %.6f, \"shortened\": %s, "
       "\"sphere_checks\": %ld, "
       "\"wall_s\": %.6f, \"cpu_s\": %.6f, \"load_s\": %.6f}\n",
       run.solved ? "true" : "false", run.status.c_str(), run.attempts, run.rejected, run.vertices, charts,
       constraint->projections,
       planner->samples,
       problem.counts.fk, problem.counts.jacobians, problem.counts.inequalities, problem.counts.collision_checks,
+      found_length, shortened ? "true" : "false",
       problem.counts.sphere_checks, wall, cpu, load_s);
   std::fflush(stdout);
   return 0;

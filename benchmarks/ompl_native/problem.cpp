@@ -177,6 +177,7 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
   p.settings.max_iterations = static_cast<int>(s.at("max_iterations").to_number<long>());
   p.settings.time_limit = s.at("time_limit").to_number<double>();
   p.settings.seed = static_cast<unsigned long>(s.at("seed").to_number<long>());
+  if (s.contains("shortcut")) p.settings.shortcut = static_cast<int>(s.at("shortcut").to_number<long>());
 }
 
 Problem::~Problem() = default;

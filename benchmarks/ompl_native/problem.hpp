@@ -32,6 +32,7 @@ struct Settings {
   int max_iterations = 50; // Newton iterations per projection
   double time_limit = 1.0; // seconds, for the whole query
   unsigned long seed = 0;
+  int shortcut = 0;        // OMPL PathSimplifier::shortcutPath attempts on an accepted path (0: none)
 };
 
 class Problem {

@@ -106,7 +106,7 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
         "settings": {"space": ompl_space, "planner": "rrtconnect", "delta": resolution,
                      "lambda": settings.lambda_, "range": settings.range,
                      "tolerance": 1.0 - space.settings.margin, "max_iterations": settings.max_iterations,
-                     "time_limit": time_limit, "seed": int(seed)},
+                     "time_limit": time_limit, "seed": int(seed), "shortcut": settings.shortcut},
     }
     if spheres and space.checker is not None:  # the core's sphere broad phase (same verdicts, cheaper checks)
         model = native.space_spheres(space)
@@ -200,6 +200,8 @@ class NativeOmplPlanner:
                   "sweep_checks": self.dense_sweep_checks,
                   "native_cpu_s": done["cpu_s"], "native_wall_s": done["wall_s"], "load_s": done["load_s"],
                   "dense_cpu_s": self.dense_cpu_s,
+                  **({"found_length": done["found_length"], "shortened": done["shortened"]}
+                     if solved and self.settings.shortcut else {}),
                   "valid": solved, "worst_violation": worst, "reason": reason}
         path = path if solved else np.zeros((0, n))
         return PlanResult(solved, path, elapsed, int(done["vertices"]), 0, int(done["projections"]), self.name,
@@ -210,16 +212,20 @@ class NativeOmplPlanner:
         the last rejection, the program's closing report)."""
         child.stdin.write(f"go {time_limit!r}\n")
         child.stdin.flush()
-        path, worst, reason = np.zeros((0, n)), float("nan"), ""
+        accepted, worst, reason = np.zeros((0, n)), float("nan"), ""
         while True:
             line = self._expect(child, log, "path", "done")
             if line.startswith("done "):
-                return path, worst, reason, json.loads(line[5:])
+                return accepted, worst, reason, json.loads(line[5:])
             count = int(line.split()[1])
             path = np.array([[float(v) for v in child.stdout.readline().split()] for _ in range(count)])
             cpu = time.process_time()
-            valid, worst, reason = self._dense_check(path)
+            valid, checked_worst, why = self._dense_check(path)
             self.dense_cpu_s += time.process_time() - cpu
+            if valid:  # the latest valid path is the answer (a shortened one that fails keeps the one before)
+                accepted, worst, reason = path, checked_worst, ""
+            elif not len(accepted):
+                worst, reason = checked_worst, why
             child.stdin.write("valid\n" if valid else "invalid\n")
             child.stdin.flush()
 

@@ -18,15 +18,18 @@ class OmplSettings:
     limit on manifold-walk length / chord length; range: planner range in rad, by default
     our planners' (``PlannerSettings.range``; 0: OMPL's default, 20% of the space extent,
     2.6 rad for the panda, which makes tree planners slower in clutter); sample_attempts: draws from our sampler per OMPL
-    request before giving up.
+    request before giving up; shortcut: attempts of OMPL's ``PathSimplifier::shortcutPath`` on an accepted path
+    (the C++ baseline; 0: the path as found), the budget our planners' ``shortcut`` setting gets.
     """
 
     max_iterations: int = 50
     lambda_: float = 2.0
     range: float = 0.6
     sample_attempts: int = 10
+    shortcut: int = 0
 
     def check(self) -> None:
-        if self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 or self.sample_attempts < 1:
+        if (self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 or self.sample_attempts < 1
+                or self.shortcut < 0):
             raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need max_iterations >= 1, lambda_ > 1, "
-                                   "range >= 0, sample_attempts >= 1")
+                                   "range >= 0, sample_attempts >= 1, shortcut >= 0")

@@ -231,9 +231,12 @@ def build(experiment: Experiment, method: Method, seed: int):
         sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
+        from manifoldgen.ompl_settings import OmplSettings
+        shared = {**task.planner, **experiment.planner_settings}  # the settings both sides take: checks, shortcuts
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
                                     resolution=experiment.resolution, seed=seed,
-                                    spheres=bool({**task.planner, **experiment.planner_settings}.get("spheres", False)))
+                                    settings=OmplSettings(shortcut=int(shared.get("shortcut", 0))),
+                                    spheres=bool(shared.get("spheres", False)))
     elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
