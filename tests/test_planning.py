@@ -188,6 +188,25 @@ def test_shortcut_keeps_the_constraint_and_shortens():
     assert result.extras["shortcuts"] > 0 and result.length < result.extras["found_length"] - 0.1
 
 
+def test_reuse_routes_later_queries_through_the_paths_found():
+    """``reuse``: a planner keeps its paths as a roadmap; a later query whose ends join it takes a route made of
+    checked segments (valid state by state, the right ends, no search), one that cannot join it is planned."""
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, reuse=True)
+    first = planner.solve(start, goal, 20.0)
+    _check(first, space, start, goal)
+    assert first.extras["roadmap"]["routed"] is False and first.extras["roadmap"]["nodes"] == len(first.path)
+    near_start, near_goal = start + [0.0, 0.05, 0.0], goal + [0.0, -0.05, 0.0]  # on the plane, beside the ends
+    again = planner.solve(near_start, near_goal, 20.0)
+    _check(again, space, near_start, near_goal)
+    assert again.extras["roadmap"]["routed"] is True and again.iterations == 0 and again.samples_drawn == 0
+    assert again.extras["roadmap"]["nodes"] == len(first.path) + 2  # the ends stay, joined to the roadmap
+    far = np.array([-1.0, -1.9, 0.0])  # beyond reach of every node: planned, then kept
+    third = planner.solve(far, goal, 20.0)
+    _check(third, space, far, goal)
+    assert third.extras["roadmap"]["routed"] is False and third.iterations > 0
+    assert third.extras["roadmap"]["nodes"] == len(first.path) + 2 + len(third.path)
+
+
 @pytest.mark.slow
 def test_pg_and_cbirrt_solve_the_wall_scene(panda_task):
     scene = get_scene(panda_task, "wall")

@@ -21,6 +21,7 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
+from manifoldgen.planning.roadmap import Roadmap
 from manifoldgen.planning.smoothing import shortcut
 from manifoldgen.sampling import Sampler
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
@@ -39,7 +40,9 @@ class PlannerSettings:
     range (see :class:`SamplePool`); candidates: stepping stones checked (in one batch) per
     extension; shortcut: attempts to shorten a found path within the time limit (each new stretch
     kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
-    0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`).
+    0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); reuse: keep
+    the paths found as a roadmap that later queries of this planner (its condition and scene) search first
+    (:mod:`manifoldgen.planning.roadmap`; a route found there is not shortened).
     """
 
     range: float = 0.6
@@ -50,6 +53,7 @@ class PlannerSettings:
     pool_batch: int = 256
     candidates: int = 8
     shortcut: int = 0
+    reuse: bool = False
 
     def check(self) -> None:
         if (self.range <= 0 or self.step <= 0 or self.resolution <= 0 or self.pool < 0 or self.pool_batch <= 0
@@ -136,6 +140,7 @@ class Planner(ABC):
         self.trees: list[Tree] = []
         self.pool: SamplePool | None = None
         self._goal_gap = np.inf  # the closest a node of a single tree came to the goal
+        self.roadmap = Roadmap(space.n, self._segment_valid, self.settings.range) if self.settings.reuse else None
 
     # ---------------------------------------------------------------- the contract
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
@@ -152,12 +157,18 @@ class Planner(ABC):
         begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
         note = begin_query(start, goal) if begin_query else ""
         self.found_length, self.shortcuts = np.nan, 0
+        checks = self.roadmap.checks if self.roadmap is not None else 0
+        path = self.roadmap.route(start, goal) if self.roadmap is not None else None
+        routed = path is not None
         try:
-            path = self._direct(start, goal)
+            if path is None:
+                path = self._direct(start, goal)
             if path is None:
                 path = self._solve(start, goal, began + time_limit)
-            if path is not None:
-                path = self._shorten(path, began + time_limit)
+                if path is not None:
+                    path = self._shorten(path, began + time_limit)
+            if path is not None and not routed and self.roadmap is not None:
+                self.roadmap.add(path)
         except SamplerFailed as exc:
             path, failure = None, str(exc)
         elapsed = time.perf_counter() - began
@@ -169,8 +180,10 @@ class Planner(ABC):
                   "nodes": [len(t) for t in self.trees], "rejected": {**rejected, "range": self.out_of_reach},
                   "rejected_paths": self.rejected, "evaluations": now["evaluations"] - counts["evaluations"],
                   "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
-        if path is not None and self.settings.shortcut:
+        if path is not None and self.settings.shortcut and not routed:
             extras["shortcuts"], extras["found_length"] = self.shortcuts, self.found_length
+        if self.roadmap is not None:
+            extras["roadmap"] = {"routed": routed, "nodes": len(self.roadmap), "checks": self.roadmap.checks - checks}
         if failure:
             extras["failure"] = failure
         if note:
@@ -183,6 +196,10 @@ class Planner(ABC):
     @abstractmethod
     def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
         """A path (K, n) that passed :meth:`_accept`, or None at the deadline."""
+
+    def _segment_valid(self, segment: np.ndarray) -> bool:
+        """Whether ``segment (2, n)`` passes the dense path check (the roadmap's edges)."""
+        return self.space.validate_path(segment).valid
 
     def _shorten(self, path: np.ndarray, deadline: float) -> np.ndarray:
         """``path (K, n)`` after ``settings.shortcut`` shortcut attempts until ``deadline``; sets ``found_length``

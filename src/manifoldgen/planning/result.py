@@ -43,7 +43,9 @@ class PlanResult:
     length; extras: planner-specific figures. Ours give ``nodes`` (tree sizes), ``rejected``
     (extensions refused, by reason: see ``REFUSALS``), ``rejected_paths`` (candidates that failed
     the dense validation), ``sampler`` (its stats over the query), ``evaluations`` and
-    ``collision_checks`` (configurations checked) and ``failure`` (why the sampler gave up);
+    ``collision_checks`` (configurations checked), ``failure`` (why the sampler gave up), with
+    ``shortcut`` set ``shortcuts`` (kept) and ``found_length`` (before them), with ``reuse`` set
+    ``roadmap`` (``routed``: answered from earlier paths; ``nodes``; ``checks``: segments checked);
     :meth:`why` puts them in one line.
     """
 

@@ -182,6 +182,12 @@ class CoreRRTConnect(RRTConnect):
     def _shorten(self, path, deadline):
         return path  # the core shortened it (found_length and shortcuts booked by plan_rrt_connect)
 
+    def _segment_valid(self, segment):
+        before = self.core.counts()
+        valid = self.core.validate_path(np.ascontiguousarray(segment, float), certify=True)[0]
+        native.book(self.space, before, self.core.counts())
+        return bool(valid)
+
     def _extras(self) -> dict:
         now, then = self.core.counts(), self._core_counts
         callbacks = {k: now[f"callback_{k}"] - then[f"callback_{k}"] for k in ("calls", "rows")}  # into a Python constraint

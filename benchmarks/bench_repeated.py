@@ -1,0 +1,93 @@
+"""Repeated queries on one manifold and scene: 100 random start/goal pairs in the panda maze, one process.
+
+    python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse atlas-c++]
+
+Methods, interleaved per query: ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
+one planner whose queries start from nothing; ``reuse``, the same with ``reuse=true`` (the paths found so far are
+a roadmap that later queries search first, :mod:`manifoldgen.planning.roadmap`); ``atlas-c++``, C++ OMPL Atlas +
+RRTConnect, cold (each query its own program). All with sphere models as the collision broad phase. Start and goal
+are valid, collision-free states of the maze's manifold in the component of the scene's start (the CVAE's samples,
+drawn with another seed than the planners', that RRT-Connect with the CVAE reaches from there within 1 s). Every
+path is rechecked here by the Python space's dense check (not the planners' own) and its ends compared. Prints,
+per method: solved and rechecked, median CPU and wall over all queries and over queries 2.., routed queries
+(reuse: answered from the roadmap), median path length.
+"""
+
+import argparse
+import time
+
+import numpy as np
+
+from manifoldgen.models import pretrained_model_dir
+from manifoldgen.planning import RRTConnect, RRTConnectSettings
+from manifoldgen.scene import get_scene
+from manifoldgen.space import ConstrainedSpace
+from manifoldgen.specs import make_sampler
+from manifoldgen.tasks import get_task
+
+METHODS = ("cold", "reuse", "atlas-c++")
+
+
+def queries(space: ConstrainedSpace, start: np.ndarray, count: int, seed: int, time_limit: float = 1.0) -> np.ndarray:
+    """(count, 2, n) start/goal pairs in the component of the manifold's free part that holds ``start`` (the scene's):
+    the shipped CVAE's samples (the region the model covers, drawn with another seed than the planners') that pass
+    the space's whole check and that RRT-Connect with the CVAE reaches from ``start`` within ``time_limit`` s (a choice
+    of queries, not timed)."""
+    sampler = make_sampler(f"cvae:{pretrained_model_dir()}", space, seed + 1_000_000)
+    probe = RRTConnect(space, make_sampler(f"cvae:{pretrained_model_dir()}", space, seed + 2_000_000),
+                       seed=seed, settings=RRTConnectSettings(spheres=True))
+    states: list[np.ndarray] = []
+    while len(states) < 2 * count:
+        rows = sampler.sample_many(64)
+        for q in rows[space.valid(rows)]:
+            if len(states) < 2 * count and probe.solve(start, q, time_limit).solved:
+                states.append(q)
+    return np.array(states).reshape(count, 2, space.n)
+
+
+def planner_for(method: str, space: ConstrainedSpace, seed: int):
+    if method == "atlas-c++":
+        from manifoldgen.ompl_native import NativeOmplPlanner
+        return NativeOmplPlanner(space, ompl_space="atlas", seed=seed, spheres=True)
+    sampler = make_sampler(f"cvae:{pretrained_model_dir()}", space, seed)
+    return RRTConnect(space, sampler, seed=seed, settings=RRTConnectSettings(spheres=True, reuse=method == "reuse"))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--queries", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--time", type=float, default=10.0)
+    parser.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    args = parser.parse_args()
+    task = get_task("pose")
+    scene = get_scene(task, "maze")
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    pairs = queries(space, scene.start, args.queries, args.seed)
+    planners = {m: planner_for(m, space, args.seed) for m in args.methods}
+    runs = {m: [] for m in args.methods}
+    for k, (start, goal) in enumerate(pairs):
+        for method, planner in planners.items():
+            if method == "atlas-c++":
+                planner.seed = args.seed + k
+            cpu, wall = time.process_time(), time.perf_counter()
+            result = planner.solve(start, goal, args.time)
+            cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+            checked = (result.solved and np.allclose(result.path[[0, -1]], [start, goal])
+                       and space.validate_path(result.path).valid)
+            routed = bool(result.extras.get("roadmap", {}).get("routed", False))
+            runs[method].append((result.solved, checked, cpu, wall, routed, result.length))
+        print(f"query {k + 1}/{len(pairs)}", end="\r", flush=True)
+    print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, methods interleaved")
+    print("| method | solved | rechecked | median CPU (s) | median wall (s) | median CPU, queries 2.. (s) "
+          "| median wall, queries 2.. (s) | routed | path length (rad, median) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for method, rows in runs.items():
+        solved, checked, cpu, wall, routed, length = (np.array(c) for c in zip(*rows))
+        print(f"| {method} | {solved.sum()}/{len(rows)} | {checked.sum()}/{len(rows)} | {np.median(cpu):.4f} | "
+              f"{np.median(wall):.4f} | {np.median(cpu[1:]):.4f} | {np.median(wall[1:]):.4f} | {routed.sum()} | "
+              f"{np.median(length[solved]):.2f} |")
+
+
+if __name__ == "__main__":
+    main()
