@@ -10,7 +10,7 @@ are valid, collision-free states of the maze's manifold in the component of the 
 drawn with another seed than the planners', that RRT-Connect with the CVAE reaches from there within 1 s). Every
 path is rechecked here by the Python space's dense check (not the planners' own) and its ends compared. Prints,
 per method: solved and rechecked, median CPU and wall over all queries and over queries 2.., routed queries
-(reuse: answered from the roadmap), median path length.
+(reuse: answered from the roadmap) and their median CPU, median path length.
 """
 
 import argparse
@@ -80,13 +80,13 @@ def main() -> None:
         print(f"query {k + 1}/{len(pairs)}", end="\r", flush=True)
     print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, methods interleaved")
     print("| method | solved | rechecked | median CPU (s) | median wall (s) | median CPU, queries 2.. (s) "
-          "| median wall, queries 2.. (s) | routed | path length (rad, median) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for method, rows in runs.items():
         solved, checked, cpu, wall, routed, length = (np.array(c) for c in zip(*rows))
         print(f"| {method} | {solved.sum()}/{len(rows)} | {checked.sum()}/{len(rows)} | {np.median(cpu):.4f} | "
               f"{np.median(wall):.4f} | {np.median(cpu[1:]):.4f} | {np.median(wall[1:]):.4f} | {routed.sum()} | "
-              f"{np.median(length[solved]):.2f} |")
+              f"{f'{np.median(cpu[routed]):.4f}' if routed.any() else '-'} | {np.median(length[solved]):.2f} |")
 
 
 if __name__ == "__main__":
