@@ -1,4 +1,4 @@
-"""Certified sweeps in the core's dense path check (space.cpp, "Certified sweeps"): the motion bound holds on
+"""Certified sweeps in the core's dense path check (sweeps.cpp, "Certified sweeps"): the motion bound holds on
 random spans, a certified span never holds a colliding state, and validate_path with sweeps gives the same
 report as state by state (panda maze and wall, talos reach), with fewer collision queries."""
 

@@ -1,5 +1,5 @@
 // Our constraint and validity checker (see problem.hpp): the compiled core's constrained space
-// (native/src/space.cpp, the very code manifoldgen's own planner uses), built from a problem file.
+// (native/src/space.cpp and its parts, the very code manifoldgen's own planner uses), built from a problem file.
 //
 // The robot model and the collision model (robot geometries, scene obstacles, a held object and the
 // exact collision pairs manifoldgen's CollisionChecker checks: SRDF-pruned or sampled matrix, scene

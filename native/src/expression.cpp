@@ -1,5 +1,5 @@
 // Compiled expressions (see core.hpp): a traced user residual run per configuration, values and forward-mode
-// gradients over the active coordinates. The space (space.cpp) fills the leaves from pinocchio.
+// gradients over the active coordinates. The space (terms.cpp) fills the leaves from pinocchio.
 #include "core.hpp"
 
 #include <algorithm>
