@@ -164,7 +164,7 @@ class Space {
   void add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset);
   // sphere: F = |p(q) - center| - radius
   void add_sphere(int frame, const Eigen::Vector3d& center, double radius);
-  // Whole-body terms (see the block "Whole-body terms" in space.cpp).
+  // Whole-body terms (their builders in space.cpp, their rows in terms.cpp, each under "Whole-body terms").
   // orientation: F = basis (2, 3) . R(q) axis (constraints/orientation.py)
   void add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis);
   // linear: F = A (r, n) q - y (constraints/joint_linear.py)
@@ -193,7 +193,7 @@ class Space {
                    const std::vector<int>& geometry, const std::vector<std::pair<int, int>>& exact = {});
   void clear_spheres();
   bool has_spheres() const;
-  // Certified sweeps (space.cpp, "Certified sweeps"): with sphere models set, validate_path tests whole spans of
+  // Certified sweeps (sweeps.cpp, "Certified sweeps"): with sphere models set, validate_path tests whole spans of
   // consecutive dense states at once and checks single states only where a span cannot be certified; the same
   // PathCheck as state by state. On by default; off: state by state. sweeps() says whether they are used.
   void set_sweeps(bool on);
@@ -239,7 +239,7 @@ class Space {
   Projection project(double* q, double tol, int max_iters, double damping, double max_step);
   // Every state every resolution along path (K, n), exact collision checks (with sphere models and sweeps():
   // spans of states certified at once, the same report). certify (built-in terms other than closed chains): a state
-  // the constraint's rates certify from the latest evaluated one passes without being evaluated (space.cpp,
+  // the constraint's rates certify from the latest evaluated one passes without being evaluated (sweeps.cpp,
   // "Certified constraints"): the same verdict, first invalid state, reason, segment and state count; worst: over
   // the states evaluated.
   PathCheck validate_path(const double* path, int K, bool certify = false);
