@@ -154,12 +154,12 @@ class Planner(ABC):
         self.trees, self.pool, self._goal_gap = [], None, np.inf
         began = time.perf_counter()
         failure = ""
-        begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
-        note = begin_query(start, goal) if begin_query else ""
         self.found_length, self.shortcuts = np.nan, 0
         checks = self.roadmap.checks if self.roadmap is not None else 0
         path = self.roadmap.route(start, goal) if self.roadmap is not None else None
         routed = path is not None
+        begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
+        note = begin_query(start, goal) if begin_query and not routed else ""
         try:
             if path is None:
                 path = self._direct(start, goal)

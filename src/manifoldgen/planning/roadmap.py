@@ -37,7 +37,7 @@ class Roadmap:
         first, last = self._joins(start), self._joins(goal)
         if not first or not last:
             return None
-        nodes = self._shortest(first, last)
+        nodes = self._shortest(first, last, goal)
         if nodes is None:
             return None
         route = np.concatenate([start[None], self.q[nodes], goal[None]])
@@ -79,24 +79,29 @@ class Roadmap:
         if a != b:
             self.edges[a][b] = self.edges[b][a] = length
 
-    def _shortest(self, first: dict[int, float], last: dict[int, float]) -> list[int] | None:
-        """Dijkstra from the start's joins (their lengths as starting costs) to the goal's: the node list, or None."""
+    def _shortest(self, first: dict[int, float], last: dict[int, float], goal: np.ndarray) -> list[int] | None:
+        """A* from the start's joins (their lengths as starting costs) to the goal's, the straight distance to
+        ``goal`` as the estimate (never above an edge route's length): the node list, or None."""
+        ahead = np.linalg.norm(self.q - goal, axis=1)
         cost = dict(first)
         parent = {node: -1 for node in first}
-        heap = [(c, node) for node, c in first.items()]
+        heap = [(c + ahead[node], node) for node, c in first.items()]
         heapq.heapify(heap)
         best, end, done = np.inf, -1, set()
         while heap:
-            c, node = heapq.heappop(heap)
-            if node in done or c >= best:
+            estimate, node = heapq.heappop(heap)
+            if estimate >= best:
+                break  # no route left can beat the best
+            if node in done:
                 continue
             done.add(node)
+            c = cost[node]
             if node in last and c + last[node] < best:
                 best, end = c + last[node], node
             for other, length in self.edges[node].items():
                 if c + length < cost.get(other, np.inf):
                     cost[other], parent[other] = c + length, node
-                    heapq.heappush(heap, (c + length, other))
+                    heapq.heappush(heap, (c + length + ahead[other], other))
         if end < 0:
             return None
         nodes = [end]
