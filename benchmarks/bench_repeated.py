@@ -1,6 +1,7 @@
 """Repeated queries on one manifold and scene: 100 random start/goal pairs in the panda maze, one process.
 
     python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse atlas-c++]
+                                        [--pairs PAIRS.npy]
 
 Methods, interleaved per query: ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
 one planner whose queries start from nothing; ``reuse``, the same with ``reuse=true`` (the paths found so far are
@@ -17,6 +18,7 @@ per method: solved and rechecked, median CPU and wall over all queries and over 
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -61,11 +63,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--time", type=float, default=10.0)
     parser.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--pairs", default=None, help="an .npy file of the start/goal pairs: read when it exists "
+                        "(its queries, not --queries), else written after they are chosen (choosing takes minutes)")
     args = parser.parse_args()
     task = get_task("pose")
     scene = get_scene(task, "maze")
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
-    pairs = queries(space, scene.start, args.queries, args.seed)
+    if args.pairs and Path(args.pairs).exists():
+        pairs = np.load(args.pairs)
+    else:
+        pairs = queries(space, scene.start, args.queries, args.seed)
+        if args.pairs:
+            np.save(args.pairs, pairs)
     planners = {m: planner_for(m, space, args.seed) for m in args.methods}
     runs = {m: [] for m in args.methods}
     for k, (start, goal) in enumerate(pairs):

@@ -3,7 +3,7 @@ scene) search before planning (as OMPL's Thunder keeps its solutions).
 
 Nodes are the waypoints of earlier paths; an edge is a straight segment that passed the space's dense path check
 (a path's consecutive waypoints, a new path's waypoints joined to the nearest nodes of earlier ones, a query's start
-and goal joined to their nearest nodes). A query joins start and goal to the roadmap and takes the shortest route
+and goal joined to their nearest nodes, two each at most). A query joins start and goal to the roadmap and takes the shortest route
 through it; a route is made of checked segments only, so it is valid as a whole by the same check."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-JOINS = 6  # nearest nodes a query's start or goal (or a new waypoint) is joined to, at most
+TRIES, JOINS = 6, 2  # a query's start or goal (or a new waypoint) tries its 6 nearest nodes, joins the first 2 it can
 
 
 class Roadmap:
@@ -63,12 +63,12 @@ class Roadmap:
                 self._link(base + k, node, length)
 
     def _joins(self, q: np.ndarray) -> dict[int, float]:
-        """The nearest nodes within ``reach`` of ``q (n,)`` whose straight segment to ``q`` passes the check (at
-        most :data:`JOINS` tried): node -> length."""
+        """The nearest nodes within ``reach`` of ``q (n,)`` whose straight segment to ``q`` passes the check, nearest
+        first (:data:`TRIES` tried, the first :data:`JOINS` kept): node -> length."""
         d = np.linalg.norm(self.q - q, axis=1)
         out = {}
-        for node in np.argsort(d)[:JOINS]:
-            if d[node] > self.reach:
+        for node in np.argsort(d)[:TRIES]:
+            if d[node] > self.reach or len(out) == JOINS:
                 break
             self.checks += 1
             if d[node] == 0 or self.valid(np.stack([q, self.q[node]])):
