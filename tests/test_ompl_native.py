@@ -7,6 +7,7 @@ import pytest
 from manifoldgen import native
 from manifoldgen.constraints import PlaneConstraint
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.ompl_settings import OmplSettings
 from manifoldgen.space import ConstrainedSpace, densify
 
 ompl_native = pytest.importorskip("manifoldgen.ompl_native")
@@ -75,6 +76,12 @@ def test_atlas_path_passes_our_dense_check_and_is_reproducible(maze):
     assert ops["samples"] > 0 and result.iterations >= 2  # OMPL's own samples; its tree's vertices
     again = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(scene.start, scene.goal, 20.0)
     np.testing.assert_array_equal(again.path, path)
+    # shortcut: OMPL's shortcutPath on the same accepted path, rechecked by our dense check, shorter
+    short = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4, settings=OmplSettings(shortcut=50)).solve(
+        scene.start, scene.goal, 20.0)
+    assert short.solved and short.extras["shortened"] and short.extras["found_length"] == pytest.approx(result.length)
+    assert short.length < result.length and space.validate_path(short.path).valid
+    np.testing.assert_allclose(short.path[[0, -1]], path[[0, -1]])
 
 
 def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
