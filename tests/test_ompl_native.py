@@ -84,6 +84,25 @@ def test_atlas_path_passes_our_dense_check_and_is_reproducible(maze):
     np.testing.assert_allclose(short.path[[0, -1]], path[[0, -1]])
 
 
+@needs_binary
+def test_the_atlas_knobs_reach_ompl(maze):
+    """OMPL's defaults written out give the default search, state for state; other atlas knobs give another
+    search whose path still passes our dense check. A benchmark's ``ompl_KEY`` settings go to OMPL only."""
+    task, scene, space = maze
+    solve = lambda settings: ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4, settings=settings).solve(
+        scene.start, scene.goal, 20.0)
+    default = solve(OmplSettings())
+    explicit = solve(OmplSettings(epsilon=0.05, rho=0.25, alpha=np.pi / 8, exploration=0.75, separated=True))
+    np.testing.assert_array_equal(explicit.path, default.path)
+    other = solve(OmplSettings(epsilon=0.1, separated=False))
+    assert other.solved and space.validate_path(other.path).valid
+    assert other.extras["native_ops"]["fk"] != default.extras["native_ops"]["fk"]
+    chosen = OmplSettings.from_benchmark({"ompl_epsilon": 0.1, "ompl_lambda": 3.0, "range": 0.9, "shortcut": 5})
+    assert (chosen.epsilon, chosen.lambda_, chosen.range, chosen.shortcut) == (0.1, 3.0, 0.6, 5)
+    with pytest.raises(ManifoldgenError, match="invalid OMPL settings.*0 < alpha < pi/2"):
+        OmplSettings(alpha=2.0).check()
+
+
 def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
     task, scene, space = maze
     monkeypatch.setenv(ompl_native.BINARY_ENV, str(tmp_path / "missing"))

@@ -168,6 +168,11 @@ int plan(mgnative::Problem& problem, double load_s) {
       throw std::runtime_error("start or goal is within our tolerance but not within OMPL's stricter one");
   if (settings.space != "projected") {
     auto atlas = std::static_pointer_cast<ob::AtlasStateSpace>(space);
+    atlas->setEpsilon(settings.epsilon);
+    atlas->setAlpha(settings.alpha);
+    atlas->setExploration(settings.exploration);  // before rho: it resets the sampling radius from rho
+    atlas->setRho(settings.rho > 0 ? settings.rho : 5 * settings.delta);
+    atlas->setSeparated(settings.separated);
     atlas->anchorChart(start.get());
     atlas->anchorChart(goal.get());
   }

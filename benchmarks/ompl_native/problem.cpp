@@ -178,6 +178,10 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
   p.settings.time_limit = s.at("time_limit").to_number<double>();
   p.settings.seed = static_cast<unsigned long>(s.at("seed").to_number<long>());
   if (s.contains("shortcut")) p.settings.shortcut = static_cast<int>(s.at("shortcut").to_number<long>());
+  for (auto [key, value] : {std::pair{"epsilon", &p.settings.epsilon}, {"rho", &p.settings.rho},
+                            {"alpha", &p.settings.alpha}, {"exploration", &p.settings.exploration}})
+    if (s.contains(key)) *value = s.at(key).to_number<double>();
+  if (s.contains("separated")) p.settings.separated = s.at("separated").as_bool();
 }
 
 Problem::~Problem() = default;

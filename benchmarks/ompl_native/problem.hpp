@@ -33,6 +33,11 @@ struct Settings {
   double time_limit = 1.0; // seconds, for the whole query
   unsigned long seed = 0;
   int shortcut = 0;        // OMPL PathSimplifier::shortcutPath attempts on an accepted path (0: none)
+  // the atlas's own knobs (atlas and tangent spaces; OMPL's defaults): a chart's validity region (epsilon: distance
+  // to the manifold, alpha: angle to it, rho: radius, 0: OMPL's 5 delta), the share of samples on the frontier
+  // (exploration) and whether charts are separated by their neighbours' half-spaces
+  double epsilon = 0.05, rho = 0.0, alpha = 0.39269908169872414, exploration = 0.75;
+  bool separated = true;
 };
 
 class Problem {

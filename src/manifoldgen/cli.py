@@ -446,7 +446,8 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
     paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS
     from manifoldgen.planning import PLANNERS, planner_settings
     from manifoldgen.settings import parse_settings
-    known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
+    from manifoldgen.ompl_settings import benchmark_keys
+    known = {**{k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}, **benchmark_keys()}
     experiment = Experiment(scene, task, task_obj.robot.name if robot is None else robot,
                             paper["time_limit"] if time_limit is None else time_limit, seed,
                             planner_settings=parse_settings(settings, config, known, "planner"), physics=physics)
@@ -481,7 +482,8 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE for our planners "
                                                   "(repeatable; each planner takes those it has; spheres=true "
-                                                  "also gives the C++ OMPL baseline the sphere broad phase)"),
+                                                  "and shortcut=N also go to the C++ OMPL baseline; ompl_KEY "
+                                                  "to OMPL only, e.g. ompl_range=0.45, ompl_epsilon=0.1)"),
                config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
                snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "
                                               "method's run-0 path, when solved"),

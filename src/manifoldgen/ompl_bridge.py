@@ -216,6 +216,12 @@ class OmplPlanner:
         si = (ob.TangentBundleSpaceInformation if self.ompl_space == "tangent" else ob.ConstrainedSpaceInformation)(space)
         space.setDelta(self.resolution)
         space.setLambda(self.settings.lambda_)
+        if self.ompl_space != "projected":  # the atlas's knobs, as the C++ baseline sets them
+            space.setEpsilon(self.settings.epsilon)
+            space.setAlpha(self.settings.alpha)
+            space.setExploration(self.settings.exploration)  # before rho: it resets the sampling radius from rho
+            space.setRho(self.settings.rho or 5 * self.resolution)
+            space.setSeparated(self.settings.separated)
         return space, si
 
     def _state(self, space, q: np.ndarray):

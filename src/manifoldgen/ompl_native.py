@@ -106,7 +106,9 @@ def export_problem(space: ConstrainedSpace, start: np.ndarray, goal: np.ndarray,
         "settings": {"space": ompl_space, "planner": "rrtconnect", "delta": resolution,
                      "lambda": settings.lambda_, "range": settings.range,
                      "tolerance": 1.0 - space.settings.margin, "max_iterations": settings.max_iterations,
-                     "time_limit": time_limit, "seed": int(seed), "shortcut": settings.shortcut},
+                     "time_limit": time_limit, "seed": int(seed), "shortcut": settings.shortcut,
+                     "epsilon": settings.epsilon, "rho": settings.rho, "alpha": settings.alpha,
+                     "exploration": settings.exploration, "separated": settings.separated},
     }
     if spheres and space.checker is not None:  # the core's sphere broad phase (same verdicts, cheaper checks)
         model = native.space_spheres(space)

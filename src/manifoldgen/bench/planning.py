@@ -232,16 +232,18 @@ def build(experiment: Experiment, method: Method, seed: int):
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
         from manifoldgen.ompl_settings import OmplSettings
-        shared = {**task.planner, **experiment.planner_settings}  # the settings both sides take: checks, shortcuts
+        shared = {**task.planner, **experiment.planner_settings}  # checks and shortcuts, and OMPL's ompl_KEY
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
                                     resolution=experiment.resolution, seed=seed,
-                                    settings=OmplSettings(shortcut=int(shared.get("shortcut", 0))),
+                                    settings=OmplSettings.from_benchmark(shared),
                                     spheres=bool(shared.get("spheres", False)))
     elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
+        from manifoldgen.ompl_settings import OmplSettings
         ompl_space, planner_name = method.planner[len(OMPL_PREFIX):].split("-")
         planner = OmplPlanner(space, sampler, ompl_space=ompl_space, planner=planner_name,
-                              resolution=experiment.resolution, seed=seed)
+                              resolution=experiment.resolution, seed=seed,
+                              settings=OmplSettings.from_benchmark(experiment.planner_settings))
     else:
         from manifoldgen.planning import PLANNERS
         cls = PLANNERS.get(method.planner)
