@@ -3,6 +3,7 @@
     python benchmarks/bench_tuned.py [--problems wall maze talos] [--model talos=OUT/talos-cvae ...]
                                      [--methods cvae atlas-c++ tangent-c++ projected-c++] [--tune-seed 100]
                                      [--tune-runs 15] [--seed 0] [--runs 30] [--time 10] [--out runs/tuned] [--resume]
+                                     [--one-set]
 
 Every problem is planned by each method twice on the table's seeds (seed .. seed + runs - 1), interleaved per seed
 in this one process: with its defaults (ours: the planner dataclass's, the task file's ``[planner]`` table left out;
@@ -15,7 +16,9 @@ with the default among them, two for a yes/no knob), on held-out seeds tune-seed
 knob in turn, the others held at the best so far, every value planned on every held-out seed; the value with the
 lowest median CPU (an unsolved run counts as slower than every solved one) is kept, a tie keeping the earlier.
 A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle five (the atlas's),
-Projected two (it has no more).
+Projected two (it has no more). With --one-set each method gets one set for all the problems: the same descent
+scored by the geometric mean of the problems' median CPU (a run planned for one problem's tuning counts for the
+other's: ``--resume`` over the same --out reuses every recorded run with the same arguments).
 
 Prints per problem the chosen settings, the tuning's distinct evaluations and CPU per method, and the table: solved,
 median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, and
@@ -112,25 +115,27 @@ class Problem:
         atomic_write_text(config, json.dumps(arguments, indent=1))
         atomic_write_text(self.out / "problem.json", json.dumps({"meta": problem_meta(self.base)}))
 
-    def tune(self, method: str, seeds: range) -> tuple[dict, int, float]:
-        """Coordinate descent over the method's knobs on ``seeds``: (chosen settings, distinct evaluations, CPU s)."""
-        best: dict = {}
-        evaluated: dict[str, float] = {}
 
-        def score(settings: dict) -> float:
-            settings = {k: v for k, v in settings.items() if v != KNOBS[method][k][0]}  # one name per setting
-            key = json.dumps(settings, sort_keys=True)
-            if key not in evaluated:
-                evaluated[key] = median_cpu([self.plan("tuning.jsonl", method, settings, s) for s in seeds])
-            return evaluated[key]
+def tune(problems: list[Problem], method: str, seeds: range) -> tuple[dict, int, float]:
+    """Coordinate descent over the method's knobs on ``seeds`` of every problem, scored by the geometric mean of
+    the problems' median CPU: (chosen settings, distinct settings planned, CPU s of the tuning's queries)."""
+    best: dict = {}
+    evaluated: dict[str, float] = {}
 
-        for knob, values in KNOBS[method].items():
-            scores = [score({**best, knob: value}) for value in values]
-            best = {**best, knob: values[int(np.argmin(scores))]}
-        cpu = sum(r["cpu_s"] for r in self.done.values()
-                  if json.loads(r["key"])[0] == method and json.loads(r["key"])[2] in seeds and "cpu_s" in r)
-        best = {k: v for k, v in best.items() if v != KNOBS[method][k][0]}
-        return best, len(evaluated), cpu
+    def score(settings: dict) -> float:
+        settings = {k: v for k, v in settings.items() if v != KNOBS[method][k][0]}  # one name per setting
+        key = json.dumps(settings, sort_keys=True)
+        if key not in evaluated:
+            medians = [median_cpu([p.plan("tuning.jsonl", method, settings, s) for s in seeds]) for p in problems]
+            evaluated[key] = float(np.exp(np.mean(np.log(medians))))
+        return evaluated[key]
+
+    for knob, values in KNOBS[method].items():
+        scores = [score({**best, knob: value}) for value in values]
+        best = {**best, knob: values[int(np.argmin(scores))]}
+    cpu = sum(r["cpu_s"] for p in problems for r in p.done.values()
+              if json.loads(r["key"])[0] == method and json.loads(r["key"])[2] in seeds and "cpu_s" in r)
+    return {k: v for k, v in best.items() if v != KNOBS[method][k][0]}, len(evaluated), cpu
 
 
 def row(label: str, records: list[dict], ours: list[dict] | None) -> str:
@@ -156,6 +161,8 @@ def main() -> None:
     parser.add_argument("--time", type=float, default=None, help="time limit per query, s (default: the problem's)")
     parser.add_argument("--out", default="runs/tuned")
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--one-set", action="store_true", help="tune one set of settings per method for all the "
+                        "problems together (the geometric mean of their median CPU) instead of one per problem")
     args = parser.parse_args()
     models = dict(m.split("=", 1) for m in args.model)
     for name in args.problems:
@@ -168,33 +175,39 @@ def main() -> None:
                      f"{seeds.start}..{seeds.stop - 1}; move --tune-seed")
     set_torch_threads()  # one torch thread, as the bench's workers
     out = Path(args.out)
-    for name in args.problems:
-        problem = Problem(name, models.get(name, str(pretrained_model_dir())), args.time, out, args.resume)
-        problem.load({k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out")}
-                     | {"model": models.get(name, "shipped")})
-        began = time.process_time()
+    problems = [Problem(name, models.get(name, str(pretrained_model_dir())), args.time, out, args.resume)
+                for name in args.problems]
+    for problem in problems:
+        problem.load({k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out", "one_set")}
+                     | {"model": models.get(problem.name, "shipped")})
+    groups = [problems] if args.one_set else [[p] for p in problems]
+    for group in groups:
+        print(f"## {', '.join(p.name for p in group)}: tuning on seeds {tune_seeds.start}..{tune_seeds.stop - 1}"
+              + (" (one set of settings for all, by the geometric mean of their median CPU)" if args.one_set else ""),
+              flush=True)
         tuned = {}
-        print(f"## {name}: tuning on seeds {tune_seeds.start}..{tune_seeds.stop - 1}", flush=True)
         for method in args.methods:
-            tuned[method], count, cpu = problem.tune(method, tune_seeds)
+            tuned[method], count, cpu = tune(group, method, tune_seeds)
             print(f"- {method}: {json.dumps(tuned[method]) if tuned[method] else 'its defaults'} "
                   f"({count} settings tried, {cpu:.1f} s CPU in queries)", flush=True)
-        table = {(m, pairing): [] for m in args.methods for pairing in ("defaults", "tuned")}
-        for seed in seeds:  # interleaved per seed
-            for method in args.methods:
-                for pairing, settings in (("defaults", {}), ("tuned", tuned[method])):
-                    table[method, pairing].append(problem.plan("table.jsonl", method, settings, seed))
-        lines = [f"seeds {seeds.start}..{seeds.stop - 1}, {problem.base.time_limit:g} s limit; this problem "
-                 f"took {time.process_time() - began:.0f} s CPU here",
-                 "| method | solved | median CPU (wall), s | path length, rad | FK | collision queries | "
-                 "CPU over ours |", "|---|---|---|---|---|---|---|"]
-        for pairing in ("defaults", "tuned"):
-            ours = table["cvae", pairing] if "cvae" in args.methods else None
-            for method in args.methods:
-                lines.append(row(f"{method}, {pairing}", table[method, pairing],
-                                 None if method == "cvae" else ours))
-        atomic_write_text(problem.out / "results.md", "\n".join(lines) + "\n")
-        print("\n".join(lines), flush=True)
+        for problem in group:
+            began = time.process_time()
+            table = {(m, pairing): [] for m in args.methods for pairing in ("defaults", "tuned")}
+            for seed in seeds:  # interleaved per seed
+                for method in args.methods:
+                    for pairing, settings in (("defaults", {}), ("tuned", tuned[method])):
+                        table[method, pairing].append(problem.plan("table.jsonl", method, settings, seed))
+            lines = [f"### {problem.name}: seeds {seeds.start}..{seeds.stop - 1}, {problem.base.time_limit:g} s "
+                     f"limit ({time.process_time() - began:.0f} s CPU here)",
+                     "| method | solved | median CPU (wall), s | path length, rad | FK | collision queries | "
+                     "CPU over ours |", "|---|---|---|---|---|---|---|"]
+            for pairing in ("defaults", "tuned"):
+                ours = table["cvae", pairing] if "cvae" in args.methods else None
+                for method in args.methods:
+                    lines.append(row(f"{method}, {pairing}", table[method, pairing],
+                                     None if method == "cvae" else ours))
+            atomic_write_text(problem.out / "results.md", "\n".join(lines) + "\n")
+            print("\n".join(lines), flush=True)
 
 
 if __name__ == "__main__":

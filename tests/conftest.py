@@ -1,7 +1,12 @@
-"""Shared fixtures: robots and tasks are loaded once per session; caches go to a temp dir."""
+"""Shared fixtures: robots and tasks are loaded once per session; caches go to a temp dir; torch uses one thread
+(its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy)."""
 
-import numpy as np
-import pytest
+from manifoldgen.runtime import set_torch_threads
+
+set_torch_threads(1)  # before any test module imports torch
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 
 @pytest.fixture(autouse=True, scope="session")

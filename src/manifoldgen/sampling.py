@@ -193,6 +193,8 @@ class ModelSampler(Sampler):
             self.generator = torch.Generator().manual_seed(int(self.rng.integers(0, 2**63 - 1)))
         self.missed = False  # the latest query's start or goal lies far from every model sample
         self.drawn = 0  # raw rows drawn since the latest query began
+        from manifoldgen.coverage import spacing
+        self.spacing = spacing(self._decode(CHECK_ROWS))  # the model rows' own spacing at this condition, once
 
     def _batch_rows(self) -> int:
         """Batches grow from :data:`FIRST_ROWS` rows, doubling up to ``batch``: an easy query decodes few rows
@@ -207,17 +209,20 @@ class ModelSampler(Sampler):
 
     def begin_query(self, start: np.ndarray, goal: np.ndarray) -> str:
         """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of :data:`CHECK_ROWS` model rows
-        against the rows' own spacing (median nearest-neighbour distance); a miss (see
-        :func:`manifoldgen.coverage.missed`) makes every batch of this query :data:`MIX_MISSED` projected
-        uniform rows. Returns one line saying so, or "" when the model covers both ends."""
-        from manifoldgen.coverage import gaps, missed, spacing
+        against the rows' own spacing (median nearest-neighbour distance, measured when the sampler was made); a
+        miss (see :func:`manifoldgen.coverage.missed`) makes every batch of this query :data:`MIX_MISSED`
+        projected uniform rows. Returns one line saying so, or "" when the model covers both ends, whose
+        measured rows are then the query's first raw rows (:meth:`raw_many`)."""
+        from manifoldgen.coverage import gaps, missed
 
-        self.drawn = 0
         rows = self._decode(CHECK_ROWS)
-        own = spacing(rows)
+        own = self.spacing
         ends = gaps(rows, np.stack([start, goal]))
         self.missed = bool(missed(ends, own).any())
+        self.drawn = 0
         if not self.missed:
+            self._raw = np.concatenate([rows, self._raw])
+            self.stats.generated += len(rows)
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
                 f"(their own spacing: {own:.2f} rad): it misses an IK branch of this query, so {MIX_MISSED:.0%} "

@@ -1,15 +1,17 @@
-"""Where a sphere-demo query's CPU goes: our planner's queries under ``perf``, sampled only inside ``Planner.solve``.
+"""Where a query's CPU goes: our planner's queries under ``perf``, sampled only inside ``Planner.solve``.
 
-    python benchmarks/profile_sphere_demo.py run --method cvae --model DIR [--seeds 0:30]   # timings, paths
-    python benchmarks/profile_sphere_demo.py perf --method cvae --model DIR -o cvae.data     # + perf record
-    python benchmarks/profile_sphere_demo.py split cvae.data                                 # shares by kind
+    python benchmarks/profile_query.py run --method cvae --model DIR [--seeds 0:30]   # timings, paths
+    python benchmarks/profile_query.py perf --method cvae --model DIR -o cvae.data     # + perf record
+    python benchmarks/profile_query.py split cvae.data                                 # shares by kind
 
-``run`` builds each seed's planner as ``bench_sphere_demo.py`` does (task ``sphere``, scene ``sphere``,
-``--set spheres=true``) and prints, per seed, what identifies its search (solved, waypoints, their sum,
-iterations, samples, tree sizes: equal lines mean equal decisions), then the median CPU of ``Planner.solve``.
-``perf`` runs the same under ``perf record`` (Linux perf; build the core with symbols for names inside it:
-``pip install -e . -Ccmake.build-type=RelWithDebInfo``), recording only while a
-query runs (perf's control FIFOs). ``split`` sums a recording's samples by kind of work.
+The problem is OMPL's sphere demo by default (task ``sphere``, robot ``point``, scene ``sphere``, as
+``bench_sphere_demo.py`` builds it), or any ``--task T --robot R --scene S`` (e.g. ``--task pose --robot panda
+--scene maze --model src/manifoldgen/data/pretrained/panda-pose-cvae``), always with ``spheres=true`` and
+any ``--set KEY=VALUE`` planner settings. ``run`` builds each seed's planner as the bench does and prints, per
+seed, what identifies its search (solved, waypoints, their sum, iterations, samples, tree sizes: equal lines mean
+equal decisions), then the median CPU of ``Planner.solve``. ``perf`` runs the same under ``perf record`` (Linux
+perf; build the core with symbols for names inside it: ``pip install -e . -Ccmake.build-type=RelWithDebInfo``),
+recording only while a query runs (perf's control FIFOs). ``split`` sums a recording's samples by kind of work.
 """
 
 from __future__ import annotations
@@ -43,7 +45,11 @@ def run(args: argparse.Namespace) -> None:
 
     set_torch_threads()
     first, stop = (int(v) for v in args.seeds.split(":"))
-    experiment = Experiment("sphere", task="sphere", robot="point", time_limit=10.0, planner_settings={"spheres": True})
+    from manifoldgen.planning import PLANNERS, planner_settings
+    from manifoldgen.settings import parse_settings
+    known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
+    experiment = Experiment(args.scene, task=args.task, robot=args.robot, time_limit=10.0,
+                            planner_settings={"spheres": True, **parse_settings(args.set, None, known, "planner")})
     method = Method.parse(f"cvae=rrtconnect@cvae:{args.model}" if args.method == "cvae" else "project=rrtconnect@project")
     control = (open(args.control, "w"), open(args.ack)) if args.control else None  # perf's FIFOs, open throughout
 
@@ -73,7 +79,9 @@ def record(args: argparse.Namespace) -> None:
         try:
             subprocess.run(["perf", "record", "-F", "4999", "-D", "-1", "--control", f"fifo:{control},{ack}",
                             "-o", args.output, sys.executable, __file__, "run", "--method", args.method,
-                            "--model", str(args.model), "--seeds", args.seeds, "--control", str(control),
+                            "--model", str(args.model), "--seeds", args.seeds, "--task", args.task, "--robot",
+                            args.robot, "--scene", args.scene, *(f"--set={v}" for v in args.set),
+                            "--control", str(control),
                             "--ack", str(ack)], check=True)
         finally:
             for fd in holders:
@@ -103,6 +111,10 @@ def main() -> None:
         p.add_argument("--method", choices=("cvae", "project"), default="cvae")
         p.add_argument("--model", type=Path, default=Path("runs/sphere-demo-try/cvae"))
         p.add_argument("--seeds", default="0:30", help="FIRST:STOP")
+        p.add_argument("--task", default="sphere")
+        p.add_argument("--robot", default="point")
+        p.add_argument("--scene", default="sphere")
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a planner setting")
         if name == "run":
             p.add_argument("--control", help=argparse.SUPPRESS)
             p.add_argument("--ack", help=argparse.SUPPRESS)
