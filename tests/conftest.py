@@ -49,3 +49,17 @@ def planned_path(tmp_path_factory):
             made[scene] = out
         return made[scene]
     return plan
+
+
+def pytest_addoption(parser):
+    parser.addoption("--full", action="store_true", help="run every test, the slow ones too (what .ci/run runs); "
+                     "without it, or an explicit -m, the tests marked slow are left out")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--full") or config.getoption("markexpr"):
+        return
+    slow = [item for item in items if item.get_closest_marker("slow")]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [item for item in items if not item.get_closest_marker("slow")]
