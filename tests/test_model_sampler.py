@@ -156,3 +156,23 @@ def test_model_spec_takes_whichever_model_a_directory_holds(model_dir, panda_tas
     assert sampler.refine == load_model(model_dir).refine  # the refinement the model recorded
     with pytest.raises(ManifoldgenError, match="holds a cvae model, not cfm"):
         make_sampler(f"cfm:{model_dir}", space, seed=1)
+
+
+def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_task):
+    """The pool settings count rows of the shipped panda CVAE's cost; a model whose rows cost more multiply-adds
+    gets fewer in proportion, in the Python search and in the core's alike."""
+    from manifoldgen.native import core_settings
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.planning.base import POOL_ROW_COST
+
+    model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7
+    space = ConstrainedSpace(panda_task.constraint, [0.4])
+    sampler = ModelSampler(space, model, seed=1)
+    assert sampler.row_cost == model.row_cost() == 4 * 32 + 32 * 32 + 32 * 7
+    settings = RRTConnectSettings(pool=2048, pool_batch=256)
+    assert RRTConnect(space, sampler, settings=settings).pool_rows() == (2048, 256)  # cheaper than the reference
+    sampler.row_cost = 10 * POOL_ROW_COST
+    planner = RRTConnect(space, sampler, settings=settings)
+    assert planner.pool_rows() == (205, 26)
+    native = core_settings(planner, 0)
+    assert (native.pool, native.pool_batch) == (205, 26)

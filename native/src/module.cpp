@@ -468,6 +468,8 @@ NB_MODULE(manifoldgen_core, m) {
           "of its nodes (else range); shortcut > 0: that many shortcut attempts on a found path, each kept when "
           "its stretch passes the path check.")
       .def_ro("range", &mgcore::PlannerSettings::range)
+      .def_ro("pool", &mgcore::PlannerSettings::pool)
+      .def_ro("pool_batch", &mgcore::PlannerSettings::pool_batch)
       .def_ro("edge_stride", &mgcore::PlannerSettings::edge_stride)
       .def_ro("dense_edges", &mgcore::PlannerSettings::dense_edges)
       .def_ro("refine", &mgcore::PlannerSettings::refine)

@@ -636,8 +636,9 @@ def core_settings(planner, refine: int):
     raw row when the search first uses it; -1: the sampler's rows come checked). The one place they cross."""
     s = planner.settings
     stride, dense = s.edge_checks()
+    pool, pool_batch = planner.pool_rows()
     return core_module().PlannerSettings(
-        range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=s.pool, pool_batch=s.pool_batch,
+        range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=pool, pool_batch=pool_batch,
         candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
         dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut)
 

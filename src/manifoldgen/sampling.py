@@ -67,6 +67,7 @@ class Sampler(ABC):
         self._buffer = self._raw = np.zeros((0, space.n))
 
     lazy_refine: int = 0  # projection iterations (constraints.project, default options) that refine a raw row
+    row_cost: int | None = None  # multiply-adds to make a raw row (a model's decode); None: next to nothing
 
     @abstractmethod
     def candidates(self, count: int) -> np.ndarray:
@@ -186,6 +187,7 @@ class ModelSampler(Sampler):
         model.check_condition(space.y)
         self.model, self.refine = model, int(refine)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
+        self.row_cost = model.row_cost()
         self.generator = None
         if not self.decoder:
             import torch

@@ -24,7 +24,7 @@ import torch
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.adam import Adam
 from manifoldgen.models.files import (CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS_FILE, ModelFacts, check_mix_refine,
-                                      core_decoder, document_checksum, read_model_dir)
+                                      core_decoder, decoder_row_cost, document_checksum, read_model_dir)
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
@@ -223,6 +223,12 @@ class ConditionalSampler(ModelFacts, ABC):
             return None
         weights = {key: value.float().numpy() for key, value in self.state_tensors().items()}
         return core_decoder(spec, weights, self.d, self.norm)
+
+    def row_cost(self) -> int | None:
+        """Multiply-adds to sample one row (:func:`~manifoldgen.models.files.decoder_row_cost`), or None where
+        :meth:`decoder_spec` is None."""
+        spec = self.decoder_spec()
+        return decoder_row_cost(spec, self.nets.state_dict()) if spec else None
 
     def _integration_steps(self) -> int:
         """0: the sampling network maps [latent, y] to a row; n > 0: it is a velocity field v([x, y, t]) that

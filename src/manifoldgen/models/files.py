@@ -113,6 +113,14 @@ def check_mix_refine(path: str | Path, doc: dict) -> tuple[int | None, float | N
     return refine, mix
 
 
+def decoder_row_cost(decoder: dict, weights: dict) -> int:
+    """Multiply-adds to sample one row with the sampling network ``decoder`` (a model.json ``decoder`` entry) and
+    its ``weights`` by name (as :func:`core_decoder` takes them): its Linear weights, twice per integration step
+    (Heun) for a velocity field."""
+    macs = sum(int(np.prod(tuple(weights[f"{decoder['net']}.{2 * i}.weight"].shape))) for i in range(decoder["layers"]))
+    return macs * max(1, 2 * int(decoder["steps"]))
+
+
 def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: dict):
     """``manifoldgen_core.Decoder`` for the sampling network ``decoder`` (a model.json ``decoder`` entry) with
     ``weights`` by name (``NET.2i.weight (out, in)``, ``NET.2i.bias (out,)``), or None without the core."""
@@ -171,6 +179,10 @@ class SavedModel(ModelFacts):
     def native_decoder(self):
         """The sampling network in the compiled core (see :func:`core_decoder`), or None."""
         return core_decoder(self.decoder, self.weights, self.d, self.norm) if self.decoder else None
+
+    def row_cost(self) -> int | None:
+        """Multiply-adds to sample one row (:func:`decoder_row_cost`), or None without a core decoder entry."""
+        return decoder_row_cost(self.decoder, self.weights) if self.decoder else None
 
     def sample(self, y: np.ndarray, n: int, generator=None) -> np.ndarray:
         """(n, d) rows at ``y`` from the torch model (loaded on first use): see ``ConditionalSampler.sample``."""

@@ -27,6 +27,7 @@ from manifoldgen.sampling import Sampler
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
 SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/benchmarks.md, "Shorter paths")
+POOL_ROW_COST = 17_792  # multiply-adds of a row the pool settings count in: the shipped panda CVAE's 4-128-128-7 net
 
 @dataclass
 class PlannerSettings:
@@ -37,7 +38,8 @@ class PlannerSettings:
     finer ``ValidationSettings.resolution``); step: longest distance between projected states
     (walks, halved where a segment fails); partial: a blocked straight extension keeps its valid
     part; pool / pool_batch: stepping stones drawn up front / whenever a tree has none within
-    range (see :class:`SamplePool`); candidates: stepping stones checked (in one batch) per
+    range (see :class:`SamplePool`), in rows of a sampler whose row costs at most :data:`POOL_ROW_COST`
+    multiply-adds; a dearer model's rows are fewer in proportion (:meth:`Planner.pool_rows`); candidates: stepping stones checked (in one batch) per
     extension; shortcut: attempts to shorten a found path within the time limit (each new stretch
     kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
     0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); reuse: keep
@@ -232,11 +234,20 @@ class Planner(ABC):
         if not self.local.stones:
             self.pool = None
             return
-        self.pool = SamplePool(self._draw_many, trees, self._stone_radius(), self.settings.pool_batch)
-        for _ in range(0, self.settings.pool, self.settings.pool_batch):
+        pool, batch = self.pool_rows()
+        self.pool = SamplePool(self._draw_many, trees, self._stone_radius(), batch)
+        for _ in range(0, pool, batch):
             if time.perf_counter() > deadline:
                 break
-            self.pool.draw(self.settings.pool_batch)
+            self.pool.draw(batch)
+
+    def pool_rows(self) -> tuple[int, int]:
+        """(pool, pool_batch) in the sampler's rows: the settings' for a row of at most :data:`POOL_ROW_COST`
+        multiply-adds, fewer in proportion for a dearer one (the same decode budget: a whole-body model's rows
+        cost ten times the panda's, and most pooled rows are never used)."""
+        cost = getattr(self.sampler, "row_cost", None)
+        scale = min(1.0, POOL_ROW_COST / cost) if cost else 1.0
+        return round(self.settings.pool * scale), max(1, round(self.settings.pool_batch * scale))
 
     def _stone_radius(self) -> float:
         """How close to a tree's node a pooled sample must lie to be one of its stepping stones (rad)."""
