@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from manifoldgen.bench.planning import Experiment, Method, build
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 
 
 def main() -> None:
@@ -29,7 +29,7 @@ def main() -> None:
     parser.add_argument("--ranges", type=float, nargs="+", default=[0.3, 0.45, 0.6, 0.9])
     parser.add_argument("--ours", help="our sampler spec, e.g. cvae:OUT/talos-cvae,batch=64 (default: Atlas only)")
     args = parser.parse_args()
-    set_torch_threads()  # as the bench's workers: one thread, no idle threads spinning on our CPU clock
+    set_threads()  # as the bench's workers: one thread, no idle threads spinning on our CPU clock
     experiment = Experiment("reach", task="balance", robot=args.robot, time_limit=30.0, resolution=0.05,
                             planner_settings={"spheres": True, "pool": 0, "pool_batch": 32, "resolution": 0.02})
     atlas = Method.parse("atlas-c++=ompl-native-atlas")

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from manifoldgen.models import load_model, pretrained_model_dir
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 from manifoldgen.tasks import get_task
 
 BATCHES = (32, 64, 256, 1024)
@@ -71,7 +71,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=100)
     parser.add_argument("--runs", type=int, default=100)
     args = parser.parse_args()
-    set_torch_threads()
+    set_threads()
     model = load_model(args.model)
     decoder = model.native_decoder()
     if decoder is None:

@@ -38,7 +38,7 @@ import numpy as np
 from manifoldgen.bench.planning import Experiment, Method, read_records, run_once
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.progress import progress_bar
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 from manifoldgen.settings import parse_settings
 
 HERE = Path(__file__).resolve().parent
@@ -117,7 +117,7 @@ def main() -> None:
         raise SystemExit(f"{PROGRAM} not found; build it with benchmarks/ompl_native/build.sh")
     if args.runs <= 0 or not args.time > 0:
         raise SystemExit("--runs and --time must be positive")
-    set_torch_threads()
+    set_threads()
     from manifoldgen.planning import planner_settings
     from manifoldgen.tasks import get_task
 

@@ -21,8 +21,9 @@ scored by the geometric mean of the problems' median CPU (a run planned for one 
 other's: ``--resume`` over the same --out reuses every recorded run with the same arguments).
 
 Prints per problem the chosen settings, the tuning's distinct evaluations and CPU per method, and the table: solved,
-median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, and
-each OMPL method's median CPU over ours in the same pairing. Records: OUT/PROBLEM/tuning.jsonl and table.jsonl
+median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, the
+candidate paths the dense check refused (retry policies differ: OMPL starts a new tree keeping its charts, ours cuts
+the refused edge and searches on), and each OMPL method's median CPU over ours in the same pairing. Records: OUT/PROBLEM/tuning.jsonl and table.jsonl
 (every run, its path included in the table's: ``examples/check_path.py`` rechecks them with OUT/PROBLEM/problem.json).
 """
 
@@ -40,7 +41,7 @@ from manifoldgen.bench.planning import Experiment, Method, problem_meta, run_onc
 from manifoldgen.io import atomic_write_text
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.planning.rrt_connect import RRTConnectSettings
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 
 # problem -> (task, robot, scene, our sampler spec with {model}, time limit s)
 PROBLEMS = {
@@ -144,8 +145,10 @@ def row(label: str, records: list[dict], ours: list[dict] | None) -> str:
     ops = (lambda key: f"{np.median([r['ops'][key] for r in solved]):,.0f}") if solved else (lambda key: "-")
     queries = [r["extras"].get("sphere_checks", 0) + r["extras"].get("sweep_checks", 0) for r in solved]
     ratio = f"{median_cpu(records) / median_cpu(ours):.2f}x" if ours is not None else "-"
+    rejected = sum(r.get("extras", {}).get("rejected_paths", 0) for r in records)
     return (f"| {label} | {len(solved)}/{len(records)} | {med('cpu_s'):.4g} ({med('time_s'):.4g}) | "
-            f"{med('length'):.2f} | {ops('fk')} | {f'{np.median(queries):,.0f}' if solved else '-'} | {ratio} |")
+            f"{med('length'):.2f} | {ops('fk')} | {f'{np.median(queries):,.0f}' if solved else '-'} | {rejected} | "
+            f"{ratio} |")
 
 
 def main() -> None:
@@ -173,7 +176,7 @@ def main() -> None:
     if set(tune_seeds) & set(seeds):
         parser.error(f"the held-out seeds {tune_seeds.start}..{tune_seeds.stop - 1} overlap the table's "
                      f"{seeds.start}..{seeds.stop - 1}; move --tune-seed")
-    set_torch_threads()  # one torch thread, as the bench's workers
+    set_threads()  # one torch thread, as the bench's workers
     out = Path(args.out)
     problems = [Problem(name, models.get(name, str(pretrained_model_dir())), args.time, out, args.resume)
                 for name in args.problems]
@@ -200,7 +203,7 @@ def main() -> None:
             lines = [f"### {problem.name}: seeds {seeds.start}..{seeds.stop - 1}, {problem.base.time_limit:g} s "
                      f"limit ({time.process_time() - began:.0f} s CPU here)",
                      "| method | solved | median CPU (wall), s | path length, rad | FK | collision queries | "
-                     "CPU over ours |", "|---|---|---|---|---|---|---|"]
+                     "paths the dense check refused (all runs) | CPU over ours |", "|---|---|---|---|---|---|---|---|"]
             for pairing in ("defaults", "tuned"):
                 ours = table["cvae", pairing] if "cvae" in args.methods else None
                 for method in args.methods:

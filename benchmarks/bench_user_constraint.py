@@ -44,7 +44,7 @@ import torch
 from manifoldgen import native
 from manifoldgen.data import collect
 from manifoldgen.models import get_model_class
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 from manifoldgen.tasks import get_task
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "user_task"
@@ -66,7 +66,7 @@ parser.add_argument("--jacobians", action="store_true", help="time the callback'
 parser.add_argument("--evaluations", action="store_true", help="time the core's residual and Jacobian of one "
                     "state: compiled, callbacks, built-in terms")
 args = parser.parse_args()
-set_torch_threads()
+set_threads()
 FD_ROWS, COMPILE = native.FD_ROWS, native.COMPILE
 
 

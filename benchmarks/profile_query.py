@@ -41,9 +41,9 @@ KINDS = [  # (kind, shared object pattern, symbol pattern or None): the first ma
 
 def run(args: argparse.Namespace) -> None:
     from manifoldgen.bench.planning import Experiment, Method, build
-    from manifoldgen.runtime import set_torch_threads
+    from manifoldgen.runtime import set_threads
 
-    set_torch_threads()
+    set_threads()
     first, stop = (int(v) for v in args.seeds.split(":"))
     from manifoldgen.planning import PLANNERS, planner_settings
     from manifoldgen.settings import parse_settings

@@ -1,9 +1,9 @@
 """Shared fixtures: robots and tasks are loaded once per session; caches go to a temp dir; torch uses one thread
 (its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy)."""
 
-from manifoldgen.runtime import set_torch_threads
+from manifoldgen.runtime import set_threads
 
-set_torch_threads(1)  # before any test module imports torch
+set_threads(1)  # before any test module imports torch
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

@@ -161,7 +161,7 @@ def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: 
     ``hidden=[256, 256]``, ...; an unknown one lists the known ones; not with ``auto``). With ``out`` the model
     directory (``model.json`` + ``model.safetensors``; with ``auto`` also ``selection.json`` and ``candidates/``)
     is written there. Results are reproducible for a seed and a torch thread count
-    (``manifoldgen.runtime.set_torch_threads``)."""
+    (``manifoldgen.runtime.set_threads``)."""
     import tempfile
 
     from manifoldgen.dataset import Dataset

@@ -10,7 +10,7 @@ from manifoldgen.cli_common import (MADE_FOR_HELP, ROBOT_HELP, TASK_HELP, TRUST_
                                     load_task, made_for)  # the first of ours: it limits the thread pools
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path
-from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, set_torch_threads
+from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, set_threads
 
 bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Experiments behind the paper's tables.")
 app.add_typer(bench_app, name="bench")
@@ -90,7 +90,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     check_output_path(output, [_file(task)])
     task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
-    set_torch_threads()
+    set_threads()
     start = time.perf_counter()
     found = task_anchors(task_obj) if anchors and not near_home else None
     if per_condition is None:
@@ -211,12 +211,12 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     from manifoldgen.planning import planner_settings
     from manifoldgen.planning.result import engine
     from manifoldgen.query import run_query, save_path
-    from manifoldgen.runtime import set_torch_threads
+    from manifoldgen.runtime import set_threads
     from manifoldgen.scene import get_scene
     from manifoldgen.settings import parse_settings
     from manifoldgen.targets import constrained_frame
     from manifoldgen.specs import parse_spec
-    set_torch_threads()
+    set_threads()
     _bounded("--time", time_limit)
     image = output.with_suffix(".png") if picture else None
     if image == output or (snapshots is not None and snapshots in (output, image)):
@@ -317,7 +317,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     if model == "auto" and (settings or config):
         raise ManifoldgenError("--set and --config set one model's hyper-parameters; name it with --model (e.g. "
                                "--model cvae)")
-    set_torch_threads(_bounded("--threads", threads))
+    set_threads(_bounded("--threads", threads))
     _bounded("--epochs", epochs)
     data = Dataset.load(dataset)
     task_obj = task_from_meta(data.meta, task=made_for(task), trust_code=trust_code, what=f"dataset {dataset}")
@@ -369,7 +369,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     from manifoldgen.models import load_model
     from manifoldgen.sampling import sample_to_file
     from manifoldgen.tasks import task_from_meta
-    set_torch_threads(2)
+    set_threads(2)
     _bounded("--refine", refine)
     net = load_model(model_dir)
     check_output_path(output, [model_dir, _file(task)])
@@ -414,7 +414,7 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
     from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
     check_output_path(output, [*model_dirs, _file(task)], directory=True, writes=OUTPUT_FILES)
-    set_torch_threads(_bounded("--threads", threads))
+    set_threads(_bounded("--threads", threads))
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=threads, seen=_condition_rows(seen),
                        unseen=_condition_rows(unseen), task=made_for(task), trust_code=trust_code)
@@ -562,7 +562,7 @@ def sweep(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     from manifoldgen.model_sweep import MODEL_FILES, SWEEP_FILE, sweep as run_sweep
     on = parse_cluster(cluster)
     check_output_path(output, [dataset], directory=True, writes=MODEL_FILES + (SWEEP_FILE, "candidates"))
-    set_torch_threads()
+    set_threads()
     rows = run_sweep(Dataset.load(dataset), output, models=model or list(CANDIDATES), latents=latent or [],
                      seeds=seeds or [0], epochs=epochs, cluster=on)
     for row in rows:

@@ -29,7 +29,7 @@ from manifoldgen.io import atomic_write_bytes, atomic_write_text, check_name
 from manifoldgen.models import MODELS, get_model_class, load_model
 from manifoldgen.models.base import dataset_task
 from manifoldgen.progress import progress_bar
-from manifoldgen.runtime import check_seed, set_torch_threads
+from manifoldgen.runtime import check_seed, set_threads
 from manifoldgen.selection import RECALL_SLACK, score
 from manifoldgen.tasks import code_types
 from manifoldgen.training import VALIDATION, split
@@ -67,7 +67,7 @@ def train_candidate(dataset: Dataset, model: str, latent: int | None, seed: int,
     """Train and score one candidate in a temporary folder: ``{"row": ..., "files": {name: bytes}}`` (the files of
     :data:`MODEL_FILES`); the row holds ``model``, ``latent`` (as trained), ``seed``, ``accuracy``, ``recall``,
     ``epochs``, ``seconds``."""
-    set_torch_threads()
+    set_threads()
     task = dataset_task(dataset)
     held_out = split(len(dataset), VALIDATION, torch.Generator().manual_seed(seed))[0].numpy()  # fit's own split
     with tempfile.TemporaryDirectory(prefix="manifoldgen-sweep-") as folder:

@@ -177,11 +177,11 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
 def _train_candidate(job: tuple, *, task: Task | None = None, progress: bool = False) -> None:
     """Train one candidate ``(name, dataset, epochs, seed, folder, resume)`` into its folder (in a child process,
     ``task`` None: rebuilt from the dataset's meta)."""
-    from manifoldgen.runtime import set_torch_threads
+    from manifoldgen.runtime import set_threads
 
     name, dataset, epochs, seed, folder, resume = job
     if task is None:
-        set_torch_threads()
+        set_threads()
     get_model_class(name)().fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress, resume=resume,
                                 task=task)
 

@@ -354,8 +354,8 @@ def _init_worker(parent: int) -> None:
         libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         if os.getppid() != parent:  # the parent died before the line above
             os._exit(1)
-    from manifoldgen.runtime import set_torch_threads
-    set_torch_threads()
+    from manifoldgen.runtime import set_threads
+    set_threads()
 
 
 def worker_pool(workers: int) -> ProcessPoolExecutor:

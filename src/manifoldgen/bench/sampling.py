@@ -26,7 +26,7 @@ from manifoldgen.metrics import accuracy, coverage_metrics
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
 from manifoldgen.provenance import check_made_for
-from manifoldgen.runtime import check_seed, set_torch_threads
+from manifoldgen.runtime import check_seed, set_threads
 from manifoldgen.tasks import Task, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
@@ -40,7 +40,7 @@ def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, .
 
     The thread count is set here because pinocchio's parallel collision checks reset OpenMP's.
     """
-    set_torch_threads(threads)
+    set_threads(threads)
     generator = torch.Generator().manual_seed(seed)
     result = {}
     for n in counts:

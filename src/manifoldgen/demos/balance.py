@@ -20,7 +20,7 @@ from manifoldgen.data import collect
 from manifoldgen.demos.steps import plan_and_check, sample_accuracy
 from manifoldgen.models import get_model_class
 from manifoldgen.physics import balance_feet, check_path
-from manifoldgen.runtime import REFINE, set_torch_threads
+from manifoldgen.runtime import REFINE, set_threads
 from manifoldgen.scene import get_scene
 from manifoldgen.stability import path_stability
 from manifoldgen.tasks import get_task
@@ -58,7 +58,7 @@ def _collect_and_train(task, seed: int, output: Path, console: Console, figures:
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:
     """Run the pipeline into ``output``; print and return the figures."""
-    set_torch_threads()
+    set_threads()
     output.mkdir(parents=True, exist_ok=True)
     task = get_task("balance", "centauro")
     scene = get_scene(task, "reach")  # the hand's target pose solved on the balance manifold

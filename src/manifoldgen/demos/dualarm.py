@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from manifoldgen.demos.steps import collect_and_train, plan_and_check, race_line, sample_accuracy
-from manifoldgen.runtime import REFINE, set_torch_threads
+from manifoldgen.runtime import REFINE, set_threads
 from manifoldgen.scene import get_scene
 from manifoldgen.targets import constrained_frame
 from manifoldgen.tasks import get_task
@@ -29,7 +29,7 @@ TIME_LIMIT = 60.0
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:
     """Run the pipeline into ``output``; print and return the figures."""
-    set_torch_threads()
+    set_threads()
     output.mkdir(parents=True, exist_ok=True)
     task = get_task("dualarm", "pr2")
     scene = get_scene(task, "tray-over")

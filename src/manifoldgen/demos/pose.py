@@ -15,7 +15,7 @@ from rich.table import Table
 
 from manifoldgen.scene import get_scene
 from manifoldgen.demos.steps import collect_and_train, plan_and_check, race_line, sample_accuracy
-from manifoldgen.runtime import REFINE, set_torch_threads
+from manifoldgen.runtime import REFINE, set_threads
 from manifoldgen.tasks import get_task
 from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
@@ -25,7 +25,7 @@ SAMPLES = 4000
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:
     """Run the pipeline into ``output``; print and return the figures."""
-    set_torch_threads()
+    set_threads()
     output.mkdir(parents=True, exist_ok=True)
     task = get_task("pose", "panda")
     scene = get_scene(task, "wall")
