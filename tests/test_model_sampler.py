@@ -159,11 +159,11 @@ def test_model_spec_takes_whichever_model_a_directory_holds(model_dir, panda_tas
 
 
 def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_task):
-    """The pool settings count rows of the shipped panda CVAE's cost; a model whose rows cost more multiply-adds
-    gets fewer in proportion, in the Python search and in the core's alike."""
+    """The pool settings and a model sampler's batch count rows of the shipped panda CVAE's cost; a model whose
+    rows cost more multiply-adds gets fewer in proportion, in the Python search and in the core's alike."""
     from manifoldgen.native import core_settings
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
-    from manifoldgen.planning.base import POOL_ROW_COST
+    from manifoldgen.sampling import REFERENCE_ROW_COST
 
     model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7
     space = ConstrainedSpace(panda_task.constraint, [0.4])
@@ -171,8 +171,10 @@ def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_
     assert sampler.row_cost == model.row_cost() == 4 * 32 + 32 * 32 + 32 * 7
     settings = RRTConnectSettings(pool=2048, pool_batch=256)
     assert RRTConnect(space, sampler, settings=settings).pool_rows() == (2048, 256)  # cheaper than the reference
-    sampler.row_cost = 10 * POOL_ROW_COST
+    sampler.row_cost = 10 * REFERENCE_ROW_COST
     planner = RRTConnect(space, sampler, settings=settings)
     assert planner.pool_rows() == (205, 26)
     native = core_settings(planner, 0)
     assert (native.pool, native.pool_batch) == (205, 26)
+    sampler.stats.batches = 10  # its batches stop growing at a tenth of 1,024 rows
+    assert sampler._batch_rows() == 102

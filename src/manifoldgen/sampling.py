@@ -34,6 +34,8 @@ from manifoldgen.space import ConstrainedSpace
 
 PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # the projection sampler's iterations
 FIRST_ROWS = 64  # a model sampler's first batch; each next one doubles, up to its batch size
+REFERENCE_ROW_COST = 17_792  # multiply-adds of a row of the shipped panda CVAE (4-128-128-7): row counts (a model
+# sampler's batch, a planner's pool) hold for a row this cheap, and shrink in proportion for a dearer one (cost_scale)
 CHECK_ROWS = 256  # model rows a query's start draws to measure its gaps at the start and the goal
 MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows while the model covers its ends
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
@@ -131,6 +133,13 @@ class Sampler(ABC):
         return np.concatenate(rows) if rows else np.zeros((0, self.space.n))
 
 
+def cost_scale(sampler) -> float:
+    """The share of a row count that ``sampler`` draws: 1 for a row of at most :data:`REFERENCE_ROW_COST`
+    multiply-adds (``row_cost``), less in proportion for a dearer one (the same decode budget)."""
+    cost = getattr(sampler, "row_cost", None)
+    return min(1.0, REFERENCE_ROW_COST / cost) if cost else 1.0
+
+
 class UniformSampler(Sampler):
     """Rejection sampling: uniform in the joint limits (almost never on a thin manifold)."""
 
@@ -199,9 +208,11 @@ class ModelSampler(Sampler):
         self.spacing = spacing(self._decode(CHECK_ROWS))  # the model rows' own spacing at this condition, once
 
     def _batch_rows(self) -> int:
-        """Batches grow from :data:`FIRST_ROWS` rows, doubling up to ``batch``: an easy query decodes few rows
-        it never uses (a flow-matching model's decode costs tens of microseconds a row)."""
-        return min(self.batch, FIRST_ROWS << min(self.stats.batches, 20))
+        """Batches grow from :data:`FIRST_ROWS` rows, doubling up to ``batch`` (fewer in proportion for a model
+        dearer than the reference, :func:`cost_scale`): an easy query decodes few rows it never uses (a
+        flow-matching model's decode costs tens of microseconds a row)."""
+        top = max(FIRST_ROWS, round(self.batch * cost_scale(self)))
+        return min(top, FIRST_ROWS << min(self.stats.batches, 20))
 
     @property
     def lazy_refine(self) -> int:

@@ -23,11 +23,10 @@ from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.roadmap import Roadmap
 from manifoldgen.planning.smoothing import shortcut
-from manifoldgen.sampling import Sampler
+from manifoldgen.sampling import Sampler, cost_scale
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
 SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/benchmarks.md, "Shorter paths")
-POOL_ROW_COST = 17_792  # multiply-adds of a row the pool settings count in: the shipped panda CVAE's 4-128-128-7 net
 
 @dataclass
 class PlannerSettings:
@@ -38,8 +37,9 @@ class PlannerSettings:
     finer ``ValidationSettings.resolution``); step: longest distance between projected states
     (walks, halved where a segment fails); partial: a blocked straight extension keeps its valid
     part; pool / pool_batch: stepping stones drawn up front / whenever a tree has none within
-    range (see :class:`SamplePool`), in rows of a sampler whose row costs at most :data:`POOL_ROW_COST`
-    multiply-adds; a dearer model's rows are fewer in proportion (:meth:`Planner.pool_rows`); candidates: stepping stones checked (in one batch) per
+    range (see :class:`SamplePool`), in rows of a sampler whose row costs at most
+    :data:`~manifoldgen.sampling.REFERENCE_ROW_COST` multiply-adds; a dearer model's rows are fewer in
+    proportion (:meth:`Planner.pool_rows`); candidates: stepping stones checked (in one batch) per
     extension; shortcut: attempts to shorten a found path within the time limit (each new stretch
     kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
     0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); reuse: keep
@@ -242,11 +242,10 @@ class Planner(ABC):
             self.pool.draw(batch)
 
     def pool_rows(self) -> tuple[int, int]:
-        """(pool, pool_batch) in the sampler's rows: the settings' for a row of at most :data:`POOL_ROW_COST`
-        multiply-adds, fewer in proportion for a dearer one (the same decode budget: a whole-body model's rows
-        cost ten times the panda's, and most pooled rows are never used)."""
-        cost = getattr(self.sampler, "row_cost", None)
-        scale = min(1.0, POOL_ROW_COST / cost) if cost else 1.0
+        """(pool, pool_batch) in the sampler's rows: the settings' scaled by its
+        :func:`~manifoldgen.sampling.cost_scale` (the same decode budget: a whole-body model's rows cost ten
+        times the panda's, and most pooled rows are never used)."""
+        scale = cost_scale(self.sampler)
         return round(self.settings.pool * scale), max(1, round(self.settings.pool_batch * scale))
 
     def _stone_radius(self) -> float:
