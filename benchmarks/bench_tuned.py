@@ -2,8 +2,8 @@
 
     python benchmarks/bench_tuned.py [--problems wall maze talos] [--model talos=OUT/talos-cvae ...]
                                      [--methods cvae atlas-c++ tangent-c++ projected-c++] [--tune-seed 100]
-                                     [--tune-runs 15] [--seed 0] [--runs 30] [--time 10] [--out runs/tuned] [--resume]
-                                     [--one-set]
+                                     [--tune-runs 15] [--tune-time S] [--seed 0] [--runs 30] [--time 10]
+                                     [--out runs/tuned] [--resume] [--one-set]
 
 Every problem is planned by each method twice on the table's seeds (seed .. seed + runs - 1), interleaved per seed
 in this one process: with its defaults (ours: the planner dataclass's, the task file's ``[planner]`` table left out;
@@ -14,8 +14,8 @@ sides get the sphere broad phase, the same tolerance, the same dense check of ev
 Tuning, the same for every method: coordinate descent over the method's knobs (:data:`KNOBS`, three values each
 with the default among them, two for a yes/no knob), on held-out seeds tune-seed .. tune-seed + tune-runs - 1: each
 knob in turn, the others held at the best so far, every value planned on every held-out seed; the value with the
-lowest median CPU (an unsolved run counts as slower than every solved one) is kept, a tie keeping the earlier.
-A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle five (the atlas's),
+lowest median CPU (an unsolved run, or one past --tune-time, counts as slower than every solved one) is kept, a tie
+keeping the earlier. A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle five (the atlas's),
 Projected two (it has no more). With --one-set each method gets one set for all the problems: the same descent
 scored by the geometric mean of the problems' median CPU (a run planned for one problem's tuning counts for the
 other's: ``--resume`` over the same --out reuses every recorded run with the same arguments).
@@ -23,8 +23,9 @@ other's: ``--resume`` over the same --out reuses every recorded run with the sam
 Prints per problem the chosen settings, the tuning's distinct evaluations and CPU per method, and the table: solved,
 median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, the
 candidate paths the dense check refused (retry policies differ: OMPL starts a new tree keeping its charts, ours cuts
-the refused edge and searches on), and each OMPL method's median CPU over ours in the same pairing. Records: OUT/PROBLEM/tuning.jsonl and table.jsonl
-(every run, its path included in the table's: ``examples/check_path.py`` rechecks them with OUT/PROBLEM/problem.json).
+the refused edge and searches on), and each OMPL method's median CPU over ours in the same pairing. Records:
+OUT/PROBLEM/tuning.jsonl and table.jsonl (every run, its path included in the table's: ``examples/check_path.py``
+rechecks them with OUT/PROBLEM/problem.json).
 """
 
 from __future__ import annotations
@@ -64,9 +65,9 @@ KNOBS = {  # method -> knob -> values, the default first (ompl_rho 0: OMPL's 5 x
 OURS_DEFAULTS = {f.name: f.default for f in fields(RRTConnectSettings)}
 
 
-def median_cpu(records: list[dict]) -> float:
-    """Median CPU with an unsolved run slower than every solved one (inf when most are unsolved)."""
-    return float(np.median([r["cpu_s"] if r["solved"] else np.inf for r in records]))
+def median_cpu(records: list[dict], limit: float = np.inf) -> float:
+    """Median CPU with an unsolved run (or one over ``limit`` s) slower than every solved one (inf when most are)."""
+    return float(np.median([r["cpu_s"] if r["solved"] and r["time_s"] <= limit else np.inf for r in records]))
 
 
 class Problem:
@@ -81,13 +82,15 @@ class Problem:
         self.done: dict[str, dict] = {}
         self.resume = resume
 
-    def plan(self, file: str, method: str, settings: dict, seed: int) -> dict:
-        """The record of ``method`` with ``settings`` (over its defaults) at ``seed``, planned unless recorded."""
+    def plan(self, file: str, method: str, settings: dict, seed: int, time_limit: float = np.inf) -> dict:
+        """The record of ``method`` with ``settings`` (over its defaults) at ``seed`` within the problem's time limit
+        or ``time_limit`` s if shorter, planned unless recorded (a record made with a longer limit is kept)."""
         key = json.dumps([method, settings, seed], sort_keys=True)
         if key not in self.done:
             spec = f"{method}={METHODS[method].format(sampler=self.sampler)}"
             ours = {} if method.endswith("-c++") else OURS_DEFAULTS
-            experiment = Experiment(self.base.scene, self.base.task, self.base.robot, self.base.time_limit, seed,
+            experiment = Experiment(self.base.scene, self.base.task, self.base.robot,
+                                    min(self.base.time_limit, time_limit), seed,
                                     planner_settings={**ours, "spheres": True, **settings})
             record = run_once(experiment, Method.parse(spec), 0)
             record.update(key=key, settings=settings)
@@ -117,9 +120,10 @@ class Problem:
         atomic_write_text(self.out / "problem.json", json.dumps({"meta": problem_meta(self.base)}))
 
 
-def tune(problems: list[Problem], method: str, seeds: range) -> tuple[dict, int, float]:
-    """Coordinate descent over the method's knobs on ``seeds`` of every problem, scored by the geometric mean of
-    the problems' median CPU: (chosen settings, distinct settings planned, CPU s of the tuning's queries)."""
+def tune(problems: list[Problem], method: str, seeds: range, limit: float) -> tuple[dict, int, float]:
+    """Coordinate descent over the method's knobs on ``seeds`` of every problem, each query within ``limit`` s,
+    scored by the geometric mean of the problems' median CPU: (chosen settings, distinct settings planned, CPU s
+    of the tuning's queries)."""
     best: dict = {}
     evaluated: dict[str, float] = {}
 
@@ -127,7 +131,8 @@ def tune(problems: list[Problem], method: str, seeds: range) -> tuple[dict, int,
         settings = {k: v for k, v in settings.items() if v != KNOBS[method][k][0]}  # one name per setting
         key = json.dumps(settings, sort_keys=True)
         if key not in evaluated:
-            medians = [median_cpu([p.plan("tuning.jsonl", method, settings, s) for s in seeds]) for p in problems]
+            medians = [median_cpu([p.plan("tuning.jsonl", method, settings, s, limit) for s in seeds], limit)
+                       for p in problems]
             evaluated[key] = float(np.exp(np.mean(np.log(medians))))
         return evaluated[key]
 
@@ -159,6 +164,8 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", default=["cvae", "atlas-c++"], choices=sorted(METHODS))
     parser.add_argument("--tune-seed", type=int, default=100)
     parser.add_argument("--tune-runs", type=int, default=15)
+    parser.add_argument("--tune-time", type=float, default=None, help="time limit of a tuning query, s (default: "
+                        "the problem's); a setting whose median query takes longer loses")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--runs", type=int, default=30)
     parser.add_argument("--time", type=float, default=None, help="time limit per query, s (default: the problem's)")
@@ -181,7 +188,7 @@ def main() -> None:
     problems = [Problem(name, models.get(name, str(pretrained_model_dir())), args.time, out, args.resume)
                 for name in args.problems]
     for problem in problems:
-        problem.load({k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out", "one_set")}
+        problem.load({k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out", "one_set", "tune_time")}
                      | {"model": models.get(problem.name, "shipped")})
     groups = [problems] if args.one_set else [[p] for p in problems]
     for group in groups:
@@ -190,7 +197,7 @@ def main() -> None:
               flush=True)
         tuned = {}
         for method in args.methods:
-            tuned[method], count, cpu = tune(group, method, tune_seeds)
+            tuned[method], count, cpu = tune(group, method, tune_seeds, args.tune_time or np.inf)
             print(f"- {method}: {json.dumps(tuned[method]) if tuned[method] else 'its defaults'} "
                   f"({count} settings tried, {cpu:.1f} s CPU in queries)", flush=True)
         for problem in group:
