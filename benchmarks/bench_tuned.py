@@ -24,8 +24,8 @@ Prints per problem the chosen settings, the tuning's distinct evaluations and CP
 median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, the
 candidate paths the dense check refused (retry policies differ: OMPL starts a new tree keeping its charts, ours cuts
 the refused edge and searches on), and each OMPL method's median CPU over ours in the same pairing. Records:
-OUT/PROBLEM/tuning.jsonl and table.jsonl (every run, its path included in the table's: ``examples/check_path.py``
-rechecks them with OUT/PROBLEM/problem.json).
+OUT/PROBLEM/tuning.jsonl and runs.jsonl, the table's (every run, its path included: ``python examples/check_path.py
+OUT/PROBLEM`` rechecks them outside the project with OUT/PROBLEM/problem.json).
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.bench.planning import Experiment, Method, problem_meta, run_once
+from manifoldgen.bench.planning import PROBLEM_FILE, RUNS_FILE, Experiment, Method, problem_meta, run_once
 from manifoldgen.io import atomic_write_text
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.planning.rrt_connect import RRTConnectSettings
@@ -107,17 +107,17 @@ class Problem:
         if self.resume and config.is_file():
             if json.loads(config.read_text()) != arguments:
                 raise SystemExit(f"{config}: made with other arguments; resume with the same ones or use another --out")
-            for file in ("tuning.jsonl", "table.jsonl"):
+            for file in ("tuning.jsonl", RUNS_FILE):
                 path = self.out / file
                 for line in path.read_text().splitlines() if path.is_file() else []:
                     if line.strip():
                         record = json.loads(line)
                         self.done[record["key"]] = record
         else:
-            for file in ("tuning.jsonl", "table.jsonl"):
+            for file in ("tuning.jsonl", RUNS_FILE):
                 (self.out / file).unlink(missing_ok=True)
         atomic_write_text(config, json.dumps(arguments, indent=1))
-        atomic_write_text(self.out / "problem.json", json.dumps({"meta": problem_meta(self.base)}))
+        atomic_write_text(self.out / PROBLEM_FILE, json.dumps(problem_meta(self.base), indent=1))
 
 
 def tune(problems: list[Problem], method: str, seeds: range, limit: float) -> tuple[dict, int, float]:
@@ -206,7 +206,7 @@ def main() -> None:
             for seed in seeds:  # interleaved per seed
                 for method in args.methods:
                     for pairing, settings in (("defaults", {}), ("tuned", tuned[method])):
-                        table[method, pairing].append(problem.plan("table.jsonl", method, settings, seed))
+                        table[method, pairing].append(problem.plan(RUNS_FILE, method, settings, seed))
             lines = [f"### {problem.name}: seeds {seeds.start}..{seeds.stop - 1}, {problem.base.time_limit:g} s "
                      f"limit ({time.process_time() - began:.0f} s CPU here)",
                      "| method | solved | median CPU (wall), s | path length, rad | FK | collision queries | "
