@@ -15,8 +15,8 @@ Tuning, the same for every method: coordinate descent over the method's knobs (:
 with the default among them, two for a yes/no knob), on held-out seeds tune-seed .. tune-seed + tune-runs - 1: each
 knob in turn, the others held at the best so far, every value planned on every held-out seed; the value with the
 lowest median CPU (an unsolved run, or one past --tune-time, counts as slower than every solved one) is kept, a tie
-keeping the earlier. A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle five (the atlas's),
-Projected two (it has no more). With --one-set each method gets one set for all the problems: the same descent
+keeping the earlier. A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle
+five (the atlas's), Projected two (it has no more). With --one-set each method gets one set for all the problems: the same descent
 scored by the geometric mean of the problems' median CPU (a run planned for one problem's tuning counts for the
 other's: ``--resume`` over the same --out reuses every recorded run with the same arguments).
 
@@ -139,8 +139,8 @@ def tune(problems: list[Problem], method: str, seeds: range, limit: float) -> tu
     for knob, values in KNOBS[method].items():
         scores = [score({**best, knob: value}) for value in values]
         best = {**best, knob: values[int(np.argmin(scores))]}
-    cpu = sum(r["cpu_s"] for p in problems for r in p.done.values()
-              if json.loads(r["key"])[0] == method and json.loads(r["key"])[2] in seeds and "cpu_s" in r)
+    cpu = sum(r.get("cpu_s", 0.0) for p in problems for r in p.done.values()
+              if r["method"] == method and r["seed"] in seeds)
     return {k: v for k, v in best.items() if v != KNOBS[method][k][0]}, len(evaluated), cpu
 
 
@@ -188,8 +188,8 @@ def main() -> None:
     problems = [Problem(name, models.get(name, str(pretrained_model_dir())), args.time, out, args.resume)
                 for name in args.problems]
     for problem in problems:
-        problem.load({k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out", "one_set", "tune_time")}
-                     | {"model": models.get(problem.name, "shipped")})
+        kept = {k: v for k, v in vars(args).items() if k not in ("problems", "resume", "out", "one_set", "tune_time")}
+        problem.load(kept | {"model": models.get(problem.name, "shipped")})
     groups = [problems] if args.one_set else [[p] for p in problems]
     for group in groups:
         print(f"## {', '.join(p.name for p in group)}: tuning on seeds {tune_seeds.start}..{tune_seeds.stop - 1}"

@@ -21,8 +21,8 @@ def limit_threads() -> None:
 def set_threads(threads: int = TORCH_THREADS) -> None:
     """Set torch's CPU thread count (at least 1): at once where torch is loaded, else through
     ``OMP_NUM_THREADS``, which torch reads when it loads (a command that never needs torch never pays its
-    2-3 s import); and numpy's BLAS to one thread (its idle threads spin: 45 % of a whole-body query's CPU on a busy
-    machine, and a torch thread beside them runs many times slower)."""
+    2-3 s import); and numpy's BLAS pool as :func:`limit_threads` sizes it (its idle threads spin: 45 % of a
+    whole-body query's CPU on a busy machine, and a torch thread beside them runs many times slower)."""
     import os
     import sys
 
@@ -31,10 +31,10 @@ def set_threads(threads: int = TORCH_THREADS) -> None:
         sys.modules["torch"].set_num_threads(threads)
     else:
         os.environ["OMP_NUM_THREADS"] = str(threads)
-    os.environ["OPENBLAS_NUM_THREADS"] = "1"  # for a numpy loaded later
-    if "numpy" in sys.modules:
+    limit_threads()  # numpy's BLAS pool, for a numpy loaded later
+    if "numpy" in sys.modules:  # already loaded: its pool takes the same size at once
         from threadpoolctl import threadpool_limits
-        threadpool_limits(1, user_api="blas")
+        threadpool_limits(int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
 
 
 MAX_SEED = 2**32 - 1  # seeds feed numpy's and torch's generators; run r of a benchmark uses seed + r

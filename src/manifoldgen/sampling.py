@@ -229,17 +229,16 @@ class ModelSampler(Sampler):
         from manifoldgen.coverage import gaps, missed
 
         rows = self._decode(CHECK_ROWS)
-        own = self.spacing
         ends = gaps(rows, np.stack([start, goal]))
-        self.missed = bool(missed(ends, own).any())
+        self.missed = bool(missed(ends, self.spacing).any())
         self.drawn = 0
         if not self.missed:
             self._raw = np.concatenate([rows, self._raw])
             self.stats.generated += len(rows)
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
-                f"(their own spacing: {own:.2f} rad): it misses an IK branch of this query, so {MIX_MISSED:.0%} "
-                f"of its rows are projected uniform samples; name the scene in the task file, recollect (collect "
+                f"(their own spacing: {self.spacing:.2f} rad): it misses an IK branch of this query, so "
+                f"{MIX_MISSED:.0%} of its rows are projected uniform samples; name the scene in the task file, recollect (collect "
                 f"seeds around every scene's start and goal) and retrain")
 
     def mix(self) -> float:
