@@ -238,8 +238,8 @@ class ModelSampler(Sampler):
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
                 f"(their own spacing: {self.spacing:.2f} rad): it misses an IK branch of this query, so "
-                f"{MIX_MISSED:.0%} of its rows are projected uniform samples; name the scene in the task file, recollect (collect "
-                f"seeds around every scene's start and goal) and retrain")
+                f"{MIX_MISSED:.0%} of its rows are projected uniform samples; name the scene in the task file, "
+                f"recollect (collect seeds around every scene's start and goal) and retrain")
 
     def mix(self) -> float:
         """The share of projected uniform rows in the next batch (see the module doc)."""
