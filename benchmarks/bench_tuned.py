@@ -17,8 +17,8 @@ knob in turn, the others held at the best so far, every value planned on every h
 lowest median CPU (an unsolved run, or one past --tune-time, counts as slower than every solved one) is kept, a tie
 keeping the earlier. A setting already planned is not planned again. Ours has five knobs, Atlas and TangentBundle
 five (the atlas's), Projected two (it has no more). With --one-set each method gets one set for all the problems:
-the same descent scored by the geometric mean of the problems' median CPU (a run planned for one problem's tuning counts for the
-other's: ``--resume`` over the same --out reuses every recorded run with the same arguments).
+the same descent scored by the geometric mean of the problems' median CPU. ``--resume`` over the same --out reuses
+every recorded run made with the same arguments.
 
 Prints per problem the chosen settings, the tuning's distinct evaluations and CPU per method, and the table: solved,
 median CPU (wall), path length and FK and collision-query counts of each method with its defaults and tuned, the
