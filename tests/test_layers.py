@@ -12,14 +12,14 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "manifoldgen"
 
 # Bottom to top. A name covers the module and everything under it (a package); the longest name that covers a
-# module decides its layer ("viz.losses" before "viz"); "" is the package's own __init__ (the `mg` namespace).
+# module decides its layer; "" is the package's own __init__ (the `mg` namespace).
 LAYERS = [
     ("base", ["errors", "io", "registry", "runtime", "settings", "progress", "cluster"]),
     ("geometry and kinematics", ["robot", "collision", "spheres", "shapes"]),
     ("constraints", ["constraints", "provenance"]),
     ("space", ["space"]),
     ("compiled core", ["native", "targets"]),
-    ("learning", ["coverage", "metrics", "dataset", "sampling", "training", "viz.losses"]),
+    ("learning", ["coverage", "metrics", "dataset", "sampling", "training"]),
     ("planning", ["planning"]),
     ("problem", ["tasks", "scene"]),
     ("models", ["models"]),

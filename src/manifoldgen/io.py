@@ -1,4 +1,4 @@
-"""Atomic file writes, output-path checks, one writer per output, and the JSON ``meta`` carried by every
+"""Atomic file writes (figures too), output-path checks, one writer per output, and the JSON ``meta`` carried by every
 .npz file."""
 
 from __future__ import annotations
@@ -98,6 +98,18 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     _atomic(path, lambda f: f.write(data))
+
+
+def save_figure(fig, path: str | Path) -> None:
+    """Write a matplotlib figure as PNG atomically and close it."""
+    import io as bytes_io
+
+    import matplotlib.pyplot as plt
+
+    buffer = bytes_io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(Path(path), buffer.getvalue())
 
 
 def _same(a: Path, b: Path) -> bool:

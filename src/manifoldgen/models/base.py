@@ -28,7 +28,7 @@ from manifoldgen.models.files import (CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
-from manifoldgen.viz.losses import plot_training
+from manifoldgen.models.loss_curve import plot_training
 
 if TYPE_CHECKING:
     from manifoldgen.dataset import Dataset

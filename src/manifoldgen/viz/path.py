@@ -12,7 +12,7 @@ from manifoldgen.robot import Robot
 from manifoldgen.scene import Scene
 from manifoldgen.shapes import Obstacle
 from manifoldgen.space import densify
-from manifoldgen.viz.losses import save_figure
+from manifoldgen.io import save_figure
 
 VIEWS = (("top view", 0, 1, "x (m)", "y (m)"), ("side view", 0, 2, "x (m)", "z (m)"))
 TOOL_VIEWS = 8  # held-object outlines drawn along the path, start and goal included

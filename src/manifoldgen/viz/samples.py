@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.viz.losses import save_figure
+from manifoldgen.io import save_figure
 
 
 def _pyplot():

@@ -25,7 +25,7 @@ from manifoldgen.stability import balance_part
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.viewer.meshes import Part, part_poses, robot_parts, scene_parts
 from manifoldgen.viewer.source import traced_frames
-from manifoldgen.viz.losses import save_figure
+from manifoldgen.io import save_figure
 
 HULL_POINTS = 60
 LIGHT = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])

@@ -1,25 +1,14 @@
-"""Loss curves of a training run (``loss.png`` in every model directory)."""
+"""The loss curves of a training run (``loss.png`` in every model directory)."""
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from manifoldgen.io import atomic_write_bytes
+from manifoldgen.io import save_figure
 
 if TYPE_CHECKING:
     from manifoldgen.training import TrainingLog
-
-
-def save_figure(fig, path: str | Path) -> None:
-    """Write a matplotlib figure as PNG atomically and close it."""
-    import matplotlib.pyplot as plt
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(Path(path), buffer.getvalue())
 
 
 def plot_training(log: TrainingLog, path: str | Path) -> None:
