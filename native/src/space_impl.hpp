@@ -139,7 +139,7 @@ struct Space::Impl {
   bool com_needed = false;
   Vec full, lower, upper, tolerance;
   Matrix6x Ja, Jb;
-  double margin = 0.05, resolution = 0.005;
+  double margin, resolution;  // set by the constructor from the Python space
   int m = 0;
   // Python callbacks (Space::add_callback, set_inequalities)
   std::vector<Residuals> callbacks;

@@ -170,11 +170,20 @@ def _worker_task(spec: str) -> tuple[Task, object]:
     return task, task_checker(task)
 
 
+@functools.lru_cache(maxsize=64)
+def _worker_space(spec: str, y: tuple[float, ...]) -> ConstrainedSpace:
+    """The space at condition ``y`` on a worker, built once per worker process like the one space per condition of
+    a local run (so the compiled core's copy of it is built once too, not for every batch)."""
+    task, checker = _worker_task(spec)
+    return ConstrainedSpace(task.constraint, np.array(y), checker)
+
+
 def _remote_batch(spec: str, y: np.ndarray, c: int, b: int, seed: int, batch: int, near_home: float,
                   anchors: Anchors | None) -> np.ndarray:
     """:func:`draw_batch` on a cluster's worker."""
-    task, checker = _worker_task(spec)
-    return draw_batch(task, ConstrainedSpace(task.constraint, y, checker), c, b, seed, batch, near_home, anchors)
+    task, _ = _worker_task(spec)
+    space = _worker_space(spec, tuple(np.asarray(y, dtype=float).tolist()))
+    return draw_batch(task, space, c, b, seed, batch, near_home, anchors)
 
 
 class _Shards:

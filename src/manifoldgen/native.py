@@ -115,16 +115,11 @@ def write_models(space: ConstrainedSpace, folder: Path) -> tuple[Path, Path]:
     return model_file, geometry_file
 
 
-FREE_FLYER = 7  # the core's nq of a floating base: six coordinates (x, y, z, yaw, pitch, roll)
-
-
 def active_coordinates(robot) -> list[tuple[int, int, int]]:
     """(idx_q, idx_v, nq) of each planning-group joint in pinocchio's q and v (nq 2: continuous); a floating
     base first, as its free flyer (nq 7), which stands for the group's six base coordinates."""
-    base = ([(robot.model.joints[1].idx_q, robot.model.joints[1].idx_v, FREE_FLYER)]
-            if robot.floating_base else [])
-    return base + [(robot.model.joints[j].idx_q, robot.model.joints[j].idx_v, robot.model.joints[j].nq)
-                   for j in robot._joint_ids]
+    joints = ([1] if robot.floating_base else []) + list(robot._joint_ids)
+    return [(robot.model.joints[j].idx_q, robot.model.joints[j].idx_v, robot.model.joints[j].nq) for j in joints]
 
 
 def _parts(space: ConstrainedSpace) -> list:

@@ -3,10 +3,9 @@
 ``array_namespace`` is re-exported for user constraints (numpy or torch operations alike).
 """
 
-from array_api_compat import array_namespace
 
 from manifoldgen.constraints.balance import BalanceConstraint
-from manifoldgen.constraints.base import (CONSTRAINTS, Condition, Constraint, ConstraintSet, as_like,
+from manifoldgen.constraints.base import (CONSTRAINTS, Condition, Constraint, ConstraintSet, array_namespace, as_like,
                                           build_constraint)
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
 from manifoldgen.constraints.joint_linear import JointLinearConstraint

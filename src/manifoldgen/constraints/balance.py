@@ -15,9 +15,8 @@ within the tolerance), and a given stance must itself be balanced (CoM inside wi
 from __future__ import annotations
 
 import numpy as np
-from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, array_namespace, as_like
 from manifoldgen.constraints.so3 import jlog3, log3
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot

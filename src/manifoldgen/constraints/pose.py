@@ -8,9 +8,8 @@ components of ``log3(R_target^T R(q))`` (all three by default). Defaults: 0.01 m
 from __future__ import annotations
 
 import numpy as np
-from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, array_namespace, as_like
 from manifoldgen.constraints.so3 import jlog3, log3
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot

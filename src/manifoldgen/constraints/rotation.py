@@ -8,9 +8,8 @@ frame's fixed world ``rotation`` (3, 3), turned by the conditioned angle ``y`` (
 from __future__ import annotations
 
 import numpy as np
-from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, array_namespace, as_like
 from manifoldgen.constraints.orientation import unit
 from manifoldgen.constraints.pose import rotation_matrix
 from manifoldgen.constraints.so3 import hat, jlog3, log3

@@ -7,9 +7,8 @@ Residual (B, 1): ``|p(q) - c| - y`` (metres); analytic Jacobian ``u^T J_p`` with
 from __future__ import annotations
 
 import numpy as np
-from array_api_compat import array_namespace
 
-from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_like
+from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, array_namespace, as_like
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot
 
