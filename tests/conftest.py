@@ -1,4 +1,4 @@
-"""Shared fixtures: robots and tasks are loaded once per session; caches go to a temp dir; torch uses one thread
+"""Shared fixtures: robots and tasks are loaded once per session; the user's cache is shared; torch uses one thread
 (its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy)."""
 
 from manifoldgen.runtime import set_threads
@@ -9,12 +9,12 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 
-@pytest.fixture(autouse=True, scope="session")
-def _isolated_cache(tmp_path_factory):
-    mp = pytest.MonkeyPatch()
-    mp.setenv("MANIFOLDGEN_CACHE", str(tmp_path_factory.mktemp("cache")))
-    yield
-    mp.undo()
+@pytest.fixture
+def private_cache(tmp_path, monkeypatch):
+    """A cache folder of the test's own, for tests that count or damage cache files. Every other test shares the
+    user's cache (collision matrices and sphere fits, keyed by the robot's content), as the commands do."""
+    monkeypatch.setenv("MANIFOLDGEN_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
 
 
 @pytest.fixture(scope="session")

@@ -192,6 +192,7 @@ def test_every_builtin_type_is_accepted(folder, datasets):
     assert result.stdout.count("sha256") == len(BUILTIN) and "matches" in result.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind,joint,shift", [("pose", 3, 0.05), ("orientation", 5, 0.05), ("plane", 0, 0.05),
                                               ("joint_linear", 1, 0.05), ("set", 1, 0.05), ("closed_chain", 2, 0.05),
                                               ("balance", 0, 0.05)])
@@ -315,6 +316,7 @@ def _path_file(folder, datasets, name: str, scene: dict, rotate: float = 0.8) ->
     return out
 
 
+@pytest.mark.slow
 def test_paths_with_obstacles_and_a_held_tool(folder, datasets):
     path, dataset = datasets["orientation"]
     task = task_from_meta(dataset.meta)

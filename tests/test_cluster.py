@@ -82,6 +82,7 @@ def test_without_cluster_nothing_imports_ray_and_without_the_extra_one_line_name
         "'manifoldgen[ray]'"
 
 
+@pytest.mark.slow
 def test_collect_on_the_cluster_writes_the_local_bytes(cluster, sphere, tmp_path):
     local = tmp_path / "local.npz"
     collect(sphere, out=local, progress=False, **SPHERE)
@@ -92,6 +93,7 @@ def test_collect_on_the_cluster_writes_the_local_bytes(cluster, sphere, tmp_path
         assert not out.with_name(out.name + ".partial").exists()
 
 
+@pytest.mark.slow
 def test_bench_on_the_cluster_records_what_a_local_run_does(cluster, tmp_path):
     experiment = Experiment("sphere", "sphere", "point", time_limit=60.0, seed=0)  # runs take 0.1 s of CPU
     run_bench(experiment, BENCH_METHODS, tmp_path / "local", runs=4, progress=False)

@@ -117,6 +117,7 @@ def site(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_the_site_builds_with_warnings_as_errors(site):
     for page in PAGES:
         built = site / ("index.html" if page.stem == "index" else f"{page.stem}/index.html")

@@ -119,6 +119,7 @@ def _scene_variant(tmp_path, **changes):
     return str(path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("changes, message", [
     ({"condition": [3.0, 0.0]}, r"no configuration of pr2 satisfies the task at condition distance = 3, pitch = 0 "),
     ({"start": {"position": [2.0, -0.5, 0.5]}}, r"puts r_gripper_tool_frame at the start target .*within reach"),
@@ -150,6 +151,7 @@ def _cli_error(args) -> str:
     return errors[0]
 
 
+@pytest.mark.slow
 def test_the_issues_bad_inputs_exit_2_with_one_line(tmp_path):
     """The dual-arm issue's bad inputs through the CLI: two frames that are the same, a (d, pitch) no
     configuration reaches, a tray target out of both arms' reach, a start where the tray goes through an arm."""
@@ -182,6 +184,7 @@ def _outside_check(tmp_path, *files) -> subprocess.CompletedProcess:
                           text=True, env={**os.environ, "PYTHONPATH": str(tmp_path / "no_manifoldgen")}, timeout=120)
 
 
+@pytest.mark.slow
 def test_a_planned_tray_path_is_valid_state_by_state_and_outside(tmp_path):
     """The tray carried along the table (the tray-over scene without its block, so that it plans in a second):
     the path holds the chain and the tray's rotation at every state, inside and outside manifoldgen; the same

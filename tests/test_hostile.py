@@ -643,6 +643,7 @@ def _watched(args: list[str], inputs: Path):
     return done[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_hostile(case, inputs, tmp_path):
     before = _digest(inputs)

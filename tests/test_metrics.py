@@ -64,6 +64,7 @@ def test_default_conditions_between_and_beyond():
     assert unseen == pytest.approx([0.25, 0.45, 0.65, 0.75])
 
 
+@pytest.mark.slow
 def test_sampling_bench_writes_report(panda_task, tmp_path):
     data = collect(panda_task, 80, seed=6, conditions=[[0.3], [0.5]], progress=False)
     dirs = []

@@ -44,6 +44,7 @@ def test_model_sampler_returns_only_valid_samples(model_dir, panda_task):
     np.testing.assert_array_equal(again.sample_many(40), q)
 
 
+@pytest.mark.slow
 def test_a_model_directory_samples_in_the_core_as_the_torch_model_does(model_dir, panda_task):
     """open_model reads the files without torch; its core decoder draws the torch model's decoder's rows, and a
     plan through it never loads torch (checked in a fresh interpreter)."""

@@ -49,6 +49,7 @@ def _codes(space, q, limit):
     return code
 
 
+@pytest.mark.slow
 def test_whole_body_tasks_are_built_in(problem):
     task, _, space, core = problem
     assert native.unsupported(space) is None
@@ -147,6 +148,7 @@ def _plan(task, scene, sampler: str, seed: int, time_limit: float = 20.0):
     return space, planner.solve(scene.start, scene.goal, time_limit)
 
 
+@pytest.mark.slow
 def test_native_rrt_connect_balance_path_passes_the_python_check_state_by_state(problem):
     task, scene, space, core = problem
     space, result = _plan(task, scene, "project", seed=0)
@@ -218,6 +220,7 @@ def test_cpp_ompl_baseline_takes_whole_body_tasks(problem):
     assert task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
 
 
+@pytest.mark.slow
 def test_certified_constraints_give_the_exact_report(problem):
     """validate_path(certify=True) on the whole-body terms (feet poses, base height, the CoM polygon; drinkcan's
     orientation and hemisphere): the state-by-state report (see certified_paths), for fewer evaluations."""

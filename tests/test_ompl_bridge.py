@@ -54,6 +54,7 @@ def _check_path(result, task, y, checker, start, goal, tolerance):
     assert result.length == pytest.approx(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("space,seed", [("projected", 2), ("atlas", 0), ("tangent", 0)])
 def test_constrained_spaces_solve_and_paths_validate(setup, space, seed):
     task, constraint, y, checker = setup

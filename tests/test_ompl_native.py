@@ -43,6 +43,7 @@ def tray():
     return task, scene, ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
 
 
+@pytest.mark.slow
 @needs_binary
 @pytest.mark.parametrize("problem", ["maze", "tray"])
 def test_residuals_jacobians_and_collisions_equal_ours(problem, request):

@@ -24,6 +24,7 @@ sys.path.insert(0, str(EXAMPLES))
 from check_path import outside_check  # noqa: E402  (the standalone checker users run)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("robot,scene,seed", [("panda", "wall", 0), ("panda", "wall", 1), ("panda", "maze", 0),
                                               ("pr2", "wall", 0)])
 def test_plan_writes_a_path_that_an_outside_checker_accepts(tmp_path, robot, scene, seed):

@@ -99,6 +99,7 @@ def test_a_sampler_that_gives_up_ends_the_query_with_its_reason():
     assert "the sampler failed: FailingSampler found no valid configuration" in result.why()
 
 
+@pytest.mark.slow
 def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     """xarm7 (four joints with ±2π limits), the tool pointing down on the plane x = 0.3, no
     obstacles: projected samples almost never lie within range of a tree, so straight extensions
@@ -120,6 +121,7 @@ def test_the_default_planner_solves_an_arm_with_full_turn_joints():
     assert "refused extensions: no sample within range" in stuck.why()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["rrtconnect", "sbl"])
 def test_coarse_checks_missing_a_thin_obstacle_are_caught_by_the_dense_validation(name):
     """At resolution 0.5 the straight checks step over a 2 cm slab; the final 0.005 check must
@@ -242,6 +244,7 @@ def test_bad_queries_are_refused_with_the_reason():
         PLANNERS.get("rrtconnect")(space, ProjectionSampler(space), local="straight")
 
 
+@pytest.mark.slow
 def test_cbirrt_without_a_sampler_draws_uniform_targets():
     constraint, y, checker, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, checker)

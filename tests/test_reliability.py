@@ -150,6 +150,7 @@ def whole(tiny, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target, call", [("checkpoint.safetensors", 2), ("model.json", 1),
                                           ("training.json", 1)])
 def test_a_crash_at_any_write_of_training_resumes_to_the_same_model(tiny, whole, tmp_path, monkeypatch, target,
@@ -188,7 +189,7 @@ def test_a_damaged_checkpoint_is_one_clear_error(tiny, tmp_path, monkeypatch):
 
 
 # ---------------------------------------------------------------------------------------- collision cache
-def test_a_mutated_collision_cache_is_recomputed(panda_task, monkeypatch):
+def test_a_mutated_collision_cache_is_recomputed(panda_task, monkeypatch, private_cache):
     robot = panda_task.robot
     monkeypatch.setattr(collision, "MATRIX_SAMPLES", 30)
     candidates = [(a, b) for a in range(8) for b in range(a + 1, 12)]
@@ -251,6 +252,7 @@ def test_benchmark_workers_die_with_their_parent(tmp_path):
         parent.wait()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("field, value, problem", [("accuracy", 5.0, "accuracy is 5.0, not a share from 0 to 1"),
                                                    ("recall", "high", "recall is 'high'"),
                                                    ("seed", None, "its model or seed is missing")])

@@ -129,6 +129,7 @@ NO_SRDF_IN_ITS_FOLDER = {"ur3", "ur3_robot", "ur3_joint_limited", "ur3_joint_lim
                          "ur10", "ur10_robot", "ur10_joint_limited", "ur10_joint_limited_robot"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", known_robots())
 def test_every_known_robot_loads_by_name(name, rng):
     robot = Robot.load(name)

@@ -21,6 +21,7 @@ BUILTIN_SCENES = Path(__file__).resolve().parents[1] / "src" / "manifoldgen" / "
 NAMED = [(t, r, n) for t, robots in builtin_tasks().items() for r in robots for n in get_task(t, r).scenes]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task_name,robot,name", NAMED)
 def test_named_scene_queries_are_valid(task_name, robot, name):
     task = get_task(task_name, robot)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import matplotlib.image
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
@@ -15,6 +16,7 @@ from manifoldgen.viz.snapshots import write_snapshots
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_strip_shows_the_robot_in_every_panel(tmp_path):
     path = tmp_path / "wall.npz"
     result = runner.invoke(app, ["plan", "pose", "--robot", "pr2", "--scene", "wall", "--sampler", "project",

@@ -1,6 +1,7 @@
 """Sphere models: every point of each mesh (surface and solid) inside some sphere; the sphere check never
 calls free a state coal finds in collision; cache; exact fallbacks for what has no spheres."""
 
+import shutil
 
 import coal
 import numpy as np
@@ -84,6 +85,7 @@ def test_panda_spheres_cover_every_mesh_and_box(panda_task, panda_model, rng):
     assert np.all(panda_model.union_volume >= panda_model.solid_volume * 0.9)
 
 
+@pytest.mark.slow
 def test_pr2_arm_and_base_spheres_cover_their_meshes(pr2, rng):
     geom = pr2.robot.collision_model
     ids = [i for i, g in enumerate(geom.geometryObjects) if g.name in PR2_LINKS]
@@ -136,6 +138,7 @@ def test_panda_sphere_check_is_conservative_against_coal(panda_task, panda_model
     assert np.array_equal(fast.in_collision(q[:7]), sphere[:7])
 
 
+@pytest.mark.slow
 def test_pr2_held_tray_and_self_pairs_are_conservative_with_exact_fallback(pr2, rng):
     """Arm and torso links have spheres; the others (head, base, grippers ...) fall back to coal, said once."""
     robot = pr2.robot
@@ -173,7 +176,12 @@ def test_unsupported_geometry_gets_no_spheres(panda_task):
     assert model.unfitted == (len(geom.geometryObjects) - 1,) and len(model) == 0
 
 
-def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model, monkeypatch):
+def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model, monkeypatch, tmp_path):
+    stamp = spheres.cache_stamp(panda_task.robot)
+    shared = spheres.cache_path(panda_task.robot, stamp)  # written by the panda_model fixture
+    monkeypatch.setenv("MANIFOLDGEN_CACHE", str(tmp_path))  # a copy of it in this test's own cache, to damage
+    (tmp_path / "spheres").mkdir()
+    shutil.copy(shared, spheres.cache_path(panda_task.robot, stamp))
     files = list((cache_dir() / "spheres").glob("panda-*.npz"))
     assert len(files) == 1
     monkeypatch.setattr(spheres.cache, "fit_model", lambda *a, **k: pytest.fail("refitted despite a valid cache"))
@@ -206,6 +214,7 @@ TALOS_PARTS = ("leg_left_3", "leg_right_3", "leg_left_4", "leg_right_4", "torso_
                "base_link")
 
 
+@pytest.mark.slow
 def test_the_cores_per_pair_broad_phase_keeps_every_verdict_on_talos():
     """Spheres per pair, then convex hulls, then coal: every verdict is coal's alone, on talos's close links (thighs,
     shins, torso beside the shoulders) in uniform states and states near its stance, visited in order as a path

@@ -181,6 +181,7 @@ def test_candidates_trained_in_parallel_are_the_sequential_ones(tiny, tmp_path):
             torch.testing.assert_close(b.state_tensors()[key], value, rtol=0, atol=0)
 
 
+@pytest.mark.slow
 def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_path):
     from manifoldgen.selection import PROJECTION, RACE_SEEDS, select_model
     from manifoldgen.tasks import get_task

@@ -28,7 +28,7 @@ def sphere_model(robot: Robot) -> SphereModel:
     """The robot's sphere model: read from the cache when it was made for these geometries and mesh
     files, else fitted (a few seconds per robot) and cached."""
     stamp = cache_stamp(robot)
-    path = cache_dir() / "spheres" / f"{robot.name}-{_digest(stamp)[:16]}.npz"
+    path = cache_path(robot, stamp)
     cached = read_cache(path, stamp, len(robot.collision_model.geometryObjects))
     if cached is not None:
         return cached
@@ -42,6 +42,11 @@ def sphere_model(robot: Robot) -> SphereModel:
     except ManifoldgenError as exc:  # an unwritable cache costs time, not correctness
         warnings.warn(f"sphere model not cached: {exc}")
     return model
+
+
+def cache_path(robot: Robot, stamp: dict) -> Path:
+    """The file the robot's sphere model made for ``stamp`` (:func:`cache_stamp`) is cached in."""
+    return cache_dir() / "spheres" / f"{robot.name}-{_digest(stamp)[:16]}.npz"
 
 
 def cache_stamp(robot: Robot) -> dict:
