@@ -144,8 +144,7 @@ def test_settings_are_checked_against_the_known_keys(tmp_path):
 
 def test_registries_read_entry_points_and_module_class_names(monkeypatch):
     """A package announces a constraint through the manifoldgen.constraints entry point group."""
-    import importlib.metadata
-
+    from manifoldgen import registry
     from manifoldgen.constraints import CONSTRAINTS, JointLinearConstraint
 
     class EntryPoint:
@@ -154,7 +153,11 @@ def test_registries_read_entry_points_and_module_class_names(monkeypatch):
         def load(self):
             return JointLinearConstraint
 
-    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: [EntryPoint()] if group == "manifoldgen.constraints" else [])
+    class Installed:  # what importlib.metadata.entry_points() gives: every group's, selected by group
+        def select(self, group):
+            return [EntryPoint()] if group == "manifoldgen.constraints" else []
+
+    monkeypatch.setattr(registry, "_entry_points", Installed)
     monkeypatch.setattr(CONSTRAINTS, "_classes", dict(CONSTRAINTS._classes))
     monkeypatch.setattr(CONSTRAINTS, "_entry_points", None)
     assert "coupled" in CONSTRAINTS.names() and CONSTRAINTS.get("coupled") is JointLinearConstraint

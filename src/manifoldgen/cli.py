@@ -38,16 +38,13 @@ def _bounded(option: str, value):
     return value
 
 
-def _names(registry: str) -> list[str]:
-    """Names in a registry, for --help (``models``, ``planners``, ``constraints``)."""
+def _names(registry: str) -> str:
+    """The package's own names in a registry (``models`` or ``planners``) for --help, and where others come from."""
     if registry == "models":
-        from manifoldgen.models import MODELS
-        return MODELS.names()
-    if registry == "planners":
-        from manifoldgen.planning import PLANNERS
-        return PLANNERS.names()
-    from manifoldgen.constraints import CONSTRAINTS
-    return CONSTRAINTS.names()
+        from manifoldgen.models import MODELS as found
+    else:
+        from manifoldgen.planning import PLANNERS as found
+    return f"{', '.join(found.names(announced=False))} (or one an installed package announces)"
 
 
 def _file(name: str | None) -> Path | None:
@@ -192,7 +189,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          scene: str = typer.Option(..., help="Named scene (wall, maze) or a scene .json file"),
          sampler: str = typer.Option("project", help="uniform, project, pg:DATASET.npz or MODEL:DIR "
                                      "(e.g. cvae:runs/cvae)"),
-         planner: str = typer.Option("rrtconnect", help=f"Planner: {', '.join(_names('planners'))}"),
+         planner: str = typer.Option("rrtconnect", help=f"Planner: {_names('planners')}"),
          local: str = typer.Option("auto", help="Local planner: auto (straight segments, projected walks where "
                                    "they leave the manifold), interpolate or project"),
          seed: int = typer.Option(0),
@@ -292,7 +289,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
 @friendly
 def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
           model: str = typer.Option("auto", "--model", help=f"Model: auto (train {', '.join(CANDIDATES)} and keep the "
-                                    f"best on held-out rows), {', '.join(_names('models'))}, or module:Class"),
+                                    f"best on held-out rows), {_names('models')}, or module:Class"),
           settings: list[str] = typer.Option(None, "--set", help="Hyper-parameter KEY=VALUE (repeatable), e.g. "
                                              "--set latent=8 --set 'hidden=[128,128]'"),
           config: Path = typer.Option(None, help="TOML file of hyper-parameters (--set wins)"),
@@ -546,7 +543,7 @@ def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: th
 @friendly
 def sweep(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifoldgen collect`"),
           model: list[str] = typer.Option(None, "--model", help=f"Models to train (repeatable; default: "
-                                          f"{', '.join(CANDIDATES)}): {', '.join(_names('models'))}"),
+                                          f"{', '.join(CANDIDATES)}): {_names('models')}"),
           latent: list[int] = typer.Option(None, help="Latent sizes (repeatable; default: the manifold's "
                                            "dimension); models without a latent (cfm, flow) train once per seed"),
           seeds: list[int] = typer.Option(None, "--seed", help="Training seeds (repeatable; default 0)"),

@@ -10,12 +10,21 @@ by importing the module.
 
 from __future__ import annotations
 
+import functools
 import importlib
 from typing import Generic, TypeVar
 
 from manifoldgen.errors import ManifoldgenError, unknown_name
 
 T = TypeVar("T")
+
+
+@functools.cache
+def _entry_points():
+    """Every installed package's entry points, read once for all the registries (each read scans every package)."""
+    from importlib.metadata import entry_points
+
+    return entry_points()
 
 
 class Registry(Generic[T]):
@@ -45,15 +54,14 @@ class Registry(Generic[T]):
     def _announced(self) -> dict:
         """Other packages' entry points of this group, by name (not loaded)."""
         if self._entry_points is None:
-            from importlib.metadata import entry_points
-
-            self._entry_points = {ep.name: ep for ep in entry_points(group=f"manifoldgen.{self.kind}s")}
+            self._entry_points = {ep.name: ep for ep in _entry_points().select(group=f"manifoldgen.{self.kind}s")}
         return self._entry_points
 
-    def names(self) -> list[str]:
-        """Every registered name, the package's first (nothing is imported)."""
+    def names(self, *, announced: bool = True) -> list[str]:
+        """Every registered name, the package's first (nothing is imported); ``announced=False``: the package's own
+        only, without reading other packages' entry points (0.05-0.1 s: ``--help`` lists these)."""
         own = list(self._paths) + [name for name in self._classes if name not in self._paths]
-        return own + [name for name in self._announced() if name not in own]
+        return own + ([name for name in self._announced() if name not in own] if announced else [])
 
     def get(self, name: str) -> type[T]:
         """The class registered as ``name``, or the class ``module:Class`` names."""
