@@ -288,6 +288,11 @@ struct PlannerSettings {
   // shortcut > 0: a found path is shortened by that many shortcut attempts (planner.cpp Search::shorten; the
   // Python planners' planning/smoothing.py draws the same points), each kept only when its stretch passes the path check
   int shortcut;
+  // projections: a projected walk's steps go to precision x the smallest tolerance in at most max_iters iterations
+  // (planning/local.py's), a raw row's refinement to tol; both with damping and max_step (constraints/projection.py)
+  double precision;
+  int max_iters;
+  double tol, damping, max_step;
 };
 
 struct PlanOutput {

@@ -452,13 +452,17 @@ NB_MODULE(manifoldgen_core, m) {
           "__init__",
           [](mgcore::PlannerSettings* s, double range, double resolution, double step, bool partial, int pool,
              int pool_batch, int candidates, int target_batch, const std::string& local, int edge_stride,
-             bool dense_edges, int refine, double reach, int shortcut) {
+             bool dense_edges, int refine, double reach, int shortcut, double precision, int max_iters, double tol,
+             double damping, double max_step) {
             if (edge_stride < 1) throw std::invalid_argument("edge_stride must be at least 1 (1: every state checked at once)");
-            new (s) mgcore::PlannerSettings{range, resolution, step, partial, pool, pool_batch, candidates,
-                                            target_batch, local, edge_stride, dense_edges, refine, reach, shortcut};
+            new (s) mgcore::PlannerSettings{range,       resolution, step,   partial,  pool,      pool_batch,
+                                            candidates,  target_batch, local, edge_stride, dense_edges, refine,
+                                            reach,       shortcut,   precision, max_iters, tol,     damping,
+                                            max_step};
           },
           nb::kw_only(), "range"_a, "resolution"_a, "step"_a, "partial"_a, "pool"_a, "pool_batch"_a, "candidates"_a,
           "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a, "shortcut"_a,
+          "precision"_a, "max_iters"_a, "tol"_a, "damping"_a, "max_step"_a,
           "RRT-Connect's settings, every field given (no defaults: manifoldgen.native.core_settings fills them from "
           "the planner's settings). edge_stride > 1: motions are checked for collision at every edge_stride-th state "
           "and at nodes while searching, the rest on candidate paths; dense_edges: each motion passes the path check "
@@ -466,7 +470,8 @@ NB_MODULE(manifoldgen_core, m) {
           "refine >= 0: draw gives raw candidates, each refined (refine projection iterations) and checked when the "
           "search first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
           "of its nodes (else range); shortcut > 0: that many shortcut attempts on a found path, each kept when "
-          "its stretch passes the path check.")
+          "its stretch passes the path check; precision, max_iters: a projected walk's projections (to precision x "
+          "the smallest tolerance); tol: a raw row's refinement; damping, max_step: both projections'.")
       .def_ro("range", &mgcore::PlannerSettings::range)
       .def_ro("pool", &mgcore::PlannerSettings::pool)
       .def_ro("pool_batch", &mgcore::PlannerSettings::pool_batch)

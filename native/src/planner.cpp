@@ -348,10 +348,12 @@ struct Local {
   static constexpr int DENSE = -1;
   bool loose = false;  // the latest straight motion kept a part whose own states are not those checked
   long projections = 0;
-  static constexpr double precision = 0.01;
-  static constexpr int max_iters = 20;
+  double precision, damping, max_step;  // a projected walk's projections (PlannerSettings)
+  int max_iters;
 
-  Local(Space& s, const PlannerSettings& p) : space(s), resolution(p.resolution), step(p.step), partial(p.partial) {
+  Local(Space& s, const PlannerSettings& p)
+      : space(s), resolution(p.resolution), step(p.step), partial(p.partial), precision(p.precision),
+        damping(p.damping), max_step(p.max_step), max_iters(p.max_iters) {
     static const char* names[4] = {"auto", "interpolate", "project", "direct"};
     kind = static_cast<int>(std::find(names, names + 4, p.local) - names);
     if (kind == 4) throw std::runtime_error("unknown local planner '" + p.local + "'; known: auto, interpolate, project, direct");
@@ -530,7 +532,7 @@ struct Local {
         if (!creep && space.stop == COLLISION) break;
       } else {
         target = q + (vb - q) * std::min(1.0, length / std::max(gap, 1e-12));
-        const Projection p = space.project(target.data(), tol, max_iters, 1e-6, 0.5);
+        const Projection p = space.project(target.data(), tol, max_iters, damping, max_step);
         ++projections;
         const double moved = (target - q).norm();
         if (!p.converged || moved > 2 * length || moved < 1e-9 || (vb - target).norm() >= gap) break;
@@ -604,11 +606,11 @@ struct Search {
     return rows;
   }
   // A raw candidate made a sample in place (lazy samples): the sampler's refinement (refine iterations of
-  // constraints.project with its default tolerance, damping and step) and its check (limits, constraint;
-  // collisions are the search's, as for every state it keeps). Whether it is a sample.
+  // constraints.project with its default tolerance, damping and step, PlannerSettings) and its check (limits,
+  // constraint; collisions are the search's, as for every state it keeps). Whether it is a sample.
   bool make_sample(double* q) {
     ++out.refined;
-    if (s.refine > 0) space.project(q, 1e-6, s.refine, 1e-6, 0.5);
+    if (s.refine > 0) space.project(q, s.tol, s.refine, s.damping, s.max_step);
     const bool ok = space.code(q, 1.0, false, true) == VALID;
     out.accepted += ok;
     return ok;

@@ -53,7 +53,7 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.constraints import Constraint, ConstraintSet, Projection
-from manifoldgen.constraints import trace
+from manifoldgen.constraints import projection, trace
 from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
@@ -635,7 +635,9 @@ def core_settings(planner, refine: int):
     return core_module().PlannerSettings(
         range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=pool, pool_batch=pool_batch,
         candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
-        dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut)
+        dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut,
+        precision=planner.local.precision, max_iters=planner.local.max_iters, tol=projection.TOL,
+        damping=projection.DAMPING, max_step=projection.MAX_STEP)
 
 
 def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:

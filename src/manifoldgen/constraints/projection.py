@@ -27,8 +27,11 @@ class Projection:
     residual: np.ndarray  # (B,) final max |F|
 
 
-def project(constraint: Constraint, q: np.ndarray, y: np.ndarray, *, tol: float = 1e-6,
-            max_iters: int = 50, damping: float = 1e-6, max_step: float = 0.5) -> Projection:
+TOL, MAX_ITERS, DAMPING, MAX_STEP = 1e-6, 50, 1e-6, 0.5  # project's defaults (the compiled core is given them)
+
+
+def project(constraint: Constraint, q: np.ndarray, y: np.ndarray, *, tol: float = TOL,
+            max_iters: int = MAX_ITERS, damping: float = DAMPING, max_step: float = MAX_STEP) -> Projection:
     """Project configurations ``q (B, n)`` onto the manifold of ``y`` ((k,) or (B, k)).
 
     Converged rows satisfy max_i |F_i| <= tol. Rows stop early once converged.
