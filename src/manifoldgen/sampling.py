@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import inspect
 from abc import ABC, abstractmethod
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -54,7 +54,7 @@ class SamplerStats:
     mixed: int = 0
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return dict(vars(self))  # the counts are plain ints: no deep copy (asdict's) needed
 
 
 class Sampler(ABC):

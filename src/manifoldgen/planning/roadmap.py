@@ -9,6 +9,7 @@ through it; a route is made of checked segments only, so it is valid as a whole 
 from __future__ import annotations
 
 import heapq
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -66,8 +67,9 @@ class Roadmap:
         """The nearest nodes within ``reach`` of ``q (n,)`` whose straight segment to ``q`` passes the check, nearest
         first (:data:`TRIES` tried, the first :data:`JOINS` kept): node -> length."""
         d = np.linalg.norm(self.q - q, axis=1)
+        nearest = np.argpartition(d, TRIES)[:TRIES] if len(d) > TRIES else np.arange(len(d))
         out = {}
-        for node in np.argsort(d)[:TRIES]:
+        for node in nearest[np.argsort(d[nearest], kind="stable")]:
             if d[node] > self.reach or len(out) == JOINS:
                 break
             self.checks += 1
@@ -82,12 +84,12 @@ class Roadmap:
     def _shortest(self, first: dict[int, float], last: dict[int, float], goal: np.ndarray) -> list[int] | None:
         """A* from the start's joins (their lengths as starting costs) to the goal's, the straight distance to
         ``goal`` as the estimate (never above an edge route's length): the node list, or None."""
-        ahead = np.linalg.norm(self.q - goal, axis=1)
-        cost = dict(first)
+        ahead = np.linalg.norm(self.q - goal, axis=1).tolist()  # Python floats: the loop below is Python's
+        edges, cost = self.edges, dict(first)
         parent = {node: -1 for node in first}
         heap = [(c + ahead[node], node) for node, c in first.items()]
         heapq.heapify(heap)
-        best, end, done = np.inf, -1, set()
+        best, end, done = math.inf, -1, set()
         while heap:
             estimate, node = heapq.heappop(heap)
             if estimate >= best:
@@ -98,10 +100,11 @@ class Roadmap:
             c = cost[node]
             if node in last and c + last[node] < best:
                 best, end = c + last[node], node
-            for other, length in self.edges[node].items():
-                if c + length < cost.get(other, np.inf):
-                    cost[other], parent[other] = c + length, node
-                    heapq.heappush(heap, (c + length + ahead[other], other))
+            for other, length in edges[node].items():
+                reached = c + length
+                if reached < cost.get(other, math.inf):
+                    cost[other], parent[other] = reached, node
+                    heapq.heappush(heap, (reached + ahead[other], other))
         if end < 0:
             return None
         nodes = [end]
