@@ -1,15 +1,17 @@
 """Repeated queries on one manifold and scene: 100 random start/goal pairs in the panda maze, one process.
 
     python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse atlas-c++]
-                                        [--pairs PAIRS.npy]
+                                        [--pairs PAIRS.npy] [--grouped]
 
-Methods, interleaved per query: ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
+Methods, interleaved per query (``--grouped``: each method's queries back to back, caches warm): ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
 one planner whose queries start from nothing; ``reuse``, the same with ``reuse=true`` (the paths found so far are
 a roadmap that later queries search first, :mod:`manifoldgen.planning.roadmap`); ``atlas-c++``, C++ OMPL Atlas +
 RRTConnect, cold (each query its own program). All with sphere models as the collision broad phase. Start and goal
 are valid, collision-free states of the maze's manifold in the component of the scene's start (the CVAE's samples,
 drawn with another seed than the planners', that RRT-Connect with the CVAE reaches from there within 1 s). Every
-path is rechecked here by the Python space's dense check (not the planners' own) and its ends compared. CPU: ours,
+path is rechecked here by the Python space's dense check (not the planners' own) and its ends compared; numpy's BLAS
+runs on one thread, as in every command (its idle threads would spin after the recheck, into the next solve's CPU,
+which counts all of this process's threads). CPU: ours,
 this process's over ``solve``; Atlas's, its program's from "go" plus our dense check of its paths (as
 ``bench_ompl_native.py`` counts it), its wall from "go" (not the program's start and loading). Prints,
 per method: solved and rechecked, median CPU and wall over all queries and over queries 2.., routed queries
@@ -24,6 +26,7 @@ import numpy as np
 
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.planning import RRTConnect, RRTConnectSettings
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import get_scene
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.specs import make_sampler
@@ -57,15 +60,25 @@ def planner_for(method: str, space: ConstrainedSpace, seed: int):
     return RRTConnect(space, sampler, seed=seed, settings=RRTConnectSettings(spheres=True, reuse=method == "reuse"))
 
 
+def recheck(space: ConstrainedSpace, record: list, result, start: np.ndarray, goal: np.ndarray) -> None:
+    """Fill ``record``'s checked field: the path ends at ``start`` and ``goal`` and passes the space's dense check."""
+    record[1] = bool(result.solved and np.allclose(result.path[[0, -1]], [start, goal])
+                     and space.validate_path(result.path).valid)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--queries", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--time", type=float, default=10.0)
     parser.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--grouped", action="store_true", help="each method's queries back to back, their paths "
+                        "rechecked after all of them (warm caches); default: methods interleaved per query, each path "
+                        "rechecked at once")
     parser.add_argument("--pairs", default=None, help="an .npy file of the start/goal pairs: read when it exists "
                         "(its queries, not --queries), else written after they are chosen (choosing takes minutes)")
     args = parser.parse_args()
+    set_threads()  # as every command: numpy's BLAS on one thread (the recheck's BLAS threads would spin into solves)
     task = get_task("pose")
     scene = get_scene(task, "maze")
     space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
@@ -77,21 +90,29 @@ def main() -> None:
             np.save(args.pairs, pairs)
     planners = {m: planner_for(m, space, args.seed) for m in args.methods}
     runs = {m: [] for m in args.methods}
-    for k, (start, goal) in enumerate(pairs):
-        for method, planner in planners.items():
-            if method == "atlas-c++":
-                planner.seed = args.seed + k
-            cpu, wall = time.process_time(), time.perf_counter()
-            result = planner.solve(start, goal, args.time)
-            cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
-            if method == "atlas-c++":  # its program's CPU from "go" and our dense check of its paths, as the bench's
-                cpu, wall = result.extras["native_cpu_s"] + result.extras["dense_cpu_s"], result.time_s
-            checked = (result.solved and np.allclose(result.path[[0, -1]], [start, goal])
-                       and space.validate_path(result.path).valid)
-            routed = bool(result.extras.get("roadmap", {}).get("routed", False))
-            runs[method].append((result.solved, checked, cpu, wall, routed, result.length))
-        print(f"query {k + 1}/{len(pairs)}", end="\r", flush=True)
-    print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, methods interleaved")
+    order = ([(k, m) for m in args.methods for k in range(len(pairs))] if args.grouped
+             else [(k, m) for k in range(len(pairs)) for m in args.methods])
+    unchecked = []  # grouped: the paths are rechecked after every query has run
+    for k, method in order:
+        start, goal = pairs[k]
+        planner = planners[method]
+        if method == "atlas-c++":
+            planner.seed = args.seed + k
+        cpu, wall = time.process_time(), time.perf_counter()
+        result = planner.solve(start, goal, args.time)
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+        if method == "atlas-c++":  # its program's CPU from "go" and our dense check of its paths, as the bench's
+            cpu, wall = result.extras["native_cpu_s"] + result.extras["dense_cpu_s"], result.time_s
+        routed = bool(result.extras.get("roadmap", {}).get("routed", False))
+        runs[method].append([result.solved, None, cpu, wall, routed, result.length])
+        unchecked.append((runs[method][-1], result, start, goal))
+        if not args.grouped:
+            recheck(space, *unchecked.pop())
+        print(f"query {k + 1}/{len(pairs)} {method}", end="\r", flush=True)
+    for item in unchecked:
+        recheck(space, *item)
+    print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, "
+          + ("each method's queries back to back" if args.grouped else "methods interleaved"))
     print("| method | solved | rechecked | median CPU (s) | median wall (s) | median CPU, queries 2.. (s) "
           "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
