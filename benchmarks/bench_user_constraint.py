@@ -16,8 +16,8 @@ between start and goal), RRT-Connect with the `project` sampler (or a CVAE train
 constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``); searches interleaved per seed
 (seeds 0..runs-1, ``--searches`` picks them): ``python``, the Python search; ``autograd``, the compiled core
 calling the user's residual back with the Jacobian by torch autograd (the callback path before central
-differences: ``native.FD_ROWS = 0``); ``callback``, the core calling it back with central differences of the
-numpy residual (:func:`manifoldgen.native.central_difference`; ``native.COMPILE = False``); ``compiled``, the
+differences: ``constraint_callbacks.FD_ROWS = 0``); ``callback``, the core calling it back with central differences of the
+numpy residual (:func:`manifoldgen.constraint_callbacks.central_difference`; ``native.COMPILE = False``); ``compiled``, the
 core running the user's residual traced into a compiled expression (no Python call per state); ``builtin``, the
 same manifold from the built-in orientation + plane constraints (`tool-down-xarm7-builtin.toml`, the plane's
 residual compiled too) on the same query; ``builtin-callback``, that with the plane through callbacks (as before
@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from manifoldgen import native
+from manifoldgen import constraint_callbacks, native
 from manifoldgen.data import collect
 from manifoldgen.models import get_model_class
 from manifoldgen.runtime import set_threads
@@ -67,7 +67,7 @@ parser.add_argument("--evaluations", action="store_true", help="time the core's 
                     "state: compiled, callbacks, built-in terms")
 args = parser.parse_args()
 set_threads()
-FD_ROWS, COMPILE = native.FD_ROWS, native.COMPILE
+FD_ROWS, COMPILE = constraint_callbacks.FD_ROWS, native.COMPILE
 
 
 def count_calls(constraint):
@@ -136,7 +136,7 @@ def plan_bench():
             constraint = get_task(str(EXAMPLES / ("tool-down-xarm7-builtin.toml" if builtin else
                                                   "tool-down-xarm7.toml"))).constraint
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
-            native.FD_ROWS = 0 if search == "autograd" else FD_ROWS
+            constraint_callbacks.FD_ROWS = 0 if search == "autograd" else FD_ROWS
             native.COMPILE = search in ("compiled", "builtin")
             core = "python" if search == "python" else "native"
             setup = time.process_time()  # the planner with its core (tracing and checking a compiled residual)
@@ -163,7 +163,7 @@ def plan_bench():
                   f"{totals['calls']} Python constraint calls, {totals['rows']} configurations, "
                   f"{totals['jacobian_calls']} Jacobian calls ({totals['jacobian_rows']} configurations), "
                   f"{totals['cpu']:.2f} s CPU inside them", flush=True)
-    native.FD_ROWS, native.COMPILE = FD_ROWS, COMPILE
+    constraint_callbacks.FD_ROWS, native.COMPILE = FD_ROWS, COMPILE
     print("\n| search | solved | median CPU (s) | median wall (s) | planner setup CPU (ms, median) | Python constraint "
           "calls (median) | configurations per call | Jacobian calls (median) | configurations per Jacobian call "
           "| CPU inside the Python constraint (median) |")
@@ -177,10 +177,10 @@ def plan_bench():
 
 
 def count_callbacks() -> dict:
-    """Wrap :class:`manifoldgen.native.ConstraintCallback`'s ``residuals`` (what the core calls) to count the
+    """Wrap :class:`manifoldgen.constraint_callbacks.ConstraintCallback`'s ``residuals`` (what the core calls) to count the
     native searches' calls, configurations, Jacobian calls and their configurations, and the CPU inside them;
     returns the running totals (keys as :func:`count_calls`')."""
-    totals, residuals = {}, native.ConstraintCallback.residuals
+    totals, residuals = {}, constraint_callbacks.ConstraintCallback.residuals
 
     def counted(self, q, jacobian):
         totals["calls"] += 1
@@ -192,7 +192,7 @@ def count_callbacks() -> dict:
             return residuals(self, q, jacobian)
         finally:
             totals["cpu"] += time.process_time() - began
-    native.ConstraintCallback.residuals = counted
+    constraint_callbacks.ConstraintCallback.residuals = counted
     return totals
 
 
@@ -215,8 +215,8 @@ def jacobian_bench():
         q, y = robot.sample_uniform(B, rng), np.full((B, 1), 0.4)
         reps = max(5, 1000 // B)
         autograd = per_call(lambda: constraint.jacobian(q, y), reps)
-        differences = per_call(lambda: native.central_difference(constraint.residual, q, y), reps)
-        error = np.abs(constraint.jacobian(q, y)[1] - native.central_difference(constraint.residual, q, y)[1]).max()
+        differences = per_call(lambda: constraint_callbacks.central_difference(constraint.residual, q, y), reps)
+        error = np.abs(constraint.jacobian(q, y)[1] - constraint_callbacks.central_difference(constraint.residual, q, y)[1]).max()
         print(f"| {B} | {autograd * 1e3:.2f} | {differences * 1e3:.2f} | {autograd / differences:.1f}x | {error:.1e} |")
 
 

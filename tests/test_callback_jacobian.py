@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from manifoldgen import native
+from manifoldgen import constraint_callbacks, native
 from manifoldgen.constraints import Condition, Constraint
 from manifoldgen.space import ConstrainedSpace
 
@@ -51,21 +51,21 @@ def test_central_differences_equal_autograd_on_random_rows(task):
     for B in (1, 7, 200):
         q = task.robot.sample_uniform(B, rng)
         y = rng.uniform(0.3, 0.5, (B, 1))
-        F, J = native.central_difference(c.residual, q, y)
+        F, J = constraint_callbacks.central_difference(c.residual, q, y)
         F_ref, J_ref = c.jacobian(q, y)
         assert F.shape == (B, 3) and J.shape == (B, 3, 7)
         np.testing.assert_allclose(F, c.residual(q, y), rtol=0, atol=1e-15)
         np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-12)
         np.testing.assert_allclose(J, J_ref, rtol=0, atol=1e-9)  # entries are O(1): metres and unit vectors
         assert np.abs(J_ref).max() > 0.5
-    F, J = native.central_difference(lambda q, y: q[:, :0], q, y)  # a part with inequalities only
+    F, J = constraint_callbacks.central_difference(lambda q, y: q[:, :0], q, y)  # a part with inequalities only
     assert F.shape == (200, 0) and J.shape == (200, 0, 7)
 
 
 def test_callback_takes_differences_on_small_batches_and_autograd_on_large_ones(task, monkeypatch):
     part = task.constraint
     calls = _autograd_calls(part, monkeypatch)
-    callback = native.ConstraintCallback([(part, np.array([0.4]))])
+    callback = constraint_callbacks.ConstraintCallback([(part, np.array([0.4]))])
     rng = np.random.default_rng(1)
     small = task.robot.sample_uniform(3, rng)
     for _ in range(4):
@@ -74,7 +74,7 @@ def test_callback_takes_differences_on_small_batches_and_autograd_on_large_ones(
     F_ref, J_ref = part.jacobian(small, np.full((3, 1), 0.4))
     np.testing.assert_allclose(J, J_ref, rtol=0, atol=1e-9)
     assert F.flags.c_contiguous and J.flags.c_contiguous and F.dtype == J.dtype == np.float64
-    large = task.robot.sample_uniform(native.FD_ROWS // 15 + 1, rng)  # (2n + 1) B > FD_ROWS
+    large = task.robot.sample_uniform(constraint_callbacks.FD_ROWS // 15 + 1, rng)  # (2n + 1) B > FD_ROWS
     calls.clear()
     F, J = callback.residuals(large, True)
     assert calls == [len(large)]
@@ -85,7 +85,7 @@ def test_analytic_jacobian_is_used_as_is(task):
     from manifoldgen.constraints.plane import PlaneConstraint
     plane = PlaneConstraint(task.robot, "link_eef", [[1.0, 0.0, 0.0]], [[0.4]])
     q = task.robot.sample_uniform(2, np.random.default_rng(2))
-    F, J = native.ConstraintCallback([(plane, np.array([0.4]))]).residuals(q, True)
+    F, J = constraint_callbacks.ConstraintCallback([(plane, np.array([0.4]))]).residuals(q, True)
     F_ref, J_ref = plane.jacobian(q, np.full((2, 1), 0.4))
     np.testing.assert_array_equal(F, F_ref)
     np.testing.assert_array_equal(J, J_ref)
@@ -93,7 +93,7 @@ def test_analytic_jacobian_is_used_as_is(task):
 
 def test_a_residual_whose_differences_disagree_keeps_autograd_and_says_so(task, monkeypatch):
     part = Float32Height(task.robot, "link_eef")
-    callback = native.ConstraintCallback([(part, np.array([0.3]))])
+    callback = constraint_callbacks.ConstraintCallback([(part, np.array([0.3]))])
     q = task.robot.sample_uniform(4, np.random.default_rng(3))
     with pytest.warns(UserWarning, match="central differences of its numpy residual differ"):
         _, J = callback.residuals(q, True)
