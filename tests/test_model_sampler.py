@@ -162,8 +162,8 @@ def test_model_spec_takes_whichever_model_a_directory_holds(model_dir, panda_tas
 def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_task):
     """The pool settings and a model sampler's batch count rows of the shipped panda CVAE's cost; a model whose
     rows cost more multiply-adds gets fewer in proportion, in the Python search and in the core's alike."""
-    from manifoldgen.native import core_settings
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
+    from manifoldgen.planning.rrt_connect import core_settings
     from manifoldgen.sampling import REFERENCE_ROW_COST
 
     model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7

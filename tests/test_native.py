@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from manifoldgen import native
+from manifoldgen.planning import rrt_connect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.sampling import FIRST_ROWS
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
@@ -241,7 +242,7 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeyp
     states = densify(lazy.path, space.settings.resolution)[0]
     assert panda_task.constraint.violation(states, space.y).max() <= 1.0
     assert not space.checker.in_collision(states).any() and space.validate_path(lazy.path).valid
-    monkeypatch.setattr(native, "LAZY_SAMPLES", False)
+    monkeypatch.setattr(rrt_connect, "LAZY_SAMPLES", False)
     eager_space, eager = _planner(panda_task, wall, 0)
     before = eager_space.counts()
     result = eager.solve(wall.start, wall.goal, 20.0)

@@ -26,14 +26,10 @@ equality within ``limit`` x tolerance, inequalities, collision), lazily per stat
 tests before collision for a whole batch at once, as the Python space does, then collisions in order);
 projection is :func:`~manifoldgen.constraints.project`'s algorithm with its options;
 ``tests/test_native.py``, ``tests/test_native_balance.py`` and ``tests/test_native_callback.py`` compare both
-with the Python reference, ``tests/test_native_bad_inputs.py`` their refusals. :func:`plan_rrt_connect` runs
-:class:`~manifoldgen.planning.RRTConnect`'s search in C++, the sampler feeding it through a callback
-with its raw rows (:meth:`~manifoldgen.sampling.Sampler.raw_many`: lazy samples, :data:`LAZY_SAMPLES`):
-the core refines and checks a row (limits, constraint) only when the search first uses it, and checks
-its collisions as it checks every state it keeps, so most pooled rows cost a decode and nothing more.
-:class:`NativeSpace` gives a sampler the core's ``valid``, ``violation`` and ``project`` during a native
-search (for samplers fed eagerly, ``LAZY_SAMPLES = False``). The core's operation counts are booked on
-the planner's space, so results carry the same counters as a Python search.
+with the Python reference, ``tests/test_native_bad_inputs.py`` their refusals. The core's search
+(:class:`~manifoldgen.planning.rrt_connect.CoreRRTConnect`) gives a sampler the core's ``valid``, ``violation``
+and ``project`` through :class:`NativeSpace`, and books the core's operation counts on the planner's space
+(:func:`book`), so results carry the same counters as a Python search.
 
 Sphere models (:func:`set_spheres`): conservative spheres per robot geometry; when set, the searches
 check robot-vs-primitive and robot-robot pairs with them (exact coal for the pairs they do not
@@ -43,7 +39,6 @@ cover), and every candidate path's final dense check stays exact.
 from __future__ import annotations
 
 import tempfile
-import time
 import warnings
 import weakref
 from dataclasses import dataclass
@@ -54,8 +49,8 @@ import pinocchio as pin
 
 from manifoldgen.constraints import Constraint, ConstraintSet, Projection
 from manifoldgen.constraint_callbacks import FD_AGREE, ConstraintCallback, central_difference
-from manifoldgen.constraints import projection, trace
-from manifoldgen.errors import ManifoldgenError, SamplerFailed
+from manifoldgen.constraints import trace
+from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
 
@@ -65,10 +60,6 @@ BUILD_HINT = "install manifoldgen with pip, which compiles it (pip install -e . 
 REBUILD = ("pip install scikit-build-core nanobind cmeel-eigen && pip install --no-build-isolation --no-deps "
            "--force-reinstall -e . (in the manifoldgen checkout)")
 COUNTERS = ("evaluations", "jacobians", "projection_steps", "collision_checks")
-TARGET_BATCH = 32  # samples fetched per callback for the search's targets (the pool draws pool_batch)
-# lazy samples (planner.cpp): the sampler's raw rows go to the search, which refines and checks a row only
-# when it first uses it
-LAZY_SAMPLES = True
 
 
 def core_module():
@@ -455,7 +446,7 @@ class NativeSpace:
     """``space``'s rule on the compiled ``core``: what a sampler asks (``valid``, ``violation``,
     ``project``), motion and path checks (``valid_prefix``, ``validate_path``, with the same refusals and
     reports as ``space``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
-    runs the search (:func:`plan_rrt_connect`), not here. ``collision=False``: :meth:`valid` leaves the
+    runs the search (:class:`~manifoldgen.planning.rrt_connect.CoreRRTConnect`), not here. ``collision=False``: :meth:`valid` leaves the
     collision test out (for a search that checks every state it keeps, samples included)."""
 
     def __init__(self, space: ConstrainedSpace, core, *, collision: bool = True):
@@ -534,69 +525,3 @@ def valid_query_state(space: ConstrainedSpace, core, q: np.ndarray) -> np.ndarra
     valid = core.codes(q[None], np.ones(1), True, True)[0] == 0
     book(space, before, core.counts())
     return q if valid else None
-
-
-def _draw(sampler, raw: bool):
-    """The search's callback: ``count`` -> (count, n) rows of ``sampler``, raw (:meth:`~manifoldgen.sampling.Sampler.raw_many`,
-    lazy samples) or checked (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""
-    take = sampler.raw_many if raw else sampler.sample_many
-
-    def draw(count: int) -> np.ndarray:
-        try:
-            return take(count)
-        except ManifoldgenError as exc:
-            raise SamplerFailed(str(exc)) from exc
-    return draw
-
-
-def core_settings(planner, refine: int):
-    """The core's ``PlannerSettings`` for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect`): every field
-    from its settings dataclass, its local planner and stone radius, and ``refine`` (projection iterations of a
-    raw row when the search first uses it; -1: the sampler's rows come checked). The one place they cross."""
-    s = planner.settings
-    stride, dense = s.edge_checks()
-    pool, pool_batch = planner.pool_rows()
-    return core_module().PlannerSettings(
-        range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=pool, pool_batch=pool_batch,
-        candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
-        dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut,
-        precision=planner.local.precision, max_iters=planner.local.max_iters, tol=projection.TOL,
-        damping=projection.DAMPING, max_step=projection.MAX_STEP)
-
-
-def plan_rrt_connect(planner, core, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
-    """RRT-Connect in the core for ``planner`` (an :class:`~manifoldgen.planning.RRTConnect` whose
-    settings and sampler it uses): the direct connection, then the search, until ``deadline``
-    (``time.perf_counter`` seconds). With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core,
-    which refines (``sampler.lazy_refine`` iterations) and checks each when it first uses it. Books
-    iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
-    operation counts on the planner; the path (K, n) that passed the exact dense check, or None."""
-    s, space, sampler = planner.settings, planner.space, planner.sampler
-    lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
-    before = core.counts()
-    swapped = sampler.space is space
-    if swapped:  # the sampler's checks and refinement run in the core; collisions lazily, in the search
-        sampler.space = NativeSpace(space, core, collision=False)
-    try:
-        out = core_module().rrt_connect(core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float),
-                                        _draw(sampler, lazy), max(deadline - time.perf_counter(), 0.0),
-                                        core_settings(planner, int(sampler.lazy_refine) if lazy else -1))
-    finally:
-        if swapped:
-            sampler.space = space
-        after = core.counts()
-        book(space, before, after)
-    planner.iterations += out["iterations"]
-    planner.samples += out["samples"]
-    planner.rejected += out["rejected_paths"]
-    planner.out_of_reach += out["out_of_reach"]
-    planner.local.projections += out["projections"]
-    planner.native_nodes = list(out["nodes"])
-    planner.cut_edges = out["cut_edges"]
-    planner.verified_states = out["verified_states"]
-    planner.reattached = out["reattached"]
-    planner.shortcuts, planner.found_length = out["shortcuts"], out["found_length"]
-    if lazy:
-        sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
-        sampler.stats.accepted += out["accepted"]
-    return out["path"] if len(out["path"]) else None

@@ -16,11 +16,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from manifoldgen import native
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.constraints import projection
+from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 
 EDGE_CHECKS = ("coarse", "dense")  # see RRTConnectSettings.edges
+TARGET_BATCH = 32  # samples the core's search fetches per callback for its targets (the pool draws pool_batch)
+# lazy samples (planner.cpp): the sampler's raw rows go to the core's search, which refines and checks a row only
+# when it first uses it
+LAZY_SAMPLES = True
 
 
 @dataclass
@@ -149,7 +154,7 @@ class RRTConnect(Planner):
 
 
 class CoreRRTConnect(RRTConnect):
-    """RRT-Connect in the compiled core (:func:`manifoldgen.native.plan_rrt_connect`): the same search as
+    """RRT-Connect in the compiled core (``manifoldgen_core.rrt_connect``, :meth:`_solve`): the same search as
     :class:`RRTConnect` on the same validity rule, with the differences the module docstring names (lazy samples,
     the pool's range bookkeeping, ``edges``); the tests hold both to the same verdicts and, at ``coarse:1`` with
     eager samples, the same paths. Made by :class:`RRTConnect` when the core takes the space."""
@@ -177,10 +182,43 @@ class CoreRRTConnect(RRTConnect):
         return valid if valid is not None else super()._query_state(q, what)  # the space says what is wrong
 
     def _solve(self, start, goal, deadline):
-        return native.plan_rrt_connect(self, self.core, start, goal, deadline)
+        """The direct connection, then the search, in the core until ``deadline`` (``time.perf_counter`` seconds).
+        With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core, which refines (``sampler.lazy_refine``
+        iterations) and checks each when it first uses it; the sampler's own checks and refinement run in the core
+        meanwhile (collisions lazily, in the search). Books iterations, samples, rejections, projections, the
+        sampler's refined and accepted rows and the core's operation counts; the path (K, n) that passed the exact
+        dense check, or None."""
+        space, sampler, core = self.space, self.sampler, self.core
+        lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
+        before = core.counts()
+        swapped = sampler.space is space
+        if swapped:
+            sampler.space = native.NativeSpace(space, core, collision=False)
+        try:
+            out = native.core_module().rrt_connect(
+                core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float), _core_draw(sampler, lazy),
+                max(deadline - time.perf_counter(), 0.0), core_settings(self, int(sampler.lazy_refine) if lazy else -1))
+        finally:
+            if swapped:
+                sampler.space = space
+            native.book(space, before, core.counts())
+        self.iterations += out["iterations"]
+        self.samples += out["samples"]
+        self.rejected += out["rejected_paths"]
+        self.out_of_reach += out["out_of_reach"]
+        self.local.projections += out["projections"]
+        self.native_nodes = list(out["nodes"])
+        self.cut_edges = out["cut_edges"]
+        self.verified_states = out["verified_states"]
+        self.reattached = out["reattached"]
+        self.shortcuts, self.found_length = out["shortcuts"], out["found_length"]
+        if lazy:
+            sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
+            sampler.stats.accepted += out["accepted"]
+        return out["path"] if len(out["path"]) else None
 
     def _shorten(self, path, deadline):
-        return path  # the core shortened it (found_length and shortcuts booked by plan_rrt_connect)
+        return path  # the core shortened it (found_length and shortcuts booked by _solve)
 
     def _segment_valid(self, segment):
         before = self.core.counts()
@@ -200,6 +238,36 @@ class CoreRRTConnect(RRTConnect):
                 **({"compile_fallback": "; ".join(f"{kind}: {why}" for kind, why in self.compiled["callbacks"].items())}
                    if self.compiled["callbacks"] else {}),
                 **({"sphere_fallback": self.sphere_fallback} if self.sphere_fallback else {})}
+
+
+def core_settings(planner: RRTConnect, refine: int):
+    """The core's ``PlannerSettings`` for ``planner``: every field from its settings dataclass, its local planner
+    (its projections' precision and iterations) and stone radius, :func:`~manifoldgen.constraints.project`'s
+    tolerance, damping and step, and ``refine`` (projection iterations of a raw row when the search first uses it;
+    -1: the sampler's rows come checked). The one place the two languages' settings cross."""
+    s = planner.settings
+    stride, dense = s.edge_checks()
+    pool, pool_batch = planner.pool_rows()
+    return native.core_module().PlannerSettings(
+        range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=pool, pool_batch=pool_batch,
+        candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
+        dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut,
+        precision=planner.local.precision, max_iters=planner.local.max_iters, tol=projection.TOL,
+        damping=projection.DAMPING, max_step=projection.MAX_STEP)
+
+
+def _core_draw(sampler, raw: bool):
+    """The core search's callback: ``count`` -> (count, n) rows of ``sampler``, raw
+    (:meth:`~manifoldgen.sampling.Sampler.raw_many`, lazy samples) or checked
+    (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""
+    take = sampler.raw_many if raw else sampler.sample_many
+
+    def draw(count: int) -> np.ndarray:
+        try:
+            return take(count)
+        except ManifoldgenError as exc:
+            raise SamplerFailed(str(exc)) from exc
+    return draw
 
 
 def _core_refusal(space, settings) -> str | None:
