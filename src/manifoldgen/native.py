@@ -446,8 +446,9 @@ class NativeSpace:
     """``space``'s rule on the compiled ``core``: what a sampler asks (``valid``, ``violation``,
     ``project``), motion and path checks (``valid_prefix``, ``validate_path``, with the same refusals and
     reports as ``space``); everything else is ``space``'s. The core's counts are booked on ``space`` by whoever
-    runs the search (:class:`~manifoldgen.planning.rrt_connect.CoreRRTConnect`), not here. ``collision=False``: :meth:`valid` leaves the
-    collision test out (for a search that checks every state it keeps, samples included)."""
+    runs the search (:class:`~manifoldgen.planning.rrt_connect.CoreRRTConnect`), not here. ``collision=False``:
+    :meth:`valid` leaves the collision test out (for a search that checks every state it keeps, samples
+    included)."""
 
     def __init__(self, space: ConstrainedSpace, core, *, collision: bool = True):
         self._space, self._core, self._collision = space, core, collision
