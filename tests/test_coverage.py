@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manifoldgen.coverage import Anchors, gaps, median, missed, modes, spacing
+from manifoldgen.coverage import Anchors, gaps, missed, modes, spacing
 from manifoldgen.scene import task_anchors
 from manifoldgen.data import collect
 from manifoldgen.models import load_model, pretrained_model_dir
@@ -21,14 +21,6 @@ def test_modes_find_separated_clusters_and_their_shares():
     assert [round(m["share"], 1) for m in found] == [0.7, 0.3]
     np.testing.assert_allclose(found[1]["centre"], 3.0, atol=0.05)
     assert len(modes(rng.normal(0.0, 1.0, (1000, 3)))) == 1  # one blob is one mode
-
-
-def test_median_is_numpys_to_the_bit():
-    rng = np.random.default_rng(3)
-    for n in (1, 2, 3, 4, 999, 1000):
-        values = rng.standard_normal(n) * 10.0 ** rng.uniform(-3, 3)
-        assert median(values) == float(np.median(values))
-    assert np.isnan(median(np.array([1.0, np.nan, 2.0])))
 
 
 def test_gaps_and_misses():

@@ -160,6 +160,7 @@ def test_registries_read_entry_points_and_module_class_names(monkeypatch):
     monkeypatch.setattr(registry, "_entry_points", Installed)
     monkeypatch.setattr(CONSTRAINTS, "_classes", dict(CONSTRAINTS._classes))
     monkeypatch.setattr(CONSTRAINTS, "_entry_points", None)
+    assert "coupled" not in CONSTRAINTS.names(announced=False)  # what --help lists: the package's own only
     assert "coupled" in CONSTRAINTS.names() and CONSTRAINTS.get("coupled") is JointLinearConstraint
     assert CONSTRAINTS.get("manifoldgen.constraints.plane:PlaneConstraint").__name__ == "PlaneConstraint"
     with pytest.raises(ManifoldgenError, match="unknown constraint 'coupld'; did you mean coupled"):

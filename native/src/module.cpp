@@ -455,10 +455,9 @@ NB_MODULE(manifoldgen_core, m) {
              bool dense_edges, int refine, double reach, int shortcut, double precision, int max_iters, double tol,
              double damping, double max_step) {
             if (edge_stride < 1) throw std::invalid_argument("edge_stride must be at least 1 (1: every state checked at once)");
-            new (s) mgcore::PlannerSettings{range,       resolution, step,   partial,  pool,      pool_batch,
-                                            candidates,  target_batch, local, edge_stride, dense_edges, refine,
-                                            reach,       shortcut,   precision, max_iters, tol,     damping,
-                                            max_step};
+            new (s) mgcore::PlannerSettings{range, resolution, step, partial, pool, pool_batch, candidates,
+                                            target_batch, local, edge_stride, dense_edges, refine, reach, shortcut,
+                                            precision, max_iters, tol, damping, max_step};
           },
           nb::kw_only(), "range"_a, "resolution"_a, "step"_a, "partial"_a, "pool"_a, "pool_batch"_a, "candidates"_a,
           "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a, "shortcut"_a,

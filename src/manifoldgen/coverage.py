@@ -58,18 +58,6 @@ def gaps(rows: np.ndarray, points: np.ndarray) -> np.ndarray:
     return out
 
 
-def median(values: np.ndarray) -> float:
-    """``np.median`` of ``values`` (the same float), without the 20 ms its first call spends importing numpy.ma."""
-    v = np.asarray(values, dtype=float).ravel()
-    if len(v) == 0 or np.isnan(v).any():
-        return float("nan")
-    half = len(v) // 2
-    if len(v) % 2:
-        return float(np.partition(v, half)[half])
-    part = np.partition(v, [half - 1, half])
-    return float((part[half - 1] + part[half]) / 2)
-
-
 def spacing(rows: np.ndarray, seed: int = 0, count: int = 1000) -> float:
     """Median distance from a row of ``rows (R, n)`` to its nearest other row (on at most ``count`` rows)."""
     if len(rows) < 2:
@@ -78,7 +66,7 @@ def spacing(rows: np.ndarray, seed: int = 0, count: int = 1000) -> float:
     squares = np.sum(sub**2, axis=1)
     d2 = squares[:, None] + squares[None] - 2.0 * np.einsum("ij,kj->ik", sub, sub)  # no BLAS: its threads spin
     np.fill_diagonal(d2, np.inf)
-    return float(np.sqrt(max(median(d2.min(axis=1)), 0.0)))
+    return float(np.sqrt(max(float(np.median(d2.min(axis=1))), 0.0)))
 
 
 def missed(gap: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -134,7 +122,7 @@ def modes(q: np.ndarray, seed: int = 0) -> list[dict]:
     distances = pdist(rows)
     square = squareform(distances)
     np.fill_diagonal(square, np.inf)
-    cut = MODE_CUT * median(square.min(axis=1))
+    cut = MODE_CUT * float(np.median(square.min(axis=1)))
     labels = fcluster(linkage(distances, "single"), cut, criterion="distance")
     found = []
     for label in np.unique(labels):

@@ -49,7 +49,7 @@ import pinocchio as pin
 
 from manifoldgen.constraints import Constraint, ConstraintSet, Projection
 from manifoldgen.constraint_callbacks import FD_AGREE, ConstraintCallback, central_difference
-from manifoldgen.constraints import trace
+from manifoldgen.constraints import projection, trace
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot, as_batch
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport, densify, malformed_path
@@ -464,8 +464,8 @@ class NativeSpace:
         limit = np.full(len(q), 1.0 if equality else np.inf)
         return self._core.codes(q, limit, self._collision, True) == 0
 
-    def project(self, q: np.ndarray, *, tol: float = 1e-6, max_iters: int = 50, damping: float = 1e-6,
-                max_step: float = 0.5) -> Projection:
+    def project(self, q: np.ndarray, *, tol: float = projection.TOL, max_iters: int = projection.MAX_ITERS,
+                damping: float = projection.DAMPING, max_step: float = projection.MAX_STEP) -> Projection:
         x, ok, iterations, residual = self._core.project(_rows(q, self._space.n), tol, max_iters, damping, max_step)
         return Projection(x, ok.astype(bool), iterations, residual)
 

@@ -58,8 +58,8 @@ class Registry(Generic[T]):
         return self._entry_points
 
     def names(self, *, announced: bool = True) -> list[str]:
-        """Every registered name, the package's first (nothing is imported); ``announced=False``: the package's own
-        only, without reading other packages' entry points (0.05-0.1 s: ``--help`` lists these)."""
+        """Every registered name, the package's first (nothing is imported); ``announced=False``: without reading
+        other packages' entry points (0.05-0.1 s: ``--help`` lists these), so only names already loaded."""
         own = list(self._paths) + [name for name in self._classes if name not in self._paths]
         return own + ([name for name in self._announced() if name not in own] if announced else [])
 
