@@ -105,9 +105,10 @@ def main() -> None:
             cpu, wall = result.extras["native_cpu_s"] + result.extras["dense_cpu_s"], result.time_s
         routed = bool(result.extras.get("roadmap", {}).get("routed", False))
         runs[method].append([result.solved, None, cpu, wall, routed, result.length])
-        unchecked.append((runs[method][-1], result, start, goal))
-        if not args.grouped:
-            recheck(space, *unchecked.pop())
+        if args.grouped:
+            unchecked.append((runs[method][-1], result, start, goal))
+        else:
+            recheck(space, runs[method][-1], result, start, goal)
         print(f"query {k + 1}/{len(pairs)} {method}", end="\r", flush=True)
     for item in unchecked:
         recheck(space, *item)
