@@ -52,14 +52,15 @@ def densify(path: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray
 
 
 def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolution: float | None = None,
-                  content: tuple[dict, np.ndarray] | None = None, near: Path | None = None) -> dict:
+                  content: tuple[dict, np.ndarray] | None = None, near: Path | None = None,
+                  checker: Checker | None = None) -> dict:
     """Recheck one path file. Returns ``status`` (exit code), ``line`` (verdict), ``details``, ``valid``,
     ``reason`` (the first problem), ``worst`` (max |F_i| / tol_i over the states), ``violations`` (states
     outside tolerance or violating an inequality), ``collisions``, ``outside`` (states outside the limits),
     ``states``, ``resolution``, ``meta``, ``path`` and, for a balance constraint, ``stability`` (``states``,
     ``unstable``: states whose CoM is outside the support polygon, ``min_depth`` m, ``max_foot_drift`` m; else None).
     ``content``: (meta, path) already read (``file`` then only names it); ``near``: where to look for the robot
-    files (default: the file's folder)."""
+    files (default: the file's folder); ``checker``: one already made for this meta (many paths of one file)."""
     empty = {"worst": float("inf"), "collisions": 0, "outside": 0, "violations": 0, "states": 0, "valid": False,
              "meta": {}, "path": np.zeros((0, 0)), "details": []}
     try:
@@ -79,8 +80,8 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
             resolution = float((meta.get("validation") or {}).get("resolution", DEFAULT_RESOLUTION))
         if not resolution > 0:
             raise CannotRecheck(f"resolution must be positive, got {resolution}")
-        checker = Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf,
-                          near=near or Path(file).parent)
+        checker = checker or Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf,
+                                     near=near or Path(file).parent)
     except CannotRecheck as exc:
         return {**empty, "status": EXIT_CANNOT, "reason": str(exc), "line": f"{file}: CANNOT RECHECK: {exc}"}
     details = [f"note: {note}" for note in checker.notes]

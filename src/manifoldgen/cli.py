@@ -202,6 +202,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
          snapshots: Path = typer.Option(None, help="Also write a PNG strip of robot snapshots along the path (t0..t5)"),
          picture: bool = typer.Option(True, "--picture/--no-picture", help="Draw the path's picture (a .png beside "
                                       "-o; matplotlib takes 1-2 s of the command's time)"),
+         roadmap: Path = typer.Option(None, help="Roadmap .npz of earlier paths in this task, condition and scene "
+                                      "(planner setting reuse=true): the query is routed through it first when the "
+                                      "file exists, and a solved query writes it back with its path"),
          output: Path = typer.Option(..., "-o", "--output", help="Path .npz to write (a .png is saved beside it)")):
     """Plan the scene's query; writes the path (.npz) and its picture (.png, unless --no-picture). Exit 1 when
     unsolved (nothing written)."""
@@ -224,15 +227,27 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     for out in (output, image, snapshots):
         if out is not None:
             check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
+    if roadmap is not None:
+        clash = next((out for out in (output, image, snapshots) if out is not None
+                      and roadmap.resolve() == out.resolve()), None)
+        if clash is not None:
+            raise ManifoldgenError(f"--roadmap {roadmap} is also the output {clash} of this command; give the roadmap "
+                                   "a file of its own (e.g. roadmap.npz)")
+        check_output_path(roadmap, inputs, what="--roadmap")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
-                             local=local, smooth=smooth, settings=values)
+                             local=local, smooth=smooth, settings=values, roadmap=roadmap)
+    held = result.extras.get("roadmap") if roadmap is not None else None
+    routed = held and (f"roadmap {roadmap}: {'routed through it' if held['routed'] else 'not routed'}; "
+                       f"{held['nodes']} nodes{' saved' if result.solved else ', the file not written'}")
     if not result.solved:  # no path: nothing is written, so no file can pass for one
         console.print(f"[red]not solved[/] in {result.time_s:.3f} s | {result.samples_drawn} samples, "
                       f"{result.iterations} iterations | {engine(result.extras)} | nothing written")
         console.print(result.why(), markup=False)
+        if routed:
+            console.print(routed, markup=False, highlight=False)
         raise typer.Exit(1)
     save_path(output, result, meta)
     written = [output]
@@ -250,6 +265,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     console.print(f"[green]solved[/] in {result.time_s:.3f} s | length {result.length:.2f} rad | {len(result.path)} "
                   f"waypoints | {result.samples_drawn} samples, {result.iterations} iterations | {engine(result.extras)} "
                   f"-> {', '.join(map(str, written))}")
+    if routed:
+        console.print(routed, markup=False, highlight=False)
     if result.extras.get("sampler_note"):
         console.print(f"note: {result.extras['sampler_note']}", markup=False)
 

@@ -9,13 +9,16 @@ placement and touch links).
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import check_output_path, save_npz
+from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
@@ -36,10 +39,11 @@ def get_planner(name: str) -> type[Planner]:
 
 def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int, time_limit: float,
               local: str = DEFAULT_LOCAL, smooth: bool = False, settings: dict | None = None,
-              ) -> tuple[PlanResult, dict]:
+              roadmap: str | Path | None = None) -> tuple[PlanResult, dict]:
     """Plan the scene's query with the planner's ``settings`` (field -> value; see
     :func:`manifoldgen.planning.planner_settings`); returns the result (path re-validated, optionally smoothed)
-    and the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used)."""
+    and the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used). ``roadmap``:
+    a roadmap file the query is routed through first and that keeps its path (see :func:`plan_query`)."""
     if not np.isfinite(time_limit) or time_limit <= 0:
         raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
     seed = check_seed(seed)
@@ -47,20 +51,31 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     y = task.condition.check(scene.condition)[0]
     space = ConstrainedSpace(task.constraint, y, scene.checker(task.robot))
     return plan_query(task, scene, space, make_sampler(sampler, space, seed), sampler, planner, seed=seed,
-                      time_limit=time_limit, local=local, smooth=smooth, settings=settings)
+                      time_limit=time_limit, local=local, smooth=smooth, settings=settings, roadmap=roadmap)
 
 
 def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label: str, planner: str, *, seed: int,
                time_limit: float, local: str = DEFAULT_LOCAL, smooth: bool = False, settings: dict | None = None,
-               ) -> tuple[PlanResult, dict]:
+               roadmap: str | Path | None = None) -> tuple[PlanResult, dict]:
     """:func:`run_query` with a sampler object made for ``space`` (the scene's condition and checker); ``label``
-    names the sampler in the path file's ``meta``."""
+    names the sampler in the path file's ``meta``. With ``roadmap`` (a file) the planner reuses its paths: the
+    roadmap saved there (when the file exists; refused when made for another query space) is searched first, and
+    after a solved query it is written back (atomic) with the new path; the file is locked meanwhile."""
     planner_type = get_planner(planner)
     values = task_settings(task, planner, settings)
     if smooth:  # shortened within the query, by the planner (the core's search in the core)
         values.setdefault("shortcut", SMOOTH_SHORTCUTS)
+    if roadmap is not None:
+        values["reuse"] = True
     solver = planner_type(space, sampler, local=local, seed=seed, settings=planner_type.settings_type(**values))
-    result = solver.solve(scene.start, scene.goal, time_limit)
+    with output_lock(roadmap, "roadmap") if roadmap is not None else contextlib.nullcontext():
+        if roadmap is not None:
+            about = roadmap_meta(task, scene, space)
+            if Path(roadmap).exists():
+                solver.load_roadmap(roadmap, about)
+        result = solver.solve(scene.start, scene.goal, time_limit)
+        if roadmap is not None and result.solved:
+            solver.roadmap.save(roadmap, about)
     report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")
@@ -79,6 +94,19 @@ def query_meta(task: Task, scene: Scene, y: np.ndarray) -> dict:
             "condition": np.asarray(y, float).tolist(), "condition_names": list(task.condition.names),
             "scene_name": scene.name, "scene": scene.to_meta(task.robot),
             "start": np.asarray(scene.start, float).tolist(), "goal": np.asarray(scene.goal, float).tolist()}
+
+
+def roadmap_meta(task: Task, scene: Scene, space: ConstrainedSpace) -> dict:
+    """A roadmap file's ``meta`` for queries in ``space`` (the task at the scene's condition, with its obstacles): a
+    path file's task, condition and scene (no start or goal), and the keys that a roadmap loaded for a query must
+    match (:data:`~manifoldgen.planning.roadmap.IDENTITY`): the robot's identity, the base bounds, the scene's
+    fingerprint and the dense check's resolution. :meth:`~manifoldgen.planning.roadmap.Roadmap.save` adds the
+    format, kind and reach."""
+    query = query_meta(task, scene, space.y)
+    objects = json.dumps(query["scene"], sort_keys=True, separators=(",", ":"))
+    return {**{k: v for k, v in query.items() if k not in ("format_version", "kind", "start", "goal")},
+            "robot_identity": task.robot.identity, "base_bounds": task.robot.base_bounds.tolist(),
+            "scene_sha256": hashlib.sha256(objects.encode()).hexdigest(), "resolution": space.settings.resolution}
 
 
 def unsolved_validation(resolution: float) -> dict:

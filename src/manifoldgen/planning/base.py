@@ -14,6 +14,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -185,7 +186,8 @@ class Planner(ABC):
         if path is not None and self.settings.shortcut and not routed:
             extras["shortcuts"], extras["found_length"] = self.shortcuts, self.found_length
         if self.roadmap is not None:
-            extras["roadmap"] = {"routed": routed, "nodes": len(self.roadmap), "checks": self.roadmap.checks - checks}
+            extras["roadmap"] = {"routed": routed, "nodes": len(self.roadmap), "edges": self.roadmap.edge_count(),
+                                 "checks": self.roadmap.checks - checks}
         if failure:
             extras["failure"] = failure
         if note:
@@ -194,6 +196,15 @@ class Planner(ABC):
         return PlanResult(len(path) > 0, path, elapsed, self.iterations, self.samples,
                           self.local.projections - projections + sampler["refined"], self.name,
                           path_length(path), extras)
+
+    def load_roadmap(self, path: str | Path, meta: dict) -> None:
+        """Search the roadmap saved at ``path`` from the next query on, in place of this planner's (``reuse`` on);
+        refused when its meta names another query space than ``meta`` (see
+        :meth:`~manifoldgen.planning.roadmap.Roadmap.load`)."""
+        if self.roadmap is None:
+            raise ManifoldgenError(f"{self.name}: a roadmap is searched only with reuse on; make the planner with "
+                                   "settings reuse=True")
+        self.roadmap = Roadmap.load(path, self._segment_valid, self.settings.range, expect=meta)
 
     @abstractmethod
     def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:

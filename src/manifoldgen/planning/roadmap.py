@@ -4,17 +4,33 @@ scene) search before planning (as OMPL's Thunder keeps its solutions).
 Nodes are the waypoints of earlier paths; an edge is a straight segment that passed the space's dense path check
 (a path's consecutive waypoints, a new path's waypoints joined to the nearest nodes of earlier ones, a query's start
 and goal joined to their nearest nodes, two each at most). A query joins start and goal to the roadmap and takes the shortest route
-through it; a route is made of checked segments only, so it is valid as a whole by the same check."""
+through it; a route is made of checked segments only, so it is valid as a whole by the same check.
+
+A roadmap is saved to an ``.npz`` file (:meth:`Roadmap.save`, docs/file-formats.md) and read back
+(:meth:`Roadmap.load`) for later queries in another process. The file is an input like any other: its meta must
+name the same query space (:data:`IDENTITY`), and an edge read from it is checked again the first time a route
+takes it."""
 
 from __future__ import annotations
 
 import heapq
+import json
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
+from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.io import load_npz, save_npz
+
 TRIES, JOINS = 6, 2  # a query's start or goal (or a new waypoint) tries its 6 nearest nodes, joins the first 2 it can
+FORMAT_VERSION = 1
+# the meta keys that say which query space a roadmap holds for (a file whose values differ is refused) -> their name
+IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joints", "base_bounds": "base bounds",
+            "constraint": "constraint", "tolerance": "tolerance", "condition": "condition", "scene_name": "scene",
+            "scene_sha256": "scene objects (sha256)", "resolution": "check resolution"}
+LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance
 
 
 class Roadmap:
@@ -26,9 +42,54 @@ class Roadmap:
         self.edges: list[dict[int, float]] = []  # node -> {neighbour: length}
         self.valid, self.reach = valid, reach
         self.checks = 0  # segments checked (the query's cost besides the search)
+        self.unchecked: set[tuple[int, int]] = set()  # edges (a < b) read from a file, checked when first routed
 
     def __len__(self) -> int:
         return len(self.q)
+
+    def edge_count(self) -> int:
+        """E, the number of edges."""
+        return sum(map(len, self.edges)) // 2
+
+    def edge_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """The edges as ``(E, 2)`` int64 node pairs (each once, lower node first) and their ``(E,)`` lengths."""
+        pairs = [(a, b, length) for a, out in enumerate(self.edges) for b, length in out.items() if a < b]
+        return (np.array([p[:2] for p in pairs], np.int64).reshape(-1, 2),
+                np.array([p[2] for p in pairs], float).reshape(-1))
+
+    def save(self, path: str | Path, meta: dict) -> None:
+        """Write the roadmap to ``path`` (atomic ``.npz``): ``nodes (N, n)``, ``edges (E, 2)``, ``lengths (E,)`` and
+        ``meta`` (a JSON string): the caller's ``meta`` (the query space: :data:`IDENTITY`'s keys and what an outside
+        checker needs) with ``format_version``, ``kind`` and ``reach``."""
+        edges, lengths = self.edge_array()
+        save_npz(path, {**meta, "format_version": FORMAT_VERSION, "kind": "roadmap", "reach": self.reach},
+                 nodes=np.asarray(self.q, float), edges=edges, lengths=lengths)
+
+    @classmethod
+    @file_reader
+    def load(cls, path: str | Path, valid: Callable[[np.ndarray], bool], reach: float, *,
+             expect: dict | None = None) -> Roadmap:
+        """The roadmap saved at ``path``, checked whole (one-line errors for another kind of file, another format,
+        damaged arrays), with the dense check ``valid`` and ``reach`` of the planner that searches it; refused when
+        its meta differs from ``expect`` in any :data:`IDENTITY` key ``expect`` holds. Its edges count as unchecked
+        until a route takes them."""
+        meta, arrays = load_npz(path, ())
+        if meta.get("kind") != "roadmap":
+            raise ManifoldgenError(f"{path} is not a roadmap file (its meta says kind {meta.get('kind')!r}); give a "
+                                   "file written by `plan --roadmap` or Roadmap.save")
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise ManifoldgenError(f"{path}: roadmap format {meta.get('format_version')!r} is not the one this version "
+                                   f"reads ({FORMAT_VERSION}); delete it (the next query starts a new roadmap)")
+        if expect is not None:
+            _check_identity(path, meta, expect)
+        nodes, edges, lengths = _arrays(path, meta, arrays)
+        roadmap = cls(nodes.shape[1], valid, reach)
+        roadmap.q = nodes
+        roadmap.edges = [{} for _ in nodes]
+        for (a, b), length in zip(edges.tolist(), lengths.tolist()):
+            roadmap._link(a, b, length)
+            roadmap.unchecked.add((min(a, b), max(a, b)))
+        return roadmap
 
     def route(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         """The shortest route (K, n) from ``start`` to ``goal`` through the roadmap, each segment checked (the ends
@@ -39,6 +100,8 @@ class Roadmap:
         if not first or not last:
             return None
         nodes = self._shortest(first, last, goal)
+        while nodes is not None and not self._recheck(nodes):
+            nodes = self._shortest(first, last, goal)
         if nodes is None:
             return None
         route = np.concatenate([start[None], self.q[nodes], goal[None]])
@@ -81,6 +144,20 @@ class Roadmap:
         if a != b:
             self.edges[a][b] = self.edges[b][a] = length
 
+    def _recheck(self, nodes: list[int]) -> bool:
+        """Check the unchecked edges along the route ``nodes``: True when all pass; else the first that fails is
+        removed (False: search again)."""
+        for a, b in zip(nodes, nodes[1:]):
+            edge = (min(a, b), max(a, b))
+            if edge not in self.unchecked:
+                continue
+            self.checks += 1
+            self.unchecked.discard(edge)
+            if not self.valid(self.q[[a, b]]):
+                del self.edges[a][b], self.edges[b][a]
+                return False
+        return True
+
     def _shortest(self, first: dict[int, float], last: dict[int, float], goal: np.ndarray) -> list[int] | None:
         """A* from the start's joins (their lengths as starting costs) to the goal's, the straight distance to
         ``goal`` as the estimate (never above an edge route's length): the node list, or None."""
@@ -111,3 +188,56 @@ class Roadmap:
         while parent[nodes[-1]] >= 0:
             nodes.append(parent[nodes[-1]])
         return nodes[::-1]
+
+
+def _check_identity(path: str | Path, meta: dict, expect: dict) -> None:
+    """Refuse a roadmap whose ``meta`` names another query space than ``expect`` (the :data:`IDENTITY` keys it holds),
+    naming both values of each difference."""
+    differences = [_difference(key, meta.get(key), wanted) for key in IDENTITY if key in expect
+                   for wanted in [json.loads(json.dumps(expect[key]))] if meta.get(key) != wanted]
+    if differences:
+        raise ManifoldgenError(f"{path} holds a roadmap for another query: {'; '.join(differences)}; give this query "
+                               f"another roadmap file (or delete {path} to start a new one)")
+
+
+def _difference(key: str, made, wanted) -> str:
+    """``key``'s values in the file and in this query (of an object: its fields that differ), short enough for an
+    error line."""
+    name = IDENTITY[key]
+    if isinstance(made, dict) and isinstance(wanted, dict):
+        return ", ".join(f"{name} {field} {_show(made.get(field))} (the file) vs {_show(wanted.get(field))} "
+                         "(this query)" for field in sorted({*made, *wanted}) if made.get(field) != wanted.get(field))
+    return f"{name} {_show(made)} (the file) vs {_show(wanted)} (this query)"
+
+
+def _show(value) -> str:
+    """A value as short JSON (a sha256: its first 12 digits)."""
+    if isinstance(value, str) and len(value) == 64:
+        return value[:12]
+    text = json.dumps(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The file's ``nodes (N, n)`` float64, ``edges (E, 2)`` int and ``lengths (E,)`` float64, checked: finite nodes
+    as wide as the meta's ``joints``, edges between distinct nodes, lengths their nodes' distances."""
+    fix = "the file is damaged or was edited: delete it (the next query starts a new roadmap)"
+    missing = [k for k in ("nodes", "edges", "lengths") if k not in arrays]
+    if missing:
+        raise ManifoldgenError(f"{path}: no {', '.join(missing)} array; {fix}")
+    nodes, edges, lengths = arrays["nodes"], arrays["edges"], arrays["lengths"]
+    n = len(meta["joints"]) if isinstance(meta.get("joints"), list) else -1
+    if nodes.dtype.kind not in "fiu" or nodes.ndim != 2 or nodes.shape[1] != n or not np.isfinite(nodes).all():
+        raise ManifoldgenError(f"{path}: 'nodes' must be finite numbers of shape (N, {n}) (the meta's joints), got "
+                               f"{nodes.dtype} {nodes.shape}; {fix}")
+    if edges.dtype.kind not in "iu" or edges.ndim != 2 or edges.shape[1] != 2 or lengths.shape != (len(edges),) \
+            or lengths.dtype.kind != "f":
+        raise ManifoldgenError(f"{path}: 'edges' must be (E, 2) integers and 'lengths' (E,) numbers, got "
+                               f"{edges.dtype} {edges.shape} and {lengths.dtype} {lengths.shape}; {fix}")
+    if len(edges) and (edges.min() < 0 or edges.max() >= len(nodes) or np.any(edges[:, 0] == edges[:, 1])):
+        raise ManifoldgenError(f"{path}: 'edges' must join two distinct nodes of the {len(nodes)}; {fix}")
+    nodes = np.asarray(nodes, float)
+    distance = np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
+    if not np.all(np.abs(lengths - distance) <= LENGTH_TOLERANCE):
+        raise ManifoldgenError(f"{path}: 'lengths' are not the distances between the nodes of each edge; {fix}")
+    return nodes, edges.astype(np.int64), np.asarray(lengths, float)

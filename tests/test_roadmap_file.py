@@ -1,0 +1,167 @@
+"""A planner's roadmap saved to a file and read back: the same roadmap and routes, later queries in a fresh process
+routed through it (``plan --roadmap``), files for another query or damaged ones refused in one line, outputs never
+overwritten, and the outside checker (examples/check_roadmap.py) rechecking every edge."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.errors import ManifoldgenError
+from manifoldgen.planning import PLANNERS
+from manifoldgen.planning.roadmap import Roadmap
+from manifoldgen.sampling import ProjectionSampler
+from manifoldgen.scene import get_scene
+from manifoldgen.space import ConstrainedSpace, densify
+from manifoldgen.tasks import get_task
+from planning_problems import corridor_problem
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from check_roadmap import roadmap_check  # noqa: E402  (the standalone checker users run)
+
+runner = CliRunner()
+SPHERE = ["plan", "sphere", "--scene", "sphere", "--no-picture"]  # OMPL's sphere demo: a point, solved in ~0.05 s
+# what the corridor roadmaps of the Python tests say they hold for (the IDENTITY keys a query compares)
+CORRIDOR = {"joints": ["x", "y", "z"], "condition": [0.0], "scene_name": "corridor", "tolerance": [0.01],
+            "resolution": 0.005}
+
+
+def _corridor_planner(seed: int = 1):
+    constraint, y, checker, start, goal = corridor_problem()
+    space = ConstrainedSpace(constraint, y, checker)
+    planner = PLANNERS.get("rrt")(space, ProjectionSampler(space, seed=seed), seed=seed,
+                                  settings=PLANNERS.get("rrt").settings_type(reuse=True))
+    return planner, space, start, goal
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """A roadmap file of the sphere task's scene, written by `plan --roadmap` (one query, planned)."""
+    folder = tmp_path_factory.mktemp("roadmap")
+    result = runner.invoke(app, [*SPHERE, "--roadmap", str(folder / "r.npz"), "-o", str(folder / "p.npz")])
+    assert result.exit_code == 0, result.output
+    assert "roadmap" in result.output and "not routed" in result.output
+    return folder / "r.npz"
+
+
+def test_save_and_load_give_the_same_roadmap_and_route(tmp_path):
+    planner, space, start, goal = _corridor_planner()
+    assert planner.solve(start, goal, 20.0).solved
+    planner.roadmap.save(tmp_path / "r.npz", CORRIDOR)
+    again, *_ = _corridor_planner(seed=2)
+    again.load_roadmap(tmp_path / "r.npz", CORRIDOR)
+    assert np.array_equal(again.roadmap.q, planner.roadmap.q) and again.roadmap.q.dtype == np.float64
+    for ours, theirs in zip(again.roadmap.edge_array(), planner.roadmap.edge_array()):
+        assert np.array_equal(ours, theirs)
+    meta = json.loads(str(np.load(tmp_path / "r.npz")["meta"]))
+    assert (meta["kind"], meta["format_version"], meta["reach"]) == ("roadmap", 1, planner.settings.range)
+    near_start, near_goal = start + [0.0, 0.05, 0.0], goal + [0.0, -0.05, 0.0]
+    first, second = planner.solve(near_start, near_goal, 20.0), again.solve(near_start, near_goal, 20.0)
+    assert second.extras["roadmap"]["routed"] and second.iterations == 0 and second.samples_drawn == 0
+    assert np.array_equal(first.path, second.path) and space.validate_path(second.path).valid
+
+
+def test_an_edge_read_from_a_file_is_checked_before_a_route_takes_it(tmp_path):
+    """A file's edges are rechecked when first routed: an edge made invalid by moving a node off the plane is
+    dropped, and the route found without it is valid state by state."""
+    planner, space, start, goal = _corridor_planner()
+    assert planner.solve(start, goal, 20.0).solved
+    planner.roadmap.save(tmp_path / "r.npz", CORRIDOR)
+    arrays = dict(np.load(tmp_path / "r.npz"))
+    middle = len(arrays["nodes"]) // 2
+    arrays["nodes"][middle, 2] += 0.5  # off the plane z = 0
+    edges = arrays["edges"]
+    arrays["lengths"] = np.linalg.norm(arrays["nodes"][edges[:, 1]] - arrays["nodes"][edges[:, 0]], axis=1)
+    np.savez(tmp_path / "moved.npz", **arrays)
+    again, *_ = _corridor_planner()
+    again.load_roadmap(tmp_path / "moved.npz", CORRIDOR)
+    result = again.solve(start, goal, 20.0)
+    assert result.solved and space.valid(densify(result.path, 0.005)[0]).all()
+    assert middle not in again.roadmap.edges[middle - 1]  # the path's edge into the moved node: checked, dropped
+
+
+def test_a_roadmap_for_another_query_is_refused_naming_both_values(tmp_path):
+    planner, *_ = _corridor_planner()
+    planner.roadmap.save(tmp_path / "r.npz", CORRIDOR)
+    with pytest.raises(ManifoldgenError, match=r"condition \[0.0\] \(the file\) vs \[0.5\] \(this query\); scene "
+                                               r"\"corridor\" \(the file\) vs \"maze\".*another roadmap file"):
+        planner.load_roadmap(tmp_path / "r.npz", {**CORRIDOR, "condition": [0.5], "scene_name": "maze"})
+
+
+def test_plan_in_a_fresh_process_is_routed_through_the_saved_roadmap(saved, tmp_path):
+    roadmap = tmp_path / "r.npz"
+    roadmap.write_bytes(saved.read_bytes())
+    nodes = len(np.load(roadmap)["nodes"])
+    done = subprocess.run([sys.executable, "-c", "from manifoldgen.cli import app; app()", *SPHERE, "--roadmap",
+                           str(roadmap), "-o", str(tmp_path / "p.npz")], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert f"roadmap {roadmap}: routed through it; {nodes + 2} nodes saved" in done.stdout
+    assert len(np.load(roadmap)["nodes"]) == nodes + 2
+    path = np.load(tmp_path / "p.npz")["path"]
+    task = get_task("sphere")
+    scene = get_scene(task, "sphere")
+    space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+    assert np.allclose(path[0], scene.start) and np.allclose(path[-1], scene.goal)
+    assert space.valid(densify(path, space.settings.resolution)[0]).all()
+
+
+@pytest.mark.parametrize("clash", ["-o", "--scene"])
+def test_roadmap_equal_to_an_output_or_input_is_refused_and_nothing_is_overwritten(tmp_path, clash):
+    scene = tmp_path / "scene.json"
+    scene.write_bytes(Path(get_task("sphere").scenes["sphere"]).read_bytes())
+    out = tmp_path / "p.npz"
+    out.write_bytes(b"an earlier path")
+    same = out if clash == "-o" else scene
+    before = same.read_bytes()
+    result = runner.invoke(app, ["plan", "sphere", "--scene", str(scene), "--no-picture", "--roadmap", str(same),
+                                 "-o", str(out)])
+    assert result.exit_code == 2 and "--roadmap" in result.output and result.output.count("\n") == 1, result.output
+    assert same.read_bytes() == before and out.read_bytes() == b"an earlier path"
+
+
+def test_a_damaged_or_foreign_roadmap_file_is_refused_in_one_line(saved, tmp_path):
+    damaged = tmp_path / "damaged.npz"
+    damaged.write_bytes(saved.read_bytes()[:300])
+    result = runner.invoke(app, [*SPHERE, "--roadmap", str(damaged), "-o", str(tmp_path / "p.npz")])
+    assert result.exit_code == 2 and "not a readable .npz" in result.output and result.output.count("\n") == 1
+    path = saved.parent / "p.npz"  # a path file is not a roadmap
+    result = runner.invoke(app, [*SPHERE, "--roadmap", str(path), "-o", str(tmp_path / "p.npz")])
+    assert result.exit_code == 2 and "not a roadmap file" in result.output, result.output
+    assert not (tmp_path / "p.npz").exists()
+    arrays = dict(np.load(saved))
+    arrays["lengths"] = arrays["lengths"] + 0.1
+    np.savez(tmp_path / "edited.npz", **arrays)
+    with pytest.raises(ManifoldgenError, match="'lengths' are not the distances"):
+        Roadmap.load(tmp_path / "edited.npz", lambda segment: True, 0.6)
+
+
+def test_plan_refuses_the_roadmap_of_another_scene(saved, tmp_path):
+    document = json.loads(Path(get_task("sphere").scenes["sphere"]).read_text())
+    document["obstacles"] = document["obstacles"][1:]
+    (tmp_path / "fewer.json").write_text(json.dumps(document))
+    result = runner.invoke(app, ["plan", "sphere", "--scene", str(tmp_path / "fewer.json"), "--no-picture",
+                                 "--roadmap", str(saved), "-o", str(tmp_path / "p.npz")])
+    assert result.exit_code == 2 and "scene objects (sha256)" in result.output and "(this query)" in result.output
+    assert "another roadmap file" in result.output and not (tmp_path / "p.npz").exists()
+
+
+def test_the_outside_checker_rechecks_every_edge(saved, tmp_path):
+    check = roadmap_check(saved)
+    assert check["status"] == 0 and check["valid"] and "VALID" in check["line"], check["line"]
+    arrays = dict(np.load(saved))
+    assert check["states"] >= len(arrays["edges"]) and check["worst"] <= 1.0
+    arrays["nodes"][10] *= 1.05  # off the sphere: 5 times its tolerance
+    edges = arrays["edges"]
+    arrays["lengths"] = np.linalg.norm(arrays["nodes"][edges[:, 1]] - arrays["nodes"][edges[:, 0]], axis=1)
+    np.savez(tmp_path / "off.npz", **arrays)
+    check = roadmap_check(tmp_path / "off.npz")
+    assert check["status"] == 1 and not check["valid"] and "constraint" in check["reason"]
+    touching = {e for e, (a, b) in enumerate(edges) if 10 in (a, b)}
+    assert set(check["invalid_edges"]) == touching
