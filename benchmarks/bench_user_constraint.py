@@ -16,9 +16,10 @@ between start and goal), RRT-Connect with the `project` sampler (or a CVAE train
 constraint with ``--per-condition`` and ``--epochs``: ``--sampler cvae``); searches interleaved per seed
 (seeds 0..runs-1, ``--searches`` picks them): ``python``, the Python search; ``autograd``, the compiled core
 calling the user's residual back with the Jacobian by torch autograd (the callback path before central
-differences: ``constraint_callbacks.FD_ROWS = 0``); ``callback``, the core calling it back with central differences of the
-numpy residual (:func:`manifoldgen.constraint_callbacks.central_difference`; ``native.COMPILE = False``); ``compiled``, the
-core running the user's residual traced into a compiled expression (no Python call per state); ``builtin``, the
+differences: ``constraint_callbacks.FD_ROWS = 0``); ``callback``, the core calling it back with central
+differences of the numpy residual (:func:`manifoldgen.constraint_callbacks.central_difference`; the planner
+setting ``compile=False``); ``compiled``, the core running the user's residual traced into a compiled expression
+(no Python call per state); ``builtin``, the
 same manifold from the built-in orientation + plane constraints (`tool-down-xarm7-builtin.toml`, the plane's
 residual compiled too) on the same query; ``builtin-callback``, that with the plane through callbacks (as before
 compiled expressions). Prints per search: solved, median CPU and wall time of a query, the median number of
@@ -67,7 +68,7 @@ parser.add_argument("--evaluations", action="store_true", help="time the core's 
                     "state: compiled, callbacks, built-in terms")
 args = parser.parse_args()
 set_threads()
-FD_ROWS, COMPILE = constraint_callbacks.FD_ROWS, native.COMPILE
+FD_ROWS = constraint_callbacks.FD_ROWS
 
 
 def count_calls(constraint):
@@ -137,11 +138,11 @@ def plan_bench():
                                                   "tool-down-xarm7.toml"))).constraint
             space = ConstrainedSpace(constraint, scene.condition, scene.checker(task.robot))
             constraint_callbacks.FD_ROWS = 0 if search == "autograd" else FD_ROWS
-            native.COMPILE = search in ("compiled", "builtin")
+            compiled = search in ("compiled", "builtin")
             core = "python" if search == "python" else "native"
             setup = time.process_time()  # the planner with its core (tracing and checking a compiled residual)
             planner = RRTConnect(space, make_sampler(sampler, space, seed), seed=seed,
-                                 settings=RRTConnectSettings(core=core))
+                                 settings=RRTConnectSettings(core=core, compile=compiled))
             setup = time.process_time() - setup
             totals = count_calls(constraint) if core == "python" else callback_totals
             totals.update(calls=0, rows=0, cpu=0.0, jacobian_calls=0, jacobian_rows=0)
@@ -153,7 +154,7 @@ def plan_bench():
             if core == "native":  # the core's own count of its calls into Python agrees with ours
                 assert result.extras.get("callbacks", {"calls": 0, "rows": 0}) == {"calls": totals["calls"],
                                                                                    "rows": totals["rows"]}
-                assert bool(result.extras.get("compiled")) == native.COMPILE, result.extras
+                assert bool(result.extras.get("compiled")) == compiled, result.extras
             if result.solved:
                 assert space.validate_path(result.path).valid
             rows[search].append((result.solved, cpu, wall, totals["calls"], totals["rows"], totals["jacobian_calls"],
@@ -163,7 +164,7 @@ def plan_bench():
                   f"{totals['calls']} Python constraint calls, {totals['rows']} configurations, "
                   f"{totals['jacobian_calls']} Jacobian calls ({totals['jacobian_rows']} configurations), "
                   f"{totals['cpu']:.2f} s CPU inside them", flush=True)
-    constraint_callbacks.FD_ROWS, native.COMPILE = FD_ROWS, COMPILE
+    constraint_callbacks.FD_ROWS = FD_ROWS
     print("\n| search | solved | median CPU (s) | median wall (s) | planner setup CPU (ms, median) | Python constraint "
           "calls (median) | configurations per call | Jacobian calls (median) | configurations per Jacobian call "
           "| CPU inside the Python constraint (median) |")

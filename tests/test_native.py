@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from manifoldgen import native
-from manifoldgen.planning import rrt_connect
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.sampling import FIRST_ROWS
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
@@ -163,9 +162,7 @@ def test_core_choice_and_python_constraints_through_callbacks(panda_task, wall):
     auto = RRTConnect(space, make_sampler("project", space, 0))
     assert auto.core is not None and not auto.core.batched and auto._extras()["core"] == "native"
     assert auto._extras()["compiled"] == ["plane"] and "compile_fallback" not in auto._extras()
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(native, "COMPILE", False)
-        callbacks = RRTConnect(space, make_sampler("project", space, 0))
+    callbacks = RRTConnect(space, make_sampler("project", space, 0), settings=RRTConnectSettings(compile=False))
     assert callbacks.core.batched and callbacks._extras()["compile_fallback"] == "plane: compilation is off"
     with pytest.raises(ManifoldgenError, match="unknown core"):
         RRTConnectSettings(core="gpu").check()
@@ -222,7 +219,7 @@ def test_the_spheres_setting_fits_the_robot_and_keeps_the_search(panda_task, wal
     assert a.extras["collision_checks"] < b.extras["collision_checks"] / 2
 
 
-def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeypatch):
+def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall):
     """The core takes the sampler's raw rows and refines and checks a row only when it first uses it: the same
     rows as the eager sampler would refine, valid paths, and far fewer Jacobians than refining every row."""
     space, planner = _planner(panda_task, wall, 0)
@@ -242,11 +239,9 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall, monkeyp
     states = densify(lazy.path, space.settings.resolution)[0]
     assert panda_task.constraint.violation(states, space.y).max() <= 1.0
     assert not space.checker.in_collision(states).any() and space.validate_path(lazy.path).valid
-    monkeypatch.setattr(rrt_connect, "LAZY_SAMPLES", False)
-    eager_space, eager = _planner(panda_task, wall, 0)
+    eager_space = twin.space  # refining every row the query drew, as a sampler that checks its rows would
     before = eager_space.counts()
-    result = eager.solve(wall.start, wall.goal, 20.0)
-    assert result.solved and result.extras["sampler"]["refined"] >= result.samples_drawn
+    eager_space.project(twin.sampler.raw(stats["generated"]), max_iters=twin.sampler.lazy_refine)
     assert 2 * lazy_jacobians < eager_space.counts()["jacobians"] - before["jacobians"]
 
 
@@ -321,5 +316,5 @@ def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_ca
     np.testing.assert_array_equal(fast.valid(ours.q), space.valid(ours.q))
     plane = ConstrainedSpace(PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]]), [0.5])
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(native, "COMPILE", False)  # the plane then reaches the core through callbacks
+        patch.setattr(native, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
         assert native.fast_space(plane) is plane

@@ -118,14 +118,13 @@ def test_motion_and_path_checks_equal_the_python_space(mixed):
             reference.valid, reference.reason, reference.segment, reference.states_checked)
 
 
-def test_core_auto_plans_the_user_task_natively_and_the_path_passes_the_python_rule(user, monkeypatch):
-    from manifoldgen.planning import RRTConnect
+def test_core_auto_plans_the_user_task_natively_and_the_path_passes_the_python_rule(user):
+    from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import make_sampler
     task, space, _ = user
     scene = get_scene(task, "open")
-    monkeypatch.setattr(native, "COMPILE", False)
-    planner = RRTConnect(space, make_sampler("project", space, 0), seed=0)
+    planner = RRTConnect(space, make_sampler("project", space, 0), seed=0, settings=RRTConnectSettings(compile=False))
     assert planner.core is not None and planner.core.batched
     before = planner.core.counts()
     result = planner.solve(scene.start, scene.goal, 30.0)

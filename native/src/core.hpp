@@ -279,8 +279,8 @@ struct PlannerSettings {
   // path is made of checked edges and is never rejected (planner.cpp, Local::dense)
   int edge_stride;
   bool dense_edges;
-  // refine >= 0: draw returns raw candidates; a candidate becomes a sample (refine projection iterations,
-  // then limits and constraint) only when the search first uses it (see planner.cpp); -1: rows come valid
+  // draw returns raw candidates; a candidate becomes a sample (refine >= 0 projection iterations, then limits
+  // and constraint) only when the search first uses it (see planner.cpp)
   int refine;
   // reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) of one of its nodes
   // (else range)
@@ -300,7 +300,7 @@ struct PlanOutput {
   long iterations = 0, samples = 0, rejected = 0, out_of_reach = 0, projections = 0, cut_edges = 0;
   long verified_states = 0;  // states of coarse edges checked for collision on candidate paths (Search::verify)
   long reattached = 0;  // cut edges whose node found another parent (the rest left the search with their subtrees)
-  long refined = 0, accepted = 0;  // raw candidates made samples when first used (refine >= 0), and of those valid
+  long refined = 0, accepted = 0;  // raw candidates made samples when first used, and of those valid
   long shortcuts = 0;  // shortcuts kept (settings.shortcut)
   double found_length = 0;  // the path's length before its shortcuts
   std::vector<long> nodes;

@@ -455,6 +455,7 @@ NB_MODULE(manifoldgen_core, m) {
              bool dense_edges, int refine, double reach, int shortcut, double precision, int max_iters, double tol,
              double damping, double max_step) {
             if (edge_stride < 1) throw std::invalid_argument("edge_stride must be at least 1 (1: every state checked at once)");
+            if (refine < 0) throw std::invalid_argument("refine must be at least 0 (iterations refining a raw row)");
             new (s) mgcore::PlannerSettings{range, resolution, step, partial, pool, pool_batch, candidates,
                                             target_batch, local, edge_stride, dense_edges, refine, reach, shortcut,
                                             precision, max_iters, tol, damping, max_step};
@@ -466,8 +467,8 @@ NB_MODULE(manifoldgen_core, m) {
           "the planner's settings). edge_stride > 1: motions are checked for collision at every edge_stride-th state "
           "and at nodes while searching, the rest on candidate paths; dense_edges: each motion passes the path check "
           "when it is made (after a pre-check of every edge_stride-th state), so no candidate path is rejected; "
-          "refine >= 0: draw gives raw candidates, each refined (refine projection iterations) and checked when the "
-          "search first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
+          "draw gives raw candidates, each refined (refine projection iterations) and checked when the search "
+          "first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
           "of its nodes (else range); shortcut > 0: that many shortcut attempts on a found path, each kept when "
           "its stretch passes the path check; precision, max_iters: a projected walk's projections (to precision x "
           "the smallest tolerance); tol: a raw row's refinement; damping, max_step: both projections'.")
@@ -511,7 +512,7 @@ NB_MODULE(manifoldgen_core, m) {
       },
       "space"_a, "start"_a, "goal"_a, "draw"_a, "time_limit"_a, "settings"_a,
       "RRT-Connect from start to goal (n,) in space with settings (PlannerSettings); draw(count) -> (count, n) rows "
-      "(valid samples, or raw candidates where settings.refine >= 0). A dict: path (K, n) (0 rows: unsolved), "
+      "(raw candidates, refined and checked as the search uses them). A dict: path (K, n) (0 rows: unsolved), "
       "iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, verified_states (coarse edges' "
       "states checked on candidate paths), reattached (cut edges whose node got another parent), refined, "
       "accepted (raw candidates made samples, and of those valid), shortcuts (kept), found_length (before them), "

@@ -3,8 +3,8 @@
 // with the edge-cut retry) and the local planners of planning/local.py. Samples come from Python
 // (the learned sampler) through the draw callback, a batch at a time.
 //
-// Lazy samples (settings.refine >= 0; where this search differs from the Python one, which takes checked
-// samples from Sampler.sample_many): the callback returns the sampler's raw candidates (Sampler.raw_many:
+// Lazy samples (where this search differs from the Python one, which takes checked samples from
+// Sampler.sample_many): the callback returns the sampler's raw candidates (Sampler.raw_many:
 // model decodes, uniform seeds), and a candidate is made a sample (the sampler's own refinement, refine
 // projection iterations, then its check: limits and constraint) only when the search first uses it: a
 // target when it is drawn, a pooled stepping stone when it is first tried. Most pooled samples are
@@ -275,8 +275,8 @@ struct Pool {
     }
     ++head;
   }
-  void add_rows(const RowMat& x, const std::vector<Tree>& trees, bool unrefined) {
-    for (int r = 0; r < x.rows(); ++r) add(x.row(r).data(), trees, unrefined);
+  void add_raw(const RowMat& x, const std::vector<Tree>& trees) {
+    for (int r = 0; r < x.rows(); ++r) add(x.row(r).data(), trees, true);
   }
   // Move the samples within radius of tree k's new nodes to its inside list; drop used samples.
   void refresh(int k, const Tree& t) {
@@ -622,7 +622,7 @@ struct Search {
         next = 0;
       }
       double* q = targets.row(next++).data();
-      if (s.refine < 0 || make_sample(q) || !time_left()) return Eigen::Map<const Vec>(q, space.n());
+      if (make_sample(q) || !time_left()) return Eigen::Map<const Vec>(q, space.n());
     }
   }
 
@@ -714,7 +714,7 @@ struct Search {
     pool.reset(new Pool(space.n(), s.reach > 0 ? std::min(s.reach, s.range) : s.range, trees));
     for (int i = 0; i < s.pool; i += s.pool_batch) {
       if (Clock::now() > deadline) break;
-      pool->add_rows(draw_many(s.pool_batch), trees, s.refine >= 0);
+      pool->add_raw(draw_many(s.pool_batch), trees);
     }
   }
 
@@ -753,7 +753,7 @@ struct Search {
     }
     pool->add(target.data(), trees);
     const int made = far(k, near, target.data());
-    if (made < 0 && !pool->reachable(k, tree)) pool->add_rows(draw_many(s.pool_batch), trees, s.refine >= 0);
+    if (made < 0 && !pool->reachable(k, tree)) pool->add_raw(draw_many(s.pool_batch), trees);
     return made;
   }
 

@@ -127,7 +127,6 @@ def unsupported(space: ConstrainedSpace) -> str | None:
 
 
 # Compiled expressions of Python parts (constraints/trace.py, native/src/expression.cpp).
-COMPILE = True  # Python parts that trace run as compiled expressions (False: callbacks, as before; for comparisons)
 COMPILE_ROWS = 8  # random configurations a compiled part is checked on before use
 COMPILE_AGREE = 1e-9  # its residual and inequalities against the numpy ones: within this x max(1, max |F|)
 
@@ -239,18 +238,18 @@ def _python_inequalities(space: ConstrainedSpace, layout: list[tuple[str, object
     return inequalities(space.robot.lower[None]).shape[1], inequalities
 
 
-def core_space(space: ConstrainedSpace, *, compile: bool | None = None):
+def core_space(space: ConstrainedSpace, *, compile: bool = True):
     """A ``manifoldgen_core.Space`` for ``space`` (see the module docstring); a one-line error when the
-    core is not built or cannot take the space. ``compile`` (default :data:`COMPILE`): Python parts that trace
-    and pass :func:`_disagreements`' check run as compiled expressions, the others through callbacks
-    (:func:`compile_report` says which did, and why not)."""
+    core is not built or cannot take the space. ``compile``: Python parts that trace and pass
+    :func:`_disagreements`' check run as compiled expressions, the others (all of them without ``compile``)
+    through callbacks (:func:`compile_report` says which did, and why not)."""
     problem = core_problem()
     if problem:
         raise ManifoldgenError(problem)
     reason = unsupported(space)
     if reason:
         raise ManifoldgenError(f"{reason}; use core='python' or 'auto'")
-    layout, refused = checked_layout(space, COMPILE if compile is None else compile)
+    layout, refused = checked_layout(space, compile)
     out = _build_core(space, layout)
     _REPORTS[space] = {"compiled": [term[0].spec()["type"] for kind, term in layout if kind == "expression"],
                        "callbacks": {part.spec()["type"]: refused.get(id(part), "compilation is off")

@@ -28,6 +28,7 @@ import numpy as np
 
 from manifoldgen.constraints import Constraint, project
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.native import fast_space
 from manifoldgen.provenance import check_made_for
 from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.space import ConstrainedSpace
@@ -261,7 +262,7 @@ class ModelSampler(Sampler):
             return rows
         uniform = self.space.robot.sample_uniform(mixed, self.rng)
         if not self.missed:  # a query refining rows by `refine` iterations only gets these projected now
-            uniform = self.space.project(uniform, max_iters=PROJECT_ITERS).q
+            uniform = fast_space(self.space).project(uniform, max_iters=PROJECT_ITERS).q
             self.stats.refined += mixed
         self.stats.mixed += mixed
         return np.concatenate([rows, uniform])[self.rng.permutation(count)]

@@ -23,19 +23,16 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 EDGE_CHECKS = ("coarse", "dense")  # see RRTConnectSettings.edges
 TARGET_BATCH = 32  # samples the core's search fetches per callback for its targets (the pool draws pool_batch)
-# lazy samples (planner.cpp): the sampler's raw rows go to the core's search, which refines and checks a row only
-# when it first uses it
-LAZY_SAMPLES = True
 
 
 @dataclass
 class RRTConnectSettings(PlannerSettings):
     """The shared settings (range, resolution, step, partial, pool, candidates) and ``core``: where the
     search runs: ``auto`` (the compiled core when ``manifoldgen_core`` is usable and can take the space, a
-    Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace, through
-    callbacks (``extras['compile_fallback']``: why), else Python; the result's ``extras['core']`` says which,
-    ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an error when the core cannot
-    run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
+    Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace or
+    ``compile`` is off, through callbacks (``extras['compile_fallback']``: why), else Python; the result's
+    ``extras['core']`` says which, ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an
+    error when the core cannot run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
     says which and why), the final dense check of a path stays exact; ``reach``: a pooled sample is a
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
@@ -49,9 +46,11 @@ class RRTConnectSettings(PlannerSettings):
     planning-resolution state (every test), so a candidate path is never rejected and needs no check of its own
     (it pays where the trees are about the path and a path check of a motion costs little more than its planning
     check: talos reach, docs/benchmarks.md "Dense edges"). The Python search checks every state at once whatever
-    this setting (it is the core's test oracle at ``coarse:1``)."""
+    this setting (it is the core's test oracle at ``coarse:1``). ``compile``: a Python constraint's parts run
+    in the core as compiled expressions where they trace (off: through callbacks, to compare the two)."""
 
     core: str = "auto"
+    compile: bool = True
     spheres: bool = False
     reach: float = 0.5
     edges: str = "coarse:2"
@@ -156,12 +155,12 @@ class RRTConnect(Planner):
 class CoreRRTConnect(RRTConnect):
     """RRT-Connect in the compiled core (``manifoldgen_core.rrt_connect``, :meth:`_solve`): the same search as
     :class:`RRTConnect` on the same validity rule, with the differences the module docstring names (lazy samples,
-    the pool's range bookkeeping, ``edges``); the tests hold both to the same verdicts and, at ``coarse:1`` with
-    eager samples, the same paths. Made by :class:`RRTConnect` when the core takes the space."""
+    the pool's range bookkeeping, ``edges``); the tests hold both to the same verdicts. Made by
+    :class:`RRTConnect` when the core takes the space."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.core = native.core_space(self.space)
+        self.core = native.core_space(self.space, compile=self.settings.compile)
         self.compiled = native.compile_report(self.space)  # Python parts compiled in the core, and why not the others
         self.sphere_fallback: dict[str, str] = {}  # robot geometry -> why it has no spheres (coal checks it)
         if self.settings.spheres and self.space.checker is not None:
@@ -183,24 +182,17 @@ class CoreRRTConnect(RRTConnect):
 
     def _solve(self, start, goal, deadline):
         """The direct connection, then the search, in the core until ``deadline`` (``time.perf_counter`` seconds).
-        With :data:`LAZY_SAMPLES` the sampler's raw rows go to the core, which refines (``sampler.lazy_refine``
-        iterations) and checks each when it first uses it; the sampler's own checks and refinement run in the core
-        meanwhile (collisions lazily, in the search). Books iterations, samples, rejections, projections, the
-        sampler's refined and accepted rows and the core's operation counts; the path (K, n) that passed the exact
-        dense check, or None."""
+        The sampler's raw rows (:meth:`~manifoldgen.sampling.Sampler.raw_many`) go to the core, which refines
+        (``sampler.lazy_refine`` iterations) and checks each when it first uses it (lazy samples). Books
+        iterations, samples, rejections, projections, the sampler's refined and accepted rows and the core's
+        operation counts; the path (K, n) that passed the exact dense check, or None."""
         space, sampler, core = self.space, self.sampler, self.core
-        lazy = LAZY_SAMPLES and hasattr(sampler, "raw_many")
         before = core.counts()
-        swapped = sampler.space is space
-        if swapped:
-            sampler.space = native.NativeSpace(space, core, collision=False)
         try:
             out = native.core_module().rrt_connect(
-                core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float), _core_draw(sampler, lazy),
-                max(deadline - time.perf_counter(), 0.0), core_settings(self, int(sampler.lazy_refine) if lazy else -1))
+                core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float), _core_draw(sampler),
+                max(deadline - time.perf_counter(), 0.0), core_settings(self, int(sampler.lazy_refine)))
         finally:
-            if swapped:
-                sampler.space = space
             native.book(space, before, core.counts())
         self.iterations += out["iterations"]
         self.samples += out["samples"]
@@ -212,9 +204,8 @@ class CoreRRTConnect(RRTConnect):
         self.verified_states = out["verified_states"]
         self.reattached = out["reattached"]
         self.shortcuts, self.found_length = out["shortcuts"], out["found_length"]
-        if lazy:
-            sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
-            sampler.stats.accepted += out["accepted"]
+        sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
+        sampler.stats.accepted += out["accepted"]
         return out["path"] if len(out["path"]) else None
 
     def _shorten(self, path, deadline):
@@ -243,8 +234,8 @@ class CoreRRTConnect(RRTConnect):
 def core_settings(planner: RRTConnect, refine: int):
     """The core's ``PlannerSettings`` for ``planner``: every field from its settings dataclass, its local planner
     (its projections' precision and iterations) and stone radius, :func:`~manifoldgen.constraints.project`'s
-    tolerance, damping and step, and ``refine`` (projection iterations of a raw row when the search first uses it;
-    -1: the sampler's rows come checked). The one place the two languages' settings cross."""
+    tolerance, damping and step, and ``refine`` (projection iterations of a raw row when the search first uses
+    it). The one place the two languages' settings cross."""
     s = planner.settings
     stride, dense = s.edge_checks()
     pool, pool_batch = planner.pool_rows()
@@ -256,15 +247,12 @@ def core_settings(planner: RRTConnect, refine: int):
         damping=projection.DAMPING, max_step=projection.MAX_STEP)
 
 
-def _core_draw(sampler, raw: bool):
-    """The core search's callback: ``count`` -> (count, n) rows of ``sampler``, raw
-    (:meth:`~manifoldgen.sampling.Sampler.raw_many`, lazy samples) or checked
-    (:meth:`~manifoldgen.sampling.Sampler.sample_many`); a sampler's error ends the search."""
-    take = sampler.raw_many if raw else sampler.sample_many
-
+def _core_draw(sampler):
+    """The core search's callback: ``count`` -> (count, n) raw rows of ``sampler``
+    (:meth:`~manifoldgen.sampling.Sampler.raw_many`); a sampler's error ends the search."""
     def draw(count: int) -> np.ndarray:
         try:
-            return take(count)
+            return sampler.raw_many(count)
         except ManifoldgenError as exc:
             raise SamplerFailed(str(exc)) from exc
     return draw
