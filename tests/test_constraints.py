@@ -207,10 +207,10 @@ def _core_and_checker_agree(c, q, y, built_in: bool):
     :meth:`Constraint.core_terms`, or compiled from its trace) to the same residual and Jacobian; the outside
     checker (examples/recheck.py, pinocchio alone) knows every built-in type, so adding one means its Python
     file, its core term or a residual that traces, and its checker entry."""
-    from manifoldgen import native
+    from manifoldgen import core_extension, native
     from manifoldgen.space import ConstrainedSpace
 
-    if native.core_problem():
+    if core_extension.core_problem():
         return
     space = ConstrainedSpace(c, y)
     core = native.core_space(space)

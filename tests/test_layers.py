@@ -18,7 +18,7 @@ LAYERS = [
     ("geometry and kinematics", ["robot", "collision", "spheres", "shapes"]),
     ("constraints", ["constraints", "provenance"]),
     ("space", ["space"]),
-    ("compiled core", ["constraint_callbacks", "native", "targets"]),
+    ("compiled core", ["constraint_callbacks", "core_extension", "core_terms", "native", "targets"]),
     ("learning", ["coverage", "metrics", "dataset", "sampling", "training"]),
     ("planning", ["planning"]),
     ("problem", ["tasks", "scene"]),

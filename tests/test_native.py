@@ -5,7 +5,7 @@ Python constraints, and the sphere-model hook."""
 import numpy as np
 import pytest
 
-from manifoldgen import native
+from manifoldgen import core_extension, core_terms, native
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.sampling import FIRST_ROWS
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
@@ -157,8 +157,8 @@ def test_core_choice_and_python_constraints_through_callbacks(panda_task, wall):
     from manifoldgen.specs import make_sampler
     plane = PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]])
     space = ConstrainedSpace(plane, [0.5])
-    assert native.unsupported(space) is None  # a Python constraint runs in the core: compiled, else callbacks
-    assert native.constraint_terms(space)[0]["type"] == "expression"  # the C++ OMPL baseline gets it compiled
+    assert core_extension.unsupported(space) is None  # a Python constraint runs in the core: compiled, else callbacks
+    assert core_terms.constraint_terms(space)[0]["type"] == "expression"  # the C++ OMPL baseline gets it compiled
     auto = RRTConnect(space, make_sampler("project", space, 0))
     assert auto.core is not None and not auto.core.batched and auto._extras()["core"] == "native"
     assert auto._extras()["compiled"] == ["plane"] and "compile_fallback" not in auto._extras()
@@ -316,5 +316,5 @@ def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_ca
     np.testing.assert_array_equal(fast.valid(ours.q), space.valid(ours.q))
     plane = ConstrainedSpace(PlaneConstraint(panda_task.robot, "panda_hand", normals=(0, 0, 1), values=[[0.5]]), [0.5])
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(native, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
+        patch.setattr(core_terms, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
         assert native.fast_space(plane) is plane

@@ -7,7 +7,7 @@ state (feet, CoM, limits, collisions)."""
 import numpy as np
 import pytest
 
-from manifoldgen import native
+from manifoldgen import core_extension, native
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
 from manifoldgen.stability import path_stability
 
@@ -52,7 +52,7 @@ def _codes(space, q, limit):
 @pytest.mark.slow
 def test_whole_body_tasks_are_built_in(problem):
     task, _, space, core = problem
-    assert native.unsupported(space) is None
+    assert core_extension.unsupported(space) is None
     assert (core.n, core.m) == (space.n, task.constraint.m) and core.g > 0
 
 
@@ -79,7 +79,7 @@ def test_floating_base_maps_to_the_free_flyer_as_the_python_robot_does(problem):
     robot = task.robot
     if not robot.floating_base:
         pytest.skip("fixed base")
-    assert native.active_coordinates(robot)[0] == (0, 0, 7)  # pinocchio's free flyer: position and quaternion
+    assert core_extension.active_coordinates(robot)[0] == (0, 0, 7)  # pinocchio's free flyer: position and quaternion
     rng = np.random.default_rng(1)
     q = np.clip(scene.start + 0.2 * rng.standard_normal((20, space.n)), robot.lower, robot.upper)
     # the Jacobian's base columns against central differences of the core's own residual (away from log3's pi)
@@ -174,12 +174,12 @@ def test_core_refuses_a_misplaced_free_flyer_and_a_degenerate_polygon(problem):
         core.add_com_polygon(np.zeros((2, 2)), np.zeros(2))
     if not task.robot.floating_base:
         return
-    active = native.active_coordinates(task.robot)
+    active = core_extension.active_coordinates(task.robot)
     with pytest.raises(RuntimeError, match="free flyer"):
         import tempfile
         from pathlib import Path
         with tempfile.TemporaryDirectory() as folder:
-            model, geometry = native.write_models(space, Path(folder))
+            model, geometry = core_extension.write_models(space, Path(folder))
             manifoldgen_core.Space(str(model), str(geometry), task.robot.reference, active[1:] + active[:1],
                                    task.robot.lower, task.robot.upper, 0.05, 0.005)
 

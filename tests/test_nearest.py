@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manifoldgen.native import core_module
+from manifoldgen.core_extension import core_module
 
 core = core_module()
 pytestmark = pytest.mark.skipif(core is None, reason="the compiled core is not built")

@@ -4,7 +4,7 @@ paths pass our dense check. Tests that need the built program skip, saying why, 
 import numpy as np
 import pytest
 
-from manifoldgen import native
+from manifoldgen import core_terms
 from manifoldgen.constraints import PlaneConstraint
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.ompl_settings import OmplSettings
@@ -116,7 +116,7 @@ def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
     with pytest.raises(ManifoldgenError, match="baseline failed: ompl_native: cannot read problem file; rebuild"):
         ompl_native.NativeOmplPlanner(space).solve(scene.start, scene.goal, 1.0)
     plane = PlaneConstraint(task.robot, "panda_hand_tcp", [[0, 0, 1]], [[0.3], [0.5]])
-    monkeypatch.setattr(native, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
+    monkeypatch.setattr(core_terms, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
     with pytest.raises(ManifoldgenError, match="cannot take this task .the compiled core has no .plane. constraint "
                                                "term .* does not compile .its residual does not trace: a test"):
         ompl_native.NativeOmplPlanner(ConstrainedSpace(plane, [0.4]))

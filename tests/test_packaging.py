@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 from typer.testing import CliRunner
 
-from manifoldgen import native
+from manifoldgen import core_extension
 from manifoldgen.cli import app
 from manifoldgen.errors import ManifoldgenError, require
 from manifoldgen.models import pretrained_model_dir
@@ -83,7 +83,7 @@ def test_missing_zuko_is_one_line_through_the_cli(monkeypatch, tmp_path):
 def test_the_core_records_the_pinocchio_it_was_built_against():
     core = pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
     assert core.PINOCCHIO_VERSION == pin.__version__
-    assert native.core_problem() == "" and native.core_module() is core
+    assert core_extension.core_problem() == "" and core_extension.core_module() is core
 
 
 @pytest.mark.skipif(shutil.which("readelf") is None, reason="readelf (binutils) is not installed")
@@ -98,10 +98,10 @@ def test_the_core_has_no_build_path_in_its_runpath():
 def test_a_core_built_against_another_pinocchio_is_refused(monkeypatch, tmp_path):
     core = pytest.importorskip("manifoldgen_core", reason="the compiled core is not built (scripts/setup.sh builds it)")
     monkeypatch.setattr(core, "PINOCCHIO_VERSION", "0.0.1")
-    problem = native.core_problem()
+    problem = core_extension.core_problem()
     assert problem.startswith(f"the compiled core was built against pinocchio 0.0.1 but pinocchio {pin.__version__} "
                               "is installed") and "--no-build-isolation" in problem and "\n" not in problem
-    assert native.core_module() is None
+    assert core_extension.core_module() is None
     auto = runner.invoke(app, ["plan", "pose", "--scene", "wall", "--sampler", CVAE, "-o", str(tmp_path / "a.npz")])
     assert auto.exit_code == 0 and f"Python search ({problem})" in auto.output, auto.output
     asked = runner.invoke(app, ["plan", "pose", "--scene", "wall", "--sampler", CVAE, "--set", "core=native",
@@ -111,5 +111,5 @@ def test_a_core_built_against_another_pinocchio_is_refused(monkeypatch, tmp_path
 
 def test_a_missing_core_says_how_to_install_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "manifoldgen_core", None)  # import manifoldgen_core now raises ImportError
-    assert native.core_problem() == f"the compiled core manifoldgen_core is not installed; {native.BUILD_HINT}"
-    assert native.core_module() is None
+    assert core_extension.core_problem() == f"the compiled core manifoldgen_core is not installed; {core_extension.BUILD_HINT}"
+    assert core_extension.core_module() is None

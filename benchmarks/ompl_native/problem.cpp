@@ -5,7 +5,7 @@
 // exact collision pairs manifoldgen's CollisionChecker checks: SRDF-pruned or sampled matrix, scene
 // pairs) come from pinocchio's own binary serialization, written by the Python side from the very
 // objects it plans with; the JSON gives the rest (active joints, locked reference, limits, the
-// constraint terms of manifoldgen.native.constraint_terms, query, settings).
+// constraint terms of manifoldgen.core_terms.constraint_terms, query, settings).
 #include "problem.hpp"
 
 #include "core.hpp"
@@ -57,7 +57,7 @@ Eigen::Vector3d vector3_of(const json::value& v) {
   return r;
 }
 
-// A compiled Python constraint (manifoldgen.native.constraint_terms: code [[Op value, a, b]], constants, frames,
+// A compiled Python constraint (manifoldgen.core_terms.constraint_terms: code [[Op value, a, b]], constants, frames,
 // outputs), as the core's binding builds it.
 mgcore::Expression expression_of(const json::object& to, int n) {
   std::vector<mgcore::Instruction> code;

@@ -47,7 +47,8 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen import native
-from manifoldgen.native import active_coordinates, constraint_terms, unsupported, write_models
+from manifoldgen.core_extension import active_coordinates, core_module, unsupported, write_models
+from manifoldgen.core_terms import constraint_terms
 from manifoldgen.ompl_settings import OmplSettings
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.space import REASONS, ConstrainedSpace
@@ -68,7 +69,7 @@ def native_binary() -> Path:
 
 
 def _terms(space: ConstrainedSpace) -> list[dict]:
-    """The space's constraint as the C++ terms (:func:`manifoldgen.native.constraint_terms`, the compiled
+    """The space's constraint as the C++ terms (:func:`manifoldgen.core_terms.constraint_terms`, the compiled
     core's: built-in terms and compiled Python constraints); a Python constraint that does not compile is
     refused."""
     try:
@@ -159,7 +160,7 @@ class NativeOmplPlanner:
         self.settings = OmplSettings() if settings is None else settings
         self.settings.check()
         self.space, self.ompl_space, self.resolution, self.seed = space, ompl_space, resolution, seed
-        self.core = native.core_space(space) if native.core_module() is not None else None  # the dense check
+        self.core = native.core_space(space) if core_module() is not None else None  # the dense check
         self.spheres = spheres and space.checker is not None
         self.dense_sphere_checks = 0  # sphere tests of the current solve's dense checks (spheres only)
         self.dense_sweep_checks = 0  # certified sweep tests of those dense checks (spheres only)

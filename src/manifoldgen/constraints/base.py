@@ -156,7 +156,7 @@ class Constraint(ABC):
 
     def core_terms(self, y: np.ndarray) -> list[dict] | None:
         """This constraint at its condition ``y (k,)`` as the compiled core's terms, in residual order
-        (JSON-ready dicts: ``type`` and its fields, see :func:`manifoldgen.native.constraint_terms`), or None where
+        (JSON-ready dicts: ``type`` and its fields, see :func:`manifoldgen.core_terms.constraint_terms`), or None where
         the core has no term of its own for it (a user's constraint: its residual is compiled from its trace, or
         called back)."""
         return None

@@ -124,7 +124,7 @@ def decoder_row_cost(decoder: dict, weights: dict) -> int:
 def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: dict):
     """``manifoldgen_core.Decoder`` for the sampling network ``decoder`` (a model.json ``decoder`` entry) with
     ``weights`` by name (``NET.2i.weight (out, in)``, ``NET.2i.bias (out,)``), or None without the core."""
-    from manifoldgen.native import core_module
+    from manifoldgen.core_extension import core_module
 
     core = core_module()
     if core is None:

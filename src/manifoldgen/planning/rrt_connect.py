@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manifoldgen import native
+from manifoldgen import core_extension, native
 from manifoldgen.constraints import projection
 from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.base import Planner, PlannerSettings, Tree
@@ -60,8 +60,8 @@ class RRTConnectSettings(PlannerSettings):
         self.edge_checks()
         if not self.reach > 0:
             raise ManifoldgenError(f"reach must be a positive distance (rad), got {self.reach}; e.g. reach=0.5")
-        if self.core not in native.CORES:
-            raise ManifoldgenError(f"unknown core '{self.core}'; known: {', '.join(native.CORES)}")
+        if self.core not in core_extension.CORES:
+            raise ManifoldgenError(f"unknown core '{self.core}'; known: {', '.join(core_extension.CORES)}")
 
     def edge_checks(self) -> tuple[int, bool]:
         """``edges`` as (stride K >= 1, dense), or a one-line error."""
@@ -189,7 +189,7 @@ class CoreRRTConnect(RRTConnect):
         space, sampler, core = self.space, self.sampler, self.core
         before = core.counts()
         try:
-            out = native.core_module().rrt_connect(
+            out = core_extension.core_module().rrt_connect(
                 core, np.ascontiguousarray(start, float), np.ascontiguousarray(goal, float), _core_draw(sampler),
                 max(deadline - time.perf_counter(), 0.0), core_settings(self, int(sampler.lazy_refine)))
         finally:
@@ -239,7 +239,7 @@ def core_settings(planner: RRTConnect, refine: int):
     s = planner.settings
     stride, dense = s.edge_checks()
     pool, pool_batch = planner.pool_rows()
-    return native.core_module().PlannerSettings(
+    return core_extension.core_module().PlannerSettings(
         range=s.range, resolution=s.resolution, step=s.step, partial=s.partial, pool=pool, pool_batch=pool_batch,
         candidates=s.candidates, target_batch=TARGET_BATCH, local=planner.local.name, edge_stride=stride,
         dense_edges=dense, refine=refine, reach=planner._stone_radius(), shortcut=s.shortcut,
@@ -265,8 +265,8 @@ def _core_refusal(space, settings) -> str | None:
     wanted = getattr(settings, "core", "python") if settings is not None else RRTConnectSettings.core
     if wanted == "python":
         return ""
-    problem = native.core_problem()
-    reason = problem or native.unsupported(space)
+    problem = core_extension.core_problem()
+    reason = problem or core_extension.unsupported(space)
     if reason and wanted == "native":
         raise ManifoldgenError(problem or f"{reason}; use core='python' or 'auto'")
     return reason or None
