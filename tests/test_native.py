@@ -318,3 +318,20 @@ def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_ca
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(core_terms, "compiled_part", lambda part, y, robot: "its residual does not trace: a test")
         assert native.fast_space(plane) is plane
+
+
+def test_a_built_in_term_with_a_bad_type_or_field_is_refused_in_one_line(panda_task, wall):
+    """The core builds built-in terms from one table (native/src/term_table.hpp): an unknown type, a missing field
+    and a field of the wrong size are refused naming them, and a good term adds its rows."""
+    space, _ = _planner(panda_task, wall, 0)
+    core = core_extension.empty_core(space, geometry=False)
+    pose = core_terms.constraint_terms(space)[0]
+    with pytest.raises(ValueError, match="unknown constraint term type 'plane' .built in: pose, chain"):
+        core.add_term("plane", pose)
+    with pytest.raises(ValueError, match="constraint term lacks its field 'y'"):
+        core.add_term("pose", {key: value for key, value in pose.items() if key != "y"})
+    with pytest.raises(ValueError, match="field 'rotation' needs 9 numbers"):
+        core.add_term("pose", {**pose, "rotation": [1.0, 0.0, 0.0]})
+    assert core.m == 0
+    core.add_term("pose", pose)
+    assert core.m == len(pose["position_axes"]) + len(pose["orientation_axes"])

@@ -171,7 +171,7 @@ def test_core_refuses_a_misplaced_free_flyer_and_a_degenerate_polygon(problem):
     import manifoldgen_core
     task, scene, space, core = problem
     with pytest.raises(RuntimeError, match="H >= 3"):
-        core.add_com_polygon(np.zeros((2, 2)), np.zeros(2))
+        core.add_term("com_polygon", {"normals": [[0.0, 0.0], [0.0, 0.0]], "bounds": [0.0, 0.0]})
     if not task.robot.floating_base:
         return
     active = core_extension.active_coordinates(task.robot)

@@ -9,6 +9,7 @@
 #include "problem.hpp"
 
 #include "core.hpp"
+#include "term_table.hpp"
 
 #include <boost/json.hpp>
 
@@ -29,14 +30,6 @@ Eigen::VectorXd vector_of(const json::value& v) {
   return out;
 }
 
-Eigen::Matrix3d matrix_of(const json::value& v) {  // row-major 3x3
-  const Eigen::VectorXd r = vector_of(v);
-  Eigen::Matrix3d out;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) out(i, j) = r[3 * i + j];
-  return out;
-}
-
 std::vector<int> ints_of(const json::value& v) {
   std::vector<int> out;
   for (const auto& x : v.as_array()) out.push_back(static_cast<int>(x.to_number<long>()));
@@ -49,12 +42,6 @@ mgcore::RowMat rows_of(const json::value& v) {  // a list of equal-length rows
   mgcore::RowMat out(static_cast<Eigen::Index>(a.size()), cols);
   for (std::size_t i = 0; i < a.size(); ++i) out.row(i) = vector_of(a[i]).transpose();
   return out;
-}
-
-Eigen::Vector3d vector3_of(const json::value& v) {
-  const Eigen::VectorXd r = vector_of(v);
-  if (r.size() != 3) throw std::runtime_error("expected 3 numbers");
-  return r;
 }
 
 // A compiled Python constraint (manifoldgen.core_terms.constraint_terms: code [[Op value, a, b]], constants, frames,
@@ -71,23 +58,20 @@ mgcore::Expression expression_of(const json::object& to, int n) {
                             n);
 }
 
-// The whole-body terms (orientation, linear; inequalities com_polygon, hemisphere); false: not one of them.
-bool add_whole_body(mgcore::Space& space, const std::string& kind, const json::object& to) {
-  if (kind == "orientation") {
-    const Eigen::Matrix<double, 2, 3> basis = rows_of(to.at("basis"));
-    space.add_orientation(static_cast<int>(to.at("frame_id").to_number<long>()), vector3_of(to.at("axis")), basis);
-  } else if (kind == "linear") {
-    space.add_linear(rows_of(to.at("A")), vector_of(to.at("y")));
-  } else if (kind == "com_polygon") {
-    space.add_com_polygon(rows_of(to.at("normals")), vector_of(to.at("bounds")));
-  } else if (kind == "hemisphere") {
-    space.add_hemisphere(static_cast<int>(to.at("frame_id").to_number<long>()), vector3_of(to.at("axis")),
-                         vector3_of(to.at("direction")));
-  } else {
-    return false;
+// A constraint term's fields from its JSON object, as mgcore::add_term reads them (term_table.hpp).
+struct JsonFields {
+  const json::object& fields;
+  const json::value& at(const char* name) const {
+    if (!fields.contains(name))
+      throw std::runtime_error(std::string("constraint term lacks its field '") + name + "'");
+    return fields.at(name);
   }
-  return true;
-}
+  int integer(const char* name) const { return static_cast<int>(at(name).to_number<long>()); }
+  double number(const char* name) const { return at(name).to_number<double>(); }
+  std::vector<int> ints(const char* name) const { return ints_of(at(name)); }
+  Eigen::VectorXd vector(const char* name) const { return vector_of(at(name)); }
+  mgcore::RowMat rows(const char* name) const { return rows_of(at(name)); }
+};
 
 }  // namespace
 
@@ -131,28 +115,12 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
   for (const auto& t : c.at("terms").as_array()) {
     const auto& to = t.as_object();
     const std::string kind(to.at("type").as_string());
-    if (kind == "pose") {
-      p.space->add_pose(static_cast<int>(to.at("frame_id").to_number<long>()), matrix_of(to.at("rotation")),
-                        ints_of(to.at("position_axes")), ints_of(to.at("orientation_axes")), vector_of(to.at("y")));
-    } else if (kind == "chain") {
-      const Eigen::VectorXd offset = vector_of(to.at("offset"));
-      p.space->add_chain(static_cast<int>(to.at("frame_a_id").to_number<long>()),
-                         static_cast<int>(to.at("frame_b_id").to_number<long>()), matrix_of(to.at("rotation")),
-                         Eigen::Vector3d(offset[0], offset[1], offset[2]));
-    } else if (kind == "sphere") {
-      const Eigen::VectorXd center = vector_of(to.at("center"));
-      p.space->add_sphere(static_cast<int>(to.at("frame_id").to_number<long>()),
-                          Eigen::Vector3d(center[0], center[1], center[2]), to.at("radius").to_number<double>());
-    } else if (kind == "expression" || kind == "expression_inequality") {
-      mgcore::Expression expression = expression_of(to, p.space->n());
-      if (kind == "expression") {
-        p.space->add_expression(std::move(expression));
-      } else {
-        p.space->add_expression_inequality(std::move(expression));
-      }
-    } else if (!add_whole_body(*p.space, kind, to)) {
-      throw std::runtime_error("unknown constraint term type '" + kind + "' (known: pose, chain, sphere, orientation, "
-                               "linear, com_polygon, hemisphere, expression, expression_inequality)");
+    if (kind == "expression") {
+      p.space->add_expression(expression_of(to, p.space->n()));
+    } else if (kind == "expression_inequality") {
+      p.space->add_expression_inequality(expression_of(to, p.space->n()));
+    } else {
+      mgcore::add_term(*p.space, kind, JsonFields{to});
     }
   }
   p.tolerance = vector_of(c.at("tolerance"));

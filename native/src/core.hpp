@@ -265,8 +265,8 @@ class Space {
   PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment, bool certify);
 };
 
-// RRT-Connect settings, filled whole from Python (manifoldgen.native.core_settings: the planner's settings
-// dataclass is their one source; the binding's constructor takes every field, and there are no defaults here).
+// RRT-Connect settings, filled whole from Python (manifoldgen.planning.rrt_connect.core_settings: the planner's
+// settings dataclass is their one source; the binding's constructor takes every field, and there are no defaults here).
 struct PlannerSettings {
   double range, resolution, step;
   bool partial;

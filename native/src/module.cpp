@@ -1,6 +1,7 @@
 // Python bindings of the compiled core (nanobind): batch-first numpy arrays in and out.
-// manifoldgen/native.py builds a Space from a ConstrainedSpace; keep this API additive.
+// manifoldgen/native.py builds a Space from a ConstrainedSpace (its constraint: manifoldgen/core_terms.py).
 #include "core.hpp"
+#include "term_table.hpp"
 
 #include <pinocchio/config.hpp>
 
@@ -38,6 +39,26 @@ nb::ndarray<nb::numpy, typename M::Scalar> array_of(const M& a) {
 }
 
 Vec vec_of(const In1& a) { return Eigen::Map<const Vec>(a.data(), static_cast<long>(a.shape(0))); }
+
+// A constraint term's fields from a Python dict, as mgcore::add_term reads them (term_table.hpp).
+struct DictFields {
+  const nb::dict& fields;
+  nb::handle at(const char* name) const {
+    if (!fields.contains(name))
+      throw std::invalid_argument(std::string("constraint term lacks its field '") + name + "'");
+    return fields[name];
+  }
+  int integer(const char* name) const { return nb::cast<int>(at(name)); }
+  double number(const char* name) const { return nb::cast<double>(at(name)); }
+  std::vector<int> ints(const char* name) const { return nb::cast<std::vector<int>>(at(name)); }
+  Vec vector(const char* name) const {
+    const auto v = nb::cast<std::vector<double>>(at(name));
+    return Eigen::Map<const Vec>(v.data(), static_cast<long>(v.size()));
+  }
+  RowMat rows(const char* name) const {
+    return mgcore::rows_of(nb::cast<std::vector<std::vector<double>>>(at(name)), name);
+  }
+};
 
 void check_cols(const In2& q, const Space& s) {
   if (static_cast<int>(q.shape(1)) != s.n())
@@ -92,7 +113,7 @@ void add_callback(Space& s, int rows, nb::callable fn) {
   });
 }
 
-// A compiled expression from Python's lowering (manifoldgen/native.py): code as (Op, a, b) rows, constants,
+// A compiled expression from Python's lowering (manifoldgen/core_terms.py): code as (Op, a, b) rows, constants,
 // frame ids by slot, output registers.
 mgcore::Expression expression_of(const Space& s, const std::vector<std::tuple<mgcore::Op, int, int>>& code,
                                  const std::vector<double>& constants, const std::vector<int>& frames,
@@ -118,8 +139,8 @@ void set_inequalities(Space& s, int p, nb::callable fn) {
 
 NB_MODULE(manifoldgen_core, m) {
   m.doc() = "manifoldgen's compiled planning core (pinocchio + coal): constrained space and RRT-Connect";
-  // the pinocchio whose headers this module was compiled with: manifoldgen.native refuses the module when the
-  // installed pinocchio differs (its libraries would not match the inline code compiled in here)
+  // the pinocchio whose headers this module was compiled with: manifoldgen.core_extension refuses the module when
+  // the installed pinocchio differs (its libraries would not match the inline code compiled in here)
   m.attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
 
   // the operations of compiled expressions (core.hpp), the one definition of their codes
@@ -166,67 +187,13 @@ NB_MODULE(manifoldgen_core, m) {
           "A constrained space from pinocchio binary serializations of the model and the collision model; "
           "active: (idx_q, idx_v, nq) per joint (nq 7: the free flyer, first, six coordinates x y z yaw pitch roll).")
       .def(
-          "add_pose",
-          [](Space& s, int frame, const In2& rotation, const std::vector<int>& position_axes,
-             const std::vector<int>& orientation_axes, const In1& y) {
-            Eigen::Matrix3d R;
-            for (int i = 0; i < 3; ++i)
-              for (int j = 0; j < 3; ++j) R(i, j) = rotation(i, j);
-            s.add_pose(frame, R, position_axes, orientation_axes, vec_of(y));
+          "add_term",
+          [](Space& s, const std::string& kind, const nb::dict& fields) {
+            mgcore::add_term(s, kind, DictFields{fields});
           },
-          "frame"_a, "rotation"_a, "position_axes"_a, "orientation_axes"_a, "y"_a,
-          "F = [p[position_axes] - y; log3(rotation^T R)[orientation_axes]] of frame.")
-      .def(
-          "add_chain",
-          [](Space& s, int frame_a, int frame_b, const In2& rotation, const In1& offset) {
-            Eigen::Matrix3d R;
-            for (int i = 0; i < 3; ++i)
-              for (int j = 0; j < 3; ++j) R(i, j) = rotation(i, j);
-            s.add_chain(frame_a, frame_b, R, Eigen::Vector3d(offset(0), offset(1), offset(2)));
-          },
-          "frame_a"_a, "frame_b"_a, "rotation"_a, "offset"_a,
-          "F = [Ra^T (pb - pa) - offset; log3(rotation^T Ra^T Rb)].")
-      .def(
-          "add_sphere",
-          [](Space& s, int frame, const In1& center, double radius) {
-            s.add_sphere(frame, Eigen::Vector3d(center(0), center(1), center(2)), radius);
-          },
-          "frame"_a, "center"_a, "radius"_a, "F = |p - center| - radius of frame.")
-      // whole-body terms: orientation, linear, and the inequalities (CoM polygon, hemisphere)
-      .def(
-          "add_orientation",
-          [](Space& s, int frame, const In1& axis, const In2& basis) {
-            if (axis.shape(0) != 3 || basis.shape(0) != 2 || basis.shape(1) != 3)
-              throw nb::value_error("orientation needs axis (3,) and basis (2, 3)");
-            Eigen::Matrix<double, 2, 3> B;
-            for (int i = 0; i < 2; ++i)
-              for (int j = 0; j < 3; ++j) B(i, j) = basis(i, j);
-            s.add_orientation(frame, Eigen::Vector3d(axis(0), axis(1), axis(2)), B);
-          },
-          "frame"_a, "axis"_a, "basis"_a, "F = basis (2, 3) . R axis of frame.")
-      .def(
-          "add_linear",
-          [](Space& s, const In2& A, const In1& y) {
-            s.add_linear(Eigen::Map<const RowMat>(A.data(), static_cast<long>(A.shape(0)), static_cast<long>(A.shape(1))),
-                         vec_of(y));
-          },
-          "A"_a, "y"_a, "F = A (r, n) q - y.")
-      .def(
-          "add_com_polygon",
-          [](Space& s, const In2& normals, const In1& bounds) {
-            if (normals.shape(1) != 2) throw nb::value_error("CoM polygon normals must be (H, 2)");
-            s.add_com_polygon(Eigen::Map<const RowMat>(normals.data(), static_cast<long>(normals.shape(0)), 2),
-                              vec_of(bounds));
-          },
-          "normals"_a, "bounds"_a, "Inequalities G = normals (H, 2) . com[x, y] - bounds (H,) <= 0.")
-      .def(
-          "add_hemisphere",
-          [](Space& s, int frame, const In1& axis, const In1& direction) {
-            if (axis.shape(0) != 3 || direction.shape(0) != 3) throw nb::value_error("axis and direction must be (3,)");
-            s.add_hemisphere(frame, Eigen::Vector3d(axis(0), axis(1), axis(2)),
-                             Eigen::Vector3d(direction(0), direction(1), direction(2)));
-          },
-          "frame"_a, "axis"_a, "direction"_a, "Inequality G = -direction . R axis of frame <= 0.")
+          "kind"_a, "fields"_a,
+          "Add the built-in constraint term kind (pose, chain, sphere, orientation, linear; inequalities com_polygon, "
+          "hemisphere) with its fields as manifoldgen.core_terms.constraint_terms writes them (term_table.hpp).")
       .def_prop_ro("g", &Space::g, "built-in inequality rows (CoM polygon, hemisphere)")
       .def(
           "inequality",
@@ -463,7 +430,7 @@ NB_MODULE(manifoldgen_core, m) {
           nb::kw_only(), "range"_a, "resolution"_a, "step"_a, "partial"_a, "pool"_a, "pool_batch"_a, "candidates"_a,
           "target_batch"_a, "local"_a, "edge_stride"_a, "dense_edges"_a, "refine"_a, "reach"_a, "shortcut"_a,
           "precision"_a, "max_iters"_a, "tol"_a, "damping"_a, "max_step"_a,
-          "RRT-Connect's settings, every field given (no defaults: manifoldgen.native.core_settings fills them from "
+          "RRT-Connect's settings, every field given (no defaults: manifoldgen.planning.rrt_connect.core_settings fills them from "
           "the planner's settings). edge_stride > 1: motions are checked for collision at every edge_stride-th state "
           "and at nodes while searching, the rest on candidate paths; dense_edges: each motion passes the path check "
           "when it is made (after a pre-check of every edge_stride-th state), so no candidate path is rejected; "

@@ -5,7 +5,7 @@
 // coordinates, orientation.py's and joint_linear.py's terms, and inequalities (balance.py's CoM margin,
 // orientation.py's hemisphere); balance.py's equalities are pose terms. Any other constraint (a user's) runs as a
 // compiled expression (expression.cpp: its residual and inequalities traced by manifoldgen/constraints/trace.py),
-// or, where it could not be traced, through Python callbacks on batches of configurations (manifoldgen/native.py
+// or, where it could not be traced, through Python callbacks on batches of configurations (manifoldgen/constraint_callbacks.py
 // ConstraintCallback).
 //
 // The space's parts (space_impl.hpp declares Space::Impl): this file builds it (the constructor, the add_*

@@ -164,11 +164,7 @@ def add_terms(core, space: ConstrainedSpace, layout: list[tuple[str, object]]) -
         if kind == "expression":
             _add_compiled(core, term[2])
             continue
-        adder = TERMS.get(term["type"])
-        if adder is None:
-            raise ManifoldgenError(f"the compiled core has no constraint term '{term['type']}' (built in: "
-                                   f"{', '.join(TERMS)}); add it to manifoldgen.core_terms.TERMS and the core")
-        adder(core, term)
+        core.add_term(term["type"], term)  # the core's table of built-in terms (native/src/term_table.hpp)
     core.set_tolerance(np.asarray(space.constraint.tolerance, float))
     python_inequalities = _python_inequalities(space, layout)
     if python_inequalities:
@@ -239,22 +235,3 @@ def _difference(a: np.ndarray, b: np.ndarray) -> float:
     both = np.isnan(a) & np.isnan(b)
     d = np.where(both, 0.0, np.abs(a - b))
     return float(np.max(np.nan_to_num(d, nan=np.inf), initial=0.0))
-
-
-def _array(values, shape=None) -> np.ndarray:
-    """A term's list as a C-contiguous float array (reshaped to ``shape`` when given)."""
-    return np.ascontiguousarray(np.reshape(values, shape) if shape else values, dtype=float)
-
-
-# a built-in C++ term type (Constraint.core_terms) -> how the core adds it
-TERMS = {
-    "pose": lambda core, t: core.add_pose(t["frame_id"], _array(t["rotation"], (3, 3)), t["position_axes"],
-                                          t["orientation_axes"], _array(t["y"])),
-    "chain": lambda core, t: core.add_chain(t["frame_a_id"], t["frame_b_id"], _array(t["rotation"], (3, 3)),
-                                            _array(t["offset"])),
-    "sphere": lambda core, t: core.add_sphere(t["frame_id"], _array(t["center"]), t["radius"]),
-    "orientation": lambda core, t: core.add_orientation(t["frame_id"], _array(t["axis"]), _array(t["basis"])),
-    "hemisphere": lambda core, t: core.add_hemisphere(t["frame_id"], _array(t["axis"]), _array(t["direction"])),
-    "linear": lambda core, t: core.add_linear(_array(t["A"]), _array(t["y"])),
-    "com_polygon": lambda core, t: core.add_com_polygon(_array(t["normals"]), _array(t["bounds"])),
-}
