@@ -11,6 +11,7 @@ import argparse
 import time
 
 from manifoldgen.data import collect
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import task_checker
 from manifoldgen.tasks import get_task
 
@@ -20,6 +21,7 @@ parser.add_argument("--robot", default="panda")
 parser.add_argument("--per-condition", type=int, default=10_000)
 parser.add_argument("-o", "--output", help="also write the dataset here")
 args = parser.parse_args()
+set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
 
 task = get_task(args.task, args.robot)
 task_checker(task)  # warm: builds any cached collision matrix outside the timing

@@ -22,6 +22,7 @@ import warnings
 import numpy as np
 
 from manifoldgen import native
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import get_scene
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.spheres import SphereChecker
@@ -57,6 +58,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--scenes", nargs="*", default=list(SCENES), choices=list(SCENES))
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     print("| scene | states | spheres | in collision | flagged by spheres | false positives | missed "
           "| exact, no spheres µs/state | spheres alone µs/state | exact with spheres µs/state "
           "| pairs left to coal: uniform / + task states | flagged, task-chosen | exact with spheres, task-chosen µs/state |")

@@ -4,8 +4,9 @@ For every (task, scene) given (default: the held-out set in benchmarks/heldout/)
 and nothing else: ``collect`` and ``train`` with default settings, one ``plan`` of the scene (the time from
 a task file to a first learned path), then ``bench plan`` of the learned sampler, ``project`` (uniform +
 projection) and C++ OMPL Atlas on the same seeds. Prints one table: rows per method with solved runs, median
-CPU and wall time of the solved runs, and median path length; and the pipeline's wall and CPU time. C++ Atlas
-cannot take a user-written constraint: there OMPL's Atlas runs through Python callbacks (``atlas-python``).
+CPU and wall time of the solved runs, and median path length; and the pipeline's wall and CPU time. Where the C++
+baseline cannot take the task (a user constraint whose residual does not trace), OMPL's Atlas runs through Python
+callbacks (``atlas-python``).
 
     python benchmarks/bench_defaults.py -o runs/defaults                      # the held-out set, 30 seeds
     python benchmarks/bench_defaults.py -o runs/shipped pose-panda.toml@maze dualarm-pr2.toml@tray-over ...

@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from manifoldgen.robot import Robot
+from manifoldgen.runtime import set_threads
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--robot", default="xarm7")
@@ -29,6 +30,7 @@ parser.add_argument("--pinocchio", action="store_true", help="also time a pinocc
 parser.add_argument("--batches", type=int, nargs="+", default=[1, 8, 64, 512, 2048])
 parser.add_argument("--budget", type=float, default=0.3, help="CPU seconds per measurement")
 args = parser.parse_args()
+set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
 
 
 def per_call(fn, q) -> tuple[float, float]:

@@ -28,6 +28,7 @@ import numpy as np
 from manifoldgen.bench.planning import RUNS_FILE, Experiment, read_records, run_bench
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.planning.rrt_connect import RRTConnectSettings
+from manifoldgen.runtime import set_threads
 from manifoldgen.settings import parse_settings
 
 METHODS = ["cvae=rrtconnect@cvae:{model}", "atlas-c++=ompl-native-atlas", "projected-c++=ompl-native-projected",
@@ -83,6 +84,7 @@ def main() -> None:
                         help="a setting of our planners (e.g. spheres=true, which the C++ OMPL methods take too: "
                         "the same collision checks); the other OMPL settings stay OMPL's")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     settings = parse_settings(args.set, None, {f.name: f.default for f in fields(RRTConnectSettings)}, "planner")
     methods = [m.format(model=pretrained_model_dir()) for m in METHODS]
     if args.methods:

@@ -22,6 +22,7 @@ import numpy as np
 
 from manifoldgen.io import load_npz, save_npz
 from manifoldgen.physics import PhysicsSettings, check_path_file
+from manifoldgen.runtime import set_threads
 
 FEET = ["wheel_1", "wheel_2", "wheel_3", "wheel_4"]
 LEGS = [f"{j}_{i}" for i in range(1, 5) for j in ("hip_yaw", "hip_pitch", "knee_pitch", "ankle_pitch")]
@@ -84,6 +85,7 @@ def main():
     parser.add_argument("--hold", type=float, default=1.0, help="seconds holding the last state")
     parser.add_argument("-o", "--output", type=Path, help="JSON lines, one result per path")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     if (args.folder is None) == (args.calibrate is None):
         parser.error("give a FOLDER of path files, or --calibrate OUT_FOLDER")
     pace = PhysicsSettings()

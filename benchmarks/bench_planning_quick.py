@@ -26,6 +26,7 @@ import torch  # noqa: E402
 
 from manifoldgen.data import collect  # noqa: E402
 from manifoldgen.planning import DEFAULT_LOCAL, PLANNERS  # noqa: E402
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import get_scene  # noqa: E402
 from manifoldgen.space import ConstrainedSpace  # noqa: E402
 from manifoldgen.specs import make_sampler  # noqa: E402
@@ -54,6 +55,7 @@ def main() -> None:
     parser.add_argument("--local", default=DEFAULT_LOCAL)
     parser.add_argument("--set", action="append", default=[], help="planner setting key=value (repeatable)")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     torch.set_num_threads(1)
     task = get_task("pose", "panda")
     cls = PLANNERS.get(args.planner)

@@ -9,13 +9,15 @@ import time
 import numpy as np
 
 from manifoldgen.constraints import project
+from manifoldgen.runtime import set_threads
 from manifoldgen.tasks import TASKS, get_task
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--seeds", type=int, default=5000)
 args = parser.parse_args()
+set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
 
-print(f"| robot | joints | success (to 1e-6, <= 50 it.) | median iterations | time per 1k seeds |")
+print("| robot | joints | success (to 1e-6, <= 50 it.) | median iterations | time per 1k seeds |")
 print("|---|---|---|---|---|")
 for robot in TASKS["pose"]:
     task = get_task("pose", robot)

@@ -19,6 +19,7 @@ import torch
 
 from manifoldgen.bench.sampling import run_sampling_bench
 from manifoldgen.models import pretrained_model_dir
+from manifoldgen.runtime import set_threads
 
 
 def main() -> None:
@@ -30,6 +31,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     torch.set_num_threads(max(1, args.threads))
     models = args.models or [pretrained_model_dir()]
     out = args.output or Path(tempfile.mkdtemp(prefix="bench-sampling-"))

@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from manifoldgen.constraints import project
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import get_scene, task_checker
 from manifoldgen.spheres import SphereChecker, fit_model
 from manifoldgen.tasks import get_task
@@ -171,6 +172,7 @@ def main() -> None:
     parser.add_argument("--robots", nargs="*", default=list(ROBOTS), choices=list(ROBOTS))
     parser.add_argument("--draw", metavar="PNG", help="only draw panda's spheres over its meshes to PNG")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     if args.draw:
         draw(args.draw)
         return

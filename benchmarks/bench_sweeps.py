@@ -20,6 +20,7 @@ import numpy as np
 
 from manifoldgen.models import pretrained_model_dir
 from manifoldgen.planning import RRTConnect, RRTConnectSettings
+from manifoldgen.runtime import set_threads
 from manifoldgen.scene import get_scene
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.specs import make_sampler
@@ -75,6 +76,7 @@ def main() -> None:
     parser.add_argument("--talos-model", default="/tmp/bal3/talos-cvae")
     parser.add_argument("--drinkcan-model", default="/tmp/bal3/drinkcan-cvae")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     print("| scene | dense check | paths | dense states | per-state checks | sweep tests | collision queries "
           "| hull tests | coal mesh tests | CPU per check (ms) |")
     print("|---|---|---|---|---|---|---|---|---|---|")

@@ -13,6 +13,7 @@ version is ``manifoldgen bench wall --runs 1000 --time 200 -o OUT``.
 import argparse
 
 from manifoldgen.bench.planning import Experiment, default_baseline, default_methods, run_bench
+from manifoldgen.runtime import set_threads
 
 
 def main(scene: str, runs: int, time_limit: float) -> None:
@@ -25,6 +26,7 @@ def main(scene: str, runs: int, time_limit: float) -> None:
     parser.add_argument("--methods", nargs="*", default=None)
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args()
+    set_threads()  # as every command: torch's and numpy's BLAS threads sized for this machine
     methods = args.methods or default_methods(args.model)
     baseline = default_baseline(methods)
     table, summaries = run_bench(Experiment(scene, time_limit=args.time), methods, args.out, runs=args.runs,
