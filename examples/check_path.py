@@ -130,8 +130,6 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
                        f"otherwise; feet at most {1000 * stability['max_foot_drift']:.1f} mm from their fixed positions")
     if reason:
         details.append(f"first problem: {reason}")
-    user = ", ".join(checker.constraint.user_types)
-    use = f"worst constraint use {worst:.2f} of tolerance" + (f" (user type {user} NOT rechecked)" if user else "")
     if not valid:
         status, word = EXIT_INVALID, "INVALID"
     elif not checker.constraint.recheckable or not rechecked:
@@ -140,8 +138,9 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
         status, word = EXIT_CANNOT, "UNVERIFIED (the robot files differ from the file's; see the warning)"
     else:
         status, word = EXIT_VALID, "VALID"
-    line = (f"{file}: {len(path)} waypoints, {count:,} states checked every {resolution:g}; {use}, {violations} "
-            f"states violating the constraint, {collisions} in collision, {outside} outside the limits: {word}")
+    line = (f"{file}: {len(path)} waypoints, {count:,} states checked every {resolution:g}; "
+            f"{checker.constraint.use(worst, violations)}, {collisions} in collision, {outside} outside the limits: "
+            f"{word}")
     return {"status": status, "line": line, "details": details, "valid": valid, "reason": reason, "worst": worst,
             "violations": violations, "collisions": collisions, "outside": outside, "states": count,
             "resolution": resolution, "meta": meta, "path": path, "stability": stability}

@@ -9,8 +9,8 @@ inequalities, the joint limits, self-collision, the obstacles and the held objec
 state; each recorded length is compared with its nodes' distance, and ``scene_sha256`` with the recorded objects.
 
     python examples/check_roadmap.py r.npz [more.npz ...] [--urdf PATH] [--srdf PATH] [--resolution R]
-    -> r.npz: 55 nodes, 60 edges, 4,412 states checked every 0.005; worst constraint use 0.61 of tolerance,
-       0 edges invalid (0 states violating the constraint, 0 in collision, 0 outside the limits): VALID
+    -> r.npz: 55 nodes, 60 edges, 4,412 states checked every 0.005; 0 edges invalid (worst constraint use 0.61
+       of tolerance, 0 states violating the constraint, 0 in collision, 0 outside the limits): VALID
 
 Exit status: 0 every roadmap valid; 1 some edge invalid; 2 bad usage; 3 could not recheck (a user constraint type
 ``module:Class``, the robot not found or not the file's, an unreadable file or not a roadmap).
@@ -92,8 +92,7 @@ def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolu
     valid = not problems
     if problems:
         details.append(f"first problem: {problems[0]}")
-    user = ", ".join(checker.constraint.user_types)
-    use = f"worst constraint use {worst:.2f} of tolerance" + (f" (user type {user} NOT rechecked)" if user else "")
+    user = checker.constraint.user_types
     if not valid:
         status, word = EXIT_INVALID, "INVALID"
     elif exit_status(statuses) == EXIT_CANNOT:
@@ -101,9 +100,9 @@ def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolu
                                      "UNVERIFIED (the robot files differ from the file's; see the warning)")
     else:
         status, word = EXIT_VALID, "VALID"
-    line = (f"{file}: {len(nodes)} nodes, {len(edges)} edges, {states:,} states checked every {resolution:g}; {use}, "
-            f"{len(invalid)} edges invalid ({violations} states violating the constraint, "
-            f"{collisions} in collision, {outside} outside the limits): {word}")
+    line = (f"{file}: {len(nodes)} nodes, {len(edges)} edges, {states:,} states checked every {resolution:g}; "
+            f"{len(invalid)} edges invalid ({checker.constraint.use(worst, violations)}, {collisions} in collision, "
+            f"{outside} outside the limits): {word}")
     return {"status": status, "line": line, "details": details, "valid": valid, "reason": problems[0] if problems
             else "", "invalid_edges": invalid, "worst": worst, "violations": violations,
             "collisions": collisions, "outside": outside, "states": states, "resolution": resolution}

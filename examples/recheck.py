@@ -686,6 +686,17 @@ class ConstraintCheck:
                     part.tolerance = np.minimum(recorded, part.tolerance)
         self.recheckable = not self.user_types
 
+    def use(self, worst: float, violating: int, what: str = "states") -> str:
+        """The constraint's share of a checker's line: the worst use of the tolerance and how many ``what`` violate
+        it, or, where a user type was not recomputed, that it was not rechecked (never a 0 that was not measured)."""
+        if not self.user_types:
+            return f"worst constraint use {worst:.2f} of tolerance, {violating} {what} violating the constraint"
+        user = ", ".join(self.user_types)
+        if not self.splittable or not any(p.recheckable for p in self.parts):
+            return f"constraint NOT rechecked (user type {user})"
+        return (f"built-in parts' worst use {worst:.2f} of tolerance, {violating} {what} violating them, user type "
+                f"{user} NOT rechecked")
+
     def describe(self) -> str:
         kind = self.spec.get("type") if isinstance(self.spec, dict) else "?"
         if kind == "set":

@@ -374,6 +374,13 @@ def test_path_checker_api_and_densification(folder, datasets):
     np.savez(folder / "moved.npz", meta=np.array(json.dumps(meta)), path=data["path"][::-1])
     report = outside_check(folder / "moved.npz")
     assert report["status"] == 1 and "does not start at the recorded start" in report["reason"]
+    # a user type: the line says the constraint was not rechecked, and counts no violations it did not measure
+    user = {**meta, "constraint": {"type": "usercon:ToolDownAtX"}}
+    np.savez(folder / "user-path.npz", meta=np.array(json.dumps(user)), path=data["path"])
+    report = outside_check(folder / "user-path.npz")
+    assert report["status"] == 3 and report["collisions"] == report["outside"] == 0
+    assert "constraint NOT rechecked (user type usercon:ToolDownAtX)" in report["line"]
+    assert "violating" not in report["line"] and report["line"].endswith("CANNOT RECHECK the constraint (user type)")
 
 
 def test_robot_given_as_a_urdf_path_is_found_next_to_the_file(folder, tmp_path):
