@@ -93,7 +93,8 @@ class Roadmap:
 
     def route(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         """The shortest route (K, n) from ``start`` to ``goal`` through the roadmap, each segment checked (the ends
-        then stay as nodes), or None when either end joins no node or the nodes they join are not connected."""
+        then stay as nodes, unless they are nodes already: a repeated query adds none, and its route repeats no
+        waypoint), or None when either end joins no node or the nodes they join are not connected."""
         if not len(self.q):
             return None
         first, last = self._joins(start), self._joins(goal)
@@ -105,7 +106,12 @@ class Roadmap:
         if nodes is None:
             return None
         route = np.concatenate([start[None], self.q[nodes], goal[None]])
+        repeated = np.all(route[1:] == route[:-1], axis=1)  # an end that is a node already
+        if len(route) - repeated.sum() >= 2:
+            route = route[np.r_[True, ~repeated]]
         for q, joined in ((start, first), (goal, last)):  # the ends become nodes, joined as found
+            if 0.0 in joined.values():  # the end is a node already
+                continue
             self.q = np.concatenate([self.q, q[None]])
             self.edges.append({})
             for node, length in joined.items():
