@@ -71,6 +71,10 @@ USER_MODULES = {  # module name -> source: a user constraint that fails in one p
                  "    def residual(self, q, y):\n        return super().residual(q, y)[:, :1]\n",
     "jac_raises": "from tool_down import ToolDownAtX\nclass C(ToolDownAtX):\n"
                   "    def jacobian(self, q, y):\n        raise KeyError('jac')\n",
+    "ineq_nan": "from tool_down import ToolDownAtX\nclass C(ToolDownAtX):\n"
+                "    def inequality(self, q, y):\n        return q[:, :1] * float('nan')\n",
+    "ineq_int": "from tool_down import ToolDownAtX\nclass C(ToolDownAtX):\n"
+                "    def inequality(self, q, y):\n        return 5\n",
     "not_class": "C = 5\n",
     "exits": "import sys\nsys.exit(3)\n",
 }
@@ -616,7 +620,31 @@ def _run_query(**kw):
     return run_query(task, get_scene(task, "wall"), "project", "rrtconnect", **{"seed": 0, **kw})
 
 
+def _sampler(I, O):
+    from manifoldgen import api as mg
+    task = get_task("pose", "panda")
+    return mg.sampler(task, mg.load_scene(task, "wall"), "project")
+
+
 CASES += [
+    cli("user-inequality-nan", f"plan {_user('ineq_nan')} --scene open --time 3 --no-picture -o {{O}}/p.npz",
+        "ineq_nan", "inequality", "NaN", "fix its inequality()"),
+    cli("user-inequality-not-an-array", f"plan {_user('ineq_int')} --scene open --time 3 --no-picture -o {{O}}/p.npz",
+        "ineq_int", "has shape ()", "fix its inequality()"),
+    cli("plan-resolution-tiny", "plan pose --scene wall --time 3 --no-picture --set resolution=1e-12 -o {O}/p.npz",
+        "resolution", "1e-12", "[0.0001, 10]"),
+    cli("plan-set-range-nan", "plan pose --scene wall --time 3 --no-picture --set range=nan -o {O}/p.npz",
+        "range", "finite", "nan"),
+    cli("plan-shortcut-negative", "plan pose --scene wall --time 3 --no-picture --set shortcut=-5 -o {O}/p.npz",
+        "shortcut", "-5", "whole number"),
+    api("api-plan-settings-nan", lambda I, O: _run_query(time_limit=2.0, settings={"range": float("nan")}),
+        "range", "nan"),
+    api("api-plan-settings-string", lambda I, O: _run_query(time_limit=2.0, settings={"range": "big"}),
+        "range", "'big'"),
+    api("api-plan-smooth-string", lambda I, O: __import__("manifoldgen").plan(
+        get_task("pose", "panda"), "wall", smooth="no", time_limit=2.0), "smooth", "'no'"),
+    api("api-sample-many-negative", lambda I, O: _sampler(I, O).sample_many(-1), "whole number", "-1"),
+    api("api-sample-many-fraction", lambda I, O: _sampler(I, O).sample_many(2.5), "whole number", "2.5"),
     api("api-run-query-time-nan", lambda I, O: _run_query(time_limit=float("nan")), "time"),
     api("api-run-query-time-negative", lambda I, O: _run_query(time_limit=-1.0), "time"),
     api("api-run-query-time-inf", lambda I, O: _run_query(time_limit=float("inf")), "time"),

@@ -374,6 +374,8 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
         raise _wrong("plan", "planner", "a planner name such as 'rrtconnect'", planner)
     if not isinstance(local, str):
         raise _wrong("plan", "local", "'auto', 'interpolate' or 'project'", local)
+    if not isinstance(smooth, bool):
+        raise _wrong("plan", "smooth", "True or False", smooth)
     seed = _seed("plan", seed)
     time_limit = _number("plan", "time_limit", time_limit)
     if not math.isfinite(time_limit) or time_limit <= 0:

@@ -118,7 +118,9 @@ class Sampler(ABC):
     def _take(self, count: int, buffer: str, refill) -> np.ndarray:
         """(count, n) rows taken in order from the array attribute ``buffer``, in slices, ``refill()`` putting a
         new batch there when it is empty; an error after ``max_batches`` empty refills in a row."""
-        rows, need, empty = [], count, 0
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 0:
+            raise ManifoldgenError(f"the number of samples must be a whole number >= 0, got {count!r}")
+        rows, need, empty = [], int(count), 0
         while need:
             if not len(getattr(self, buffer)):
                 if empty == self.max_batches:

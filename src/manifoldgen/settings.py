@@ -32,10 +32,18 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
         try:
             values[key.strip()] = json.loads(text)
         except ValueError:
-            values[key.strip()] = text
+            values[key.strip()] = _number(text)
         except RecursionError:
             raise ManifoldgenError(f"--set '{key.strip()}' is nested too deeply; give a plain value") from None
     return check_settings(values, known, what)
+
+
+def _number(text: str) -> float | str:
+    """``text`` as a float where Python reads it as one that JSON does not ("nan", "inf"), else the text itself."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def check_settings(values: dict, known: dict, what: str) -> dict:

@@ -10,10 +10,11 @@ on. An unsolved result says why in its ``extras`` (see :meth:`PlanResult.why`).
 
 from __future__ import annotations
 
+import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
@@ -28,6 +29,10 @@ from manifoldgen.sampling import Sampler, cost_scale
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
 SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/benchmarks.md, "Shorter paths")
+# each numeric planner setting's range: a resolution finer than 1e-4 rad or a pool of millions of rows would
+# only exhaust memory
+LIMITS = {"range": (1e-4, 100.0), "resolution": (1e-4, 10.0), "step": (1e-4, 100.0), "pool": (0, 10**6),
+          "pool_batch": (1, 10**6), "candidates": (1, 10**4), "shortcut": (0, 10**6)}
 
 @dataclass
 class PlannerSettings:
@@ -59,10 +64,18 @@ class PlannerSettings:
     reuse: bool = False
 
     def check(self) -> None:
-        if (self.range <= 0 or self.step <= 0 or self.resolution <= 0 or self.pool < 0 or self.pool_batch <= 0
-                or self.candidates <= 0 or self.shortcut < 0):
-            raise ManifoldgenError(f"invalid planner settings {asdict(self)}: range, resolution, step, pool_batch "
-                                   "and candidates must be positive, pool and shortcut >= 0")
+        """A one-line error naming the first setting of the wrong type or outside its range (:data:`LIMITS`)."""
+        for key, (low, high) in LIMITS.items():
+            value, default = getattr(self, key), getattr(type(self), key)
+            whole = isinstance(default, int)
+            if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)) \
+                    or not math.isfinite(value) or not low <= value <= high:
+                kind = "a whole number" if whole else "a number"
+                raise ManifoldgenError(f"planner setting {key} must be {kind} in [{low:g}, {high:g}], got {value!r}; "
+                                       f"e.g. {key}={default}")
+        for key in ("partial", "reuse"):
+            if not isinstance(getattr(self, key), bool):
+                raise ManifoldgenError(f"planner setting {key} must be true or false, got {getattr(self, key)!r}")
 
 
 class Tree:

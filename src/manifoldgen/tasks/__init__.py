@@ -170,6 +170,12 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
                 if residual.shape != (len(seeds), m) else "holds NaN or infinite values")
         raise ManifoldgenError(f"task '{name}': the residual of constraint {type(constraint).__module__}:"
                                f"{type(constraint).__name__} {what}; fix its residual()")
+    inequality = np.asarray(constraint.inequality(seeds, y), float)
+    if inequality.ndim != 2 or len(inequality) != len(seeds) or not np.isfinite(inequality).all():
+        what = (f"has shape {inequality.shape}, not ({len(seeds)}, p) (p inequalities per configuration, 0 for none)"
+                if inequality.ndim != 2 or len(inequality) != len(seeds) else "holds NaN or infinite values")
+        raise ManifoldgenError(f"task '{name}': the inequality of constraint {type(constraint).__module__}:"
+                               f"{type(constraint).__name__} {what}; fix its inequality()")
     res = project(constraint, seeds, y)
     if not res.converged.any():
         where = "home" if home is not None else f"{HOME_SEEDS} uniform configurations"
@@ -213,7 +219,8 @@ def load_task_file(path: str | Path) -> Task:
         raise ManifoldgenError(f"{path}: not valid TOML ({exc}); fix the file") from exc
 
     def where(key: str) -> str:
-        return f"{path}, line {_line(text, key)}"
+        line = _line(text, key)
+        return f"{path}, line {line}" if line else str(path)
 
     unknown = [k for k in data if k not in TASK_KEYS]
     if unknown:
