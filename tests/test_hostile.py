@@ -643,6 +643,11 @@ CASES += [
         "range", "'big'"),
     api("api-plan-smooth-string", lambda I, O: __import__("manifoldgen").plan(
         get_task("pose", "panda"), "wall", smooth="no", time_limit=2.0), "smooth", "'no'"),
+    cli("tasks-user-residual-raises", f"tasks {_user('res_raises')}", "user code", "res_raises.py, line",
+        "ZeroDivisionError"),
+    cli("tasks-user-init-raises", f"tasks {_user('init_raises')}", "user code", "init_raises.py, line", "ValueError"),
+    cli("tasks-user-import-raises", f"tasks {_user('imp_raises')}", "user code", "imp_raises.py, line 1",
+        "ZeroDivisionError"),
     api("api-sample-many-negative", lambda I, O: _sampler(I, O).sample_many(-1), "whole number", "-1"),
     api("api-sample-many-fraction", lambda I, O: _sampler(I, O).sample_many(2.5), "whole number", "2.5"),
     api("api-run-query-time-nan", lambda I, O: _run_query(time_limit=float("nan")), "time"),

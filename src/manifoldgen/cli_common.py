@@ -15,7 +15,7 @@ import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.text import Text  # noqa: E402
 
-from manifoldgen.errors import ManifoldgenError  # noqa: E402
+from manifoldgen.errors import ManifoldgenError, user_code  # noqa: E402
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Constrained motion planning with learned samplers.")
@@ -51,26 +51,6 @@ def friendly(command):
                                         f"{': ' + why if why else ''}; fix that module (see docs/tasks.md)"))
             raise typer.Exit(2) from None
     return wrapper
-
-
-def user_code(exc: BaseException) -> str | None:
-    """``FILE, line N`` of the innermost frame of ``exc`` in a user's module (not this package, not an installed
-    package nor the standard library; a syntax error's own file and line), or None."""
-    import os
-    import sys
-    import sysconfig
-    import traceback
-    from pathlib import Path
-
-    ours = [str(Path(__file__).resolve().parent), *{sysconfig.get_paths()[k] for k in ("stdlib", "purelib",
-                                                                                        "platlib")}, sys.prefix]
-    frames = [(f.filename, f.lineno) for f in traceback.extract_tb(exc.__traceback__)]
-    if isinstance(exc, SyntaxError) and exc.filename:
-        frames.append((exc.filename, exc.lineno))
-    for filename, line in reversed(frames):
-        if not filename.startswith("<") and not any(os.path.realpath(filename).startswith(o) for o in ours):
-            return f"{filename}, line {line}"
-    return None
 
 
 TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"

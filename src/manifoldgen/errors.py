@@ -46,6 +46,24 @@ def not_a_file(path, what: str = "file") -> str:
     return f"{what} not found: {path}"
 
 
+def user_code(exc: BaseException) -> str | None:
+    """``FILE, line N`` of the innermost frame of ``exc`` in a user's module (not this package, not an installed
+    package nor the standard library; a syntax error's own file and line), or None."""
+    import sys
+    import sysconfig
+    import traceback
+
+    ours = [os.path.dirname(os.path.realpath(__file__)), *{sysconfig.get_paths()[k] for k in ("stdlib", "purelib",
+                                                                                        "platlib")}, sys.prefix]
+    frames = [(f.filename, f.lineno) for f in traceback.extract_tb(exc.__traceback__)]
+    if isinstance(exc, SyntaxError) and exc.filename:
+        frames.append((exc.filename, exc.lineno))
+    for filename, line in reversed(frames):
+        if not filename.startswith("<") and not any(os.path.realpath(filename).startswith(o) for o in ours):
+            return f"{filename}, line {line}"
+    return None
+
+
 def file_reader(read):
     """Decorate a reader of files: an exception that a damaged or foreign file's content raises deep inside
     (a string where a number belongs, a missing key ...) becomes one ManifoldgenError naming the file."""
@@ -56,6 +74,8 @@ def file_reader(read):
         except ManifoldgenError:
             raise
         except DAMAGED as exc:
+            if user_code(exc) is not None:  # the user's own module failed, not the file: the caller names it
+                raise
             source = next((str(a) for a in args if isinstance(a, (str, os.PathLike))), "the file")
             why = (str(exc).strip().splitlines() or [""])[0][:120]
             raise ManifoldgenError(f"{source}: damaged or unexpected content ({type(exc).__name__}: {why}); "

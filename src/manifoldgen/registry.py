@@ -95,6 +95,10 @@ def import_class(path: str, base: type, kind: str) -> type:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
+        missing = isinstance(exc, ModuleNotFoundError) and exc.name is not None \
+            and (module_name == exc.name or module_name.startswith(exc.name + "."))
+        if not missing:  # the module was found and failed as it ran: the caller names its file and line
+            raise
         raise ManifoldgenError(f"cannot import module '{module_name}' for {kind} '{path}' ({exc}); put it on "
                                "PYTHONPATH or next to the task file") from exc
     obj = module
