@@ -139,7 +139,9 @@ def inputs(tmp_path_factory, panda_task, planned_path):
                        ("model-latent-bool", lambda d: d["config"].update(latent=True)),
                        ("model-dims-huge", lambda d: d["dims"].update(d=10 ** 12)),
                        ("model-meta-task-code", lambda d: d["meta"]["task"]["constraint"].update(type="this:X")),
-                       ("model-joints-short", lambda d: d["meta"].update(joints=d["meta"]["joints"][:3]))):
+                       ("model-joints-short", lambda d: d["meta"].update(joints=d["meta"]["joints"][:3])),
+                       ("model-decoder-noise", lambda d: d["decoder"].update(noise=50)),
+                       ("model-decoder-steps", lambda d: d["decoder"].update(steps=10 ** 6))):
         shutil.copytree(root / "model", root / name)
         _resign(root / name, edit)
     shutil.copytree(root / "model", root / "model-deep")
@@ -648,6 +650,10 @@ CASES += [
     cli("tasks-user-init-raises", f"tasks {_user('init_raises')}", "user code", "init_raises.py, line", "ValueError"),
     cli("tasks-user-import-raises", f"tasks {_user('imp_raises')}", "user code", "imp_raises.py, line 1",
         "ZeroDivisionError"),
+    cli("plan-model-decoder-noise", "plan pose --scene wall --time 3 --no-picture "
+        "--sampler model:{I}/model-decoder-noise -o {O}/p.npz", "'decoder' entry does not fit its weights", "restore"),
+    cli("plan-model-decoder-steps", "plan pose --scene wall --time 3 --no-picture "
+        "--sampler model:{I}/model-decoder-steps -o {O}/p.npz", "steps [0, 1000]"),
     api("api-sample-many-negative", lambda I, O: _sampler(I, O).sample_many(-1), "whole number", "-1"),
     api("api-sample-many-fraction", lambda I, O: _sampler(I, O).sample_many(2.5), "whole number", "2.5"),
     api("api-run-query-time-nan", lambda I, O: _run_query(time_limit=float("nan")), "time"),

@@ -24,6 +24,7 @@ from manifoldgen.io import read_json
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
+DECODER_RANGES = {"noise": (1, 4096), "steps": (0, 1000), "layers": (1, 64)}  # a decoder entry's whole numbers
 
 
 def document_checksum(doc: dict) -> str:
@@ -97,9 +98,10 @@ def _validate_doc(path: Path, doc: object) -> None:
     if decoder is not None and not (
             isinstance(decoder, dict) and isinstance(decoder.get("net"), str) and decoder.get("law") in LAWS
             and all(isinstance(decoder.get(key), int) and not isinstance(decoder.get(key), bool)
-                    and decoder[key] >= low for key, low in (("noise", 1), ("steps", 0), ("layers", 1)))):
+                    and low <= decoder[key] <= high for key, (low, high) in DECODER_RANGES.items())):
         raise bad("'decoder' must name the sampling network 'net', its noise 'law' (normal or uniform), "
-                  "'noise' width, integration 'steps' and number of Linear 'layers'")
+                  "'noise' width, integration 'steps' and number of Linear 'layers' (whole numbers in "
+                  + ", ".join(f"{key} [{low}, {high}]" for key, (low, high) in DECODER_RANGES.items()) + ")")
 
 
 def check_mix_refine(path: str | Path, doc: dict) -> tuple[int | None, float | None]:
@@ -136,9 +138,14 @@ def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: di
     except KeyError as exc:
         raise ManifoldgenError(f"the model's weights lack {exc.args[0]}, which its 'decoder' entry names; the "
                                "files come from different models: retrain or restore them") from None
-    return core.Decoder(w, b, d if decoder["steps"] else decoder["noise"], decoder["law"] == "uniform",
-                        *(np.asarray(norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
-                                                                   "lower", "upper")), steps=decoder["steps"])
+    try:
+        return core.Decoder(w, b, d if decoder["steps"] else decoder["noise"], decoder["law"] == "uniform",
+                            *(np.asarray(norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
+                                                                       "lower", "upper")), steps=decoder["steps"])
+    except (ValueError, TypeError, RuntimeError) as exc:  # the entry's sizes or steps do not fit the weights
+        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        raise ManifoldgenError(f"the model's 'decoder' entry does not fit its weights ({why}); the files come from "
+                               "different models or were edited: retrain or restore them") from None
 
 
 class ModelFacts:
