@@ -266,6 +266,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
         "task-base-bounds-fixed": POSE.replace('robot = "panda"', 'robot = "panda"\nbase_bounds = [[0, 0, 0], [1, 1, 1]]'),
         "task-floating-panda": POSE.replace('robot = "panda"', 'robot = "panda"\nfloating_base = true'),
         "task-tolerance-huge": POSE.replace('position_axes = ["z"]', 'position_axes = ["z"]\nposition_tolerance = 1e308'),
+        "task-lock-group-joint": POSE.replace("[[constraints]]", "[locked]\npanda_joint1 = 0.3\n\n[[constraints]]", 1),
     }
     for name, text in tasks.items():
         (root / f"{name}.toml").write_text(text)
@@ -544,6 +545,8 @@ CASES = [
     cli("tasks-deep", "tasks {I}/task-deep.toml", "task-deep.toml"),
     cli("tasks-base-bounds-fixed", "tasks {I}/task-base-bounds-fixed.toml", "base_bounds"),
     cli("tasks-floating-panda", "tasks {I}/task-floating-panda.toml", "13 joints"),
+    cli("tasks-lock-group-joint", "tasks {I}/task-lock-group-joint.toml", "panda_joint1", "planning group",
+        "cannot be locked"),
     cli("tasks-tolerance-huge", "tasks {I}/task-tolerance-huge.toml", "position_tolerance"),
     cli("tasks-binary", "tasks {I}/task-binary.toml", "task-binary.toml"),
     cli("tasks-json-suffix", "tasks {I}/task.json", "pose", code=0),

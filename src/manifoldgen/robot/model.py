@@ -109,6 +109,9 @@ class Robot:
         for joint, value in (reference or {}).items():
             if not model.existJointName(joint):
                 raise ManifoldgenError(f"unknown joint '{joint}' in reference for robot {name}")
+            if joint in joints:
+                raise ManifoldgenError(f"joint '{joint}' is in the planning group of robot {name}, so it cannot be "
+                                       "locked; lock it or plan it, not both (drop it from 'locked' or from 'group')")
             jm = model.joints[model.getJointId(joint)]
             low, high = model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q]
             if jm.nq == 1 and not low - 1e-9 <= value <= high + 1e-9:
