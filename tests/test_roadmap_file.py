@@ -1,6 +1,7 @@
 """A planner's roadmap saved to a file and read back: the same roadmap and routes, later queries in a fresh process
 routed through it (``plan --roadmap``), files for another query or damaged ones refused in one line, outputs never
-overwritten, and the outside checker (examples/check_roadmap.py) rechecking every edge."""
+overwritten, a file written back holding only nodes and edges that passed the check, a link written through, and the
+outside checker (examples/check_roadmap.py) rechecking every edge."""
 
 from __future__ import annotations
 
@@ -114,16 +115,96 @@ def test_plan_in_a_fresh_process_is_routed_through_the_saved_roadmap(saved, tmp_
     assert space.valid(densify(path, space.settings.resolution)[0]).all()
 
 
+def _plan_sphere(roadmap: Path, out: Path):
+    """``plan`` the sphere task's query with ``--roadmap roadmap``, in this process."""
+    return runner.invoke(app, [*SPHERE, "--roadmap", str(roadmap), "-o", str(out)])
+
+
+def _edited(saved: Path, file: Path, edit) -> Path:
+    """A copy of the roadmap file ``saved`` at ``file`` after ``edit(arrays)``, its lengths recomputed (consistent)."""
+    arrays = dict(np.load(saved))
+    edit(arrays)
+    edges = arrays["edges"]
+    arrays["lengths"] = np.linalg.norm(arrays["nodes"][edges[:, 1]] - arrays["nodes"][edges[:, 0]], axis=1)
+    np.savez(file, **arrays)
+    return file
+
+
+def test_a_node_moved_off_the_manifold_is_not_written_back_nor_its_edges(saved, tmp_path):
+    """Every edge read from the file is checked before it is written back, not only those a route takes: the moved
+    node's edges fail, and the node, left with none, fails as a state; the line says how many were dropped."""
+    def move(arrays):
+        arrays["nodes"][5] += 0.3
+    roadmap = _edited(saved, tmp_path / "moved.npz", move)
+    moved = np.load(roadmap)["nodes"][5]
+    result = _plan_sphere(roadmap, tmp_path / "p.npz")
+    assert result.exit_code == 0 and "dropped 1 nodes and 2 edges read from it that failed the check" in result.output
+    assert not np.any(np.all(np.load(roadmap)["nodes"] == moved, axis=1))
+    check = roadmap_check(roadmap)
+    assert check["status"] == 0 and check["valid"], check["line"]
+
+
+def test_a_node_with_no_edge_that_fails_the_validity_rule_is_not_written_back(saved, tmp_path):
+    def append(arrays):
+        arrays["nodes"] = np.concatenate([arrays["nodes"], [[10.0, 10.0, 10.0]]])  # outside the limits, off the sphere
+    roadmap = _edited(saved, tmp_path / "lone.npz", append)
+    result = _plan_sphere(roadmap, tmp_path / "p.npz")
+    assert result.exit_code == 0 and "routed through it" in result.output, result.output
+    assert "dropped 1 nodes and 0 edges" in result.output
+    nodes = np.load(roadmap)["nodes"]
+    assert len(nodes) == len(np.load(saved)["nodes"]) and np.abs(nodes).max() <= 2.0
+
+
+def test_roadmap_save_checks_what_was_read_and_no_route_took(tmp_path):
+    """The library's save: a file's nodes and edges that no route took are checked before it is written."""
+    planner, *_ = _corridor_planner()
+    planner.roadmap.add(np.array([[-1.0, 0.0, 0.0], [-1.0, 0.1, 0.0], [-1.0, 0.2, 0.0]]))
+    planner.roadmap.save(tmp_path / "r.npz", CORRIDOR)
+
+    def edit(arrays):
+        arrays["nodes"][1, 2] = 0.5  # off the plane: its two edges fail, then it fails as a state
+        arrays["nodes"] = np.concatenate([arrays["nodes"], [[-1.0, 0.3, 0.5]]])  # off the plane, no edge
+    _edited(tmp_path / "r.npz", tmp_path / "edited.npz", edit)
+    again, *_ = _corridor_planner()
+    again.load_roadmap(tmp_path / "edited.npz", CORRIDOR)
+    again.roadmap.save(tmp_path / "edited.npz", CORRIDOR)
+    assert again.roadmap.dropped == {"nodes": 2, "edges": 2}
+    written = np.load(tmp_path / "edited.npz")
+    assert np.array_equal(written["nodes"], [[-1.0, 0.0, 0.0], [-1.0, 0.2, 0.0]]) and len(written["edges"]) == 0
+
+
+def test_a_roadmap_given_as_a_link_is_written_through_it(saved, tmp_path):
+    """The link stays a link and the file it names gets the roadmap (a roadmap shared by a link does not fork)."""
+    (tmp_path / "shared").mkdir()
+    real = _edited(saved, tmp_path / "shared" / "real.npz",
+                   lambda arrays: arrays.update(nodes=np.concatenate([arrays["nodes"], [[10.0, 10.0, 10.0]]])))
+    link = tmp_path / "link.npz"
+    link.symlink_to(real)
+    result = _plan_sphere(link, tmp_path / "p.npz")
+    assert result.exit_code == 0 and f"roadmap {link}: routed through it" in result.output, result.output
+    assert link.is_symlink() and link.resolve() == real
+    assert len(np.load(real)["nodes"]) == len(np.load(saved)["nodes"])  # written: without the appended node
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["link.npz", "p.npz", "real.npz"]
+    dangling = tmp_path / "dangling.npz"  # a link to a file still to write: made there
+    dangling.symlink_to(tmp_path / "shared" / "new.npz")
+    assert _plan_sphere(dangling, tmp_path / "p2.npz").exit_code == 0
+    assert dangling.is_symlink() and np.load(tmp_path / "shared" / "new.npz")["nodes"].shape[1] == 3
+
+
+@pytest.mark.parametrize("link", [False, True])
 @pytest.mark.parametrize("clash", ["-o", "--scene"])
-def test_roadmap_equal_to_an_output_or_input_is_refused_and_nothing_is_overwritten(tmp_path, clash):
+def test_roadmap_equal_to_an_output_or_input_is_refused_and_nothing_is_overwritten(tmp_path, clash, link):
+    """Also when the roadmap is a link to that file."""
     scene = tmp_path / "scene.json"
     scene.write_bytes(Path(get_task("sphere").scenes["sphere"]).read_bytes())
     out = tmp_path / "p.npz"
     out.write_bytes(b"an earlier path")
     same = out if clash == "-o" else scene
     before = same.read_bytes()
-    result = runner.invoke(app, ["plan", "sphere", "--scene", str(scene), "--no-picture", "--roadmap", str(same),
-                                 "-o", str(out)])
+    if link:
+        (tmp_path / "link.npz").symlink_to(same)
+    result = runner.invoke(app, ["plan", "sphere", "--scene", str(scene), "--no-picture", "--roadmap",
+                                 str(tmp_path / "link.npz" if link else same), "-o", str(out)])
     assert result.exit_code == 2 and "--roadmap" in result.output and result.output.count("\n") == 1, result.output
     assert same.read_bytes() == before and out.read_bytes() == b"an earlier path"
 

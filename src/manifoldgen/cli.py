@@ -227,21 +227,26 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     for out in (output, image, snapshots):
         if out is not None:
             check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
-    if roadmap is not None:
+    roadmap_file = roadmap.resolve() if roadmap is not None else None  # a link: the file it names, written through
+    if roadmap_file is not None:
         clash = next((out for out in (output, image, snapshots) if out is not None
-                      and roadmap.resolve() == out.resolve()), None)
+                      and roadmap_file == out.resolve()), None)
         if clash is not None:
             raise ManifoldgenError(f"--roadmap {roadmap} is also the output {clash} of this command; give the roadmap "
                                    "a file of its own (e.g. roadmap.npz)")
-        check_output_path(roadmap, inputs, what="--roadmap")
+        check_output_path(roadmap_file, inputs, what="--roadmap" if roadmap_file == roadmap.absolute()
+                          else f"--roadmap {roadmap} ->")
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
-                             local=local, smooth=smooth, settings=values, roadmap=roadmap)
+                             local=local, smooth=smooth, settings=values, roadmap=roadmap_file)
     held = result.extras.get("roadmap") if roadmap is not None else None
+    dropped = held and held["dropped"]
     routed = held and (f"roadmap {roadmap}: {'routed through it' if held['routed'] else 'not routed'}; "
-                       f"{held['nodes']} nodes{' saved' if result.solved else ', the file not written'}")
+                       f"{held['nodes']} nodes{' saved' if result.solved else ', the file not written'}"
+                       + (f"; dropped {dropped['nodes']} nodes and {dropped['edges']} edges read from it that "
+                          "failed the check" if any(dropped.values()) else ""))
     if not result.solved:  # no path: nothing is written, so no file can pass for one
         console.print(f"[red]not solved[/] in {result.time_s:.3f} s | {result.samples_drawn} samples, "
                       f"{result.iterations} iterations | {engine(result.extras)} | nothing written")

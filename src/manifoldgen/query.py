@@ -60,13 +60,15 @@ def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label
     """:func:`run_query` with a sampler object made for ``space`` (the scene's condition and checker); ``label``
     names the sampler in the path file's ``meta``. With ``roadmap`` (a file) the planner reuses its paths: the
     roadmap saved there (when the file exists; refused when made for another query space) is searched first, and
-    after a solved query it is written back (atomic) with the new path; the file is locked meanwhile."""
+    after a solved query it is written back (atomic) with the new path, holding only what passed the dense check
+    (what was read from the file and fails is dropped, counted in ``result.extras["roadmap"]["dropped"]``); the
+    file is locked meanwhile. A link is written through: its path is resolved once, before the lock."""
     planner_type = get_planner(planner)
     values = task_settings(task, planner, settings)
     if smooth:  # shortened within the query, by the planner (the core's search in the core)
         values.setdefault("shortcut", SMOOTH_SHORTCUTS)
     if roadmap is not None:
-        values["reuse"] = True
+        values["reuse"], roadmap = True, Path(roadmap).resolve()
     solver = planner_type(space, sampler, local=local, seed=seed, settings=planner_type.settings_type(**values))
     with output_lock(roadmap, "roadmap") if roadmap is not None else contextlib.nullcontext():
         if roadmap is not None:
@@ -76,6 +78,9 @@ def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label
         result = solver.solve(scene.start, scene.goal, time_limit)
         if roadmap is not None and result.solved:
             solver.roadmap.save(roadmap, about)
+        if roadmap is not None:  # the roadmap's counts after the save's check
+            result.extras["roadmap"].update(nodes=len(solver.roadmap), edges=solver.roadmap.edge_count(),
+                                            dropped=dict(solver.roadmap.dropped))
     report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")

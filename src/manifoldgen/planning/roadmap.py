@@ -8,8 +8,9 @@ through it; a route is made of checked segments only, so it is valid as a whole 
 
 A roadmap is saved to an ``.npz`` file (:meth:`Roadmap.save`, docs/file-formats.md) and read back
 (:meth:`Roadmap.load`) for later queries in another process. The file is an input like any other: its meta must
-name the same query space (:data:`IDENTITY`), and an edge read from it is checked again the first time a route
-takes it."""
+name the same query space (:data:`IDENTITY`), an edge read from it is checked again the first time a route takes it,
+and before the roadmap is saved every node and edge read that is unchecked still is checked, and dropped when it
+fails (:meth:`Roadmap.check_read`): a file written holds only what passed the check."""
 
 from __future__ import annotations
 
@@ -43,6 +44,8 @@ class Roadmap:
         self.valid, self.reach = valid, reach
         self.checks = 0  # segments checked (the query's cost besides the search)
         self.unchecked: set[tuple[int, int]] = set()  # edges (a < b) read from a file, checked when first routed
+        self.unchecked_nodes = 0  # nodes 0 .. unchecked_nodes - 1 were read from a file and are not checked yet
+        self.dropped = {"nodes": 0, "edges": 0}  # what was read from a file and failed its check
 
     def __len__(self) -> int:
         return len(self.q)
@@ -57,10 +60,37 @@ class Roadmap:
         return (np.array([p[:2] for p in pairs], np.int64).reshape(-1, 2),
                 np.array([p[2] for p in pairs], float).reshape(-1))
 
+    def check_read(self) -> None:
+        """Check what was read from a file and is unchecked still: each edge by the dense check, then each node
+        left without an edge as the zero-length segment from it to itself (a node with an edge passed with it);
+        what fails is dropped and counted in ``dropped``."""
+        for a, b in sorted(self.unchecked):
+            self.checks += 1
+            if not self.valid(self.q[[a, b]]):
+                del self.edges[a][b], self.edges[b][a]
+                self.dropped["edges"] += 1
+        self.unchecked.clear()
+        bad = []
+        for node in range(self.unchecked_nodes):
+            if not self.edges[node]:
+                self.checks += 1
+                if not self.valid(self.q[[node, node]]):
+                    bad.append(node)
+        self.unchecked_nodes = 0
+        if bad:
+            keep = np.ones(len(self.q), bool)
+            keep[bad] = False
+            number = np.cumsum(keep) - 1  # the kept nodes' new indices (a dropped node has no edge to renumber)
+            self.q = self.q[keep]
+            self.edges = [{int(number[b]): length for b, length in out.items()}
+                          for out, kept in zip(self.edges, keep) if kept]
+            self.dropped["nodes"] += len(bad)
+
     def save(self, path: str | Path, meta: dict) -> None:
-        """Write the roadmap to ``path`` (atomic ``.npz``): ``nodes (N, n)``, ``edges (E, 2)``, ``lengths (E,)`` and
-        ``meta`` (a JSON string): the caller's ``meta`` (the query space: :data:`IDENTITY`'s keys and what an outside
-        checker needs) with ``format_version``, ``kind`` and ``reach``."""
+        """Write the roadmap to ``path`` (atomic ``.npz``) after :meth:`check_read`: ``nodes (N, n)``, ``edges (E,
+        2)``, ``lengths (E,)`` and ``meta`` (a JSON string): the caller's ``meta`` (the query space:
+        :data:`IDENTITY`'s keys and what an outside checker needs) with ``format_version``, ``kind`` and ``reach``."""
+        self.check_read()
         edges, lengths = self.edge_array()
         save_npz(path, {**meta, "format_version": FORMAT_VERSION, "kind": "roadmap", "reach": self.reach},
                  nodes=np.asarray(self.q, float), edges=edges, lengths=lengths)
@@ -72,7 +102,7 @@ class Roadmap:
         """The roadmap saved at ``path``, checked whole (one-line errors for another kind of file, another format,
         damaged arrays), with the dense check ``valid`` and ``reach`` of the planner that searches it; refused when
         its meta differs from ``expect`` in any :data:`IDENTITY` key ``expect`` holds. Its edges count as unchecked
-        until a route takes them."""
+        until a route takes them or :meth:`check_read` runs, its nodes until :meth:`check_read`."""
         meta, arrays = load_npz(path, ())
         if meta.get("kind") != "roadmap":
             raise ManifoldgenError(f"{path} is not a roadmap file (its meta says kind {meta.get('kind')!r}); give a "
@@ -84,7 +114,7 @@ class Roadmap:
             _check_identity(path, meta, expect)
         nodes, edges, lengths = _arrays(path, meta, arrays)
         roadmap = cls(nodes.shape[1], valid, reach)
-        roadmap.q = nodes
+        roadmap.q, roadmap.unchecked_nodes = nodes, len(nodes)
         roadmap.edges = [{} for _ in nodes]
         for (a, b), length in zip(edges.tolist(), lengths.tolist()):
             roadmap._link(a, b, length)
@@ -161,6 +191,7 @@ class Roadmap:
             self.unchecked.discard(edge)
             if not self.valid(self.q[[a, b]]):
                 del self.edges[a][b], self.edges[b][a]
+                self.dropped["edges"] += 1
                 return False
         return True
 
