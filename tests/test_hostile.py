@@ -657,6 +657,7 @@ CASES += [
         "--sampler model:{I}/model-decoder-noise -o {O}/p.npz", "'decoder' entry does not fit its weights", "restore"),
     cli("plan-model-decoder-steps", "plan pose --scene wall --time 3 --no-picture "
         "--sampler model:{I}/model-decoder-steps -o {O}/p.npz", "steps [0, 1000]"),
+    cli("trajectory-dt-coarse", "trajectory {I}/path.npz --dt 5 -o {O}/t.csv", "straight motion", "smaller --dt"),
     api("api-sample-many-negative", lambda I, O: _sampler(I, O).sample_many(-1), "whole number", "-1"),
     api("api-sample-many-fraction", lambda I, O: _sampler(I, O).sample_many(2.5), "whole number", "2.5"),
     api("api-run-query-time-nan", lambda I, O: _run_query(time_limit=float("nan")), "time"),

@@ -85,10 +85,15 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
         raise ManifoldgenError(f"{check['states'] - check['valid']} of {check['states']} trajectory states are "
                                f"invalid, the first at {bad['time']:.2f} s: it {bad['problem']}; nothing written "
                                "(check the path with examples/check_path.py)")
+    if check["first_invalid_motion"] is not None:
+        bad = check["first_invalid_motion"]
+        raise ManifoldgenError(f"every trajectory state is valid, but the straight motion from the sample at "
+                               f"{bad['time']:.2f} s to the next is not ({bad['problem']}); nothing written: give a "
+                               f"smaller --dt than {dt:g} s")
     traj.save(output)
     console.print(f"trajectory: {info['duration']:.2f} s for a path of {info['path_length']:.2f} rad "
-                  f"({info['waypoints']} waypoints) | {check['states']} states every <= {dt:g} s: 100.0% valid "
-                  f"(worst constraint use {check['worst_violation']:.2f} of tolerance, limits and collisions "
-                  f"checked) | velocity <= {vel_scale:g} x URDF, acceleration <= {acc_scale:g} x reference; "
+                  f"({info['waypoints']} waypoints) | {check['states']} states every <= {dt:g} s and the motions "
+                  f"between them: 100.0% valid (worst constraint use {check['worst_violation']:.2f} of tolerance, "
+                  f"limits and collisions checked) | velocity <= {vel_scale:g} x URDF, acceleration <= {acc_scale:g} x reference; "
                   f"TOPP-RA timing stretched x{info['stretch_after_toppra']:.2f} -> {output}", markup=False,
                   highlight=False)

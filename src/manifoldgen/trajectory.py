@@ -157,9 +157,12 @@ def trajectory_of_file(path_file: str | Path, vel_scale: float = 1.0, acc_scale:
                              Scene.from_meta(meta).checker(robot))
     valid = space.valid(clipped)
     first = None if valid.all() else int(np.argmin(valid))
+    motions = space.validate_path(clipped) if first is None else None  # a controller moves straight between samples
     check = {"states": len(t), "valid": int(valid.sum()), "worst_violation": float(space.violation(clipped).max()),
              "first_invalid": None if first is None else {"time": float(t[first]),
                                                           "problem": space.problem(clipped[first])},
+             "first_invalid_motion": None if motions is None or motions.valid else {
+                 "time": float(t[motions.segment]), "problem": motions.reason},
              "max_clip": float(np.abs(clipped - q).max()),
              "max_velocity_ratio": float(np.abs(qd / velocity).max()),
              "max_acceleration_ratio": float(np.abs(qdd / acceleration).max())}
