@@ -99,13 +99,13 @@ def test_a_roadmap_for_another_query_is_refused_naming_both_values(tmp_path):
 def test_plan_in_a_fresh_process_is_routed_through_the_saved_roadmap(saved, tmp_path):
     roadmap = tmp_path / "r.npz"
     roadmap.write_bytes(saved.read_bytes())
-    nodes = len(np.load(roadmap)["nodes"])
+    nodes, before = len(np.load(roadmap)["nodes"]), roadmap.read_bytes()
     done = subprocess.run([sys.executable, "-c", "from manifoldgen.cli import app; app()", *SPHERE, "--roadmap",
                            str(roadmap), "-o", str(tmp_path / "p.npz")], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stdout + done.stderr
-    # the saved roadmap holds this very query's path: its ends are nodes already, so none is added
-    assert f"roadmap {roadmap}: routed through it; {nodes} nodes saved" in done.stdout
-    assert len(np.load(roadmap)["nodes"]) == nodes
+    # the saved roadmap holds this very query's path: its ends are nodes already, nothing is added or rewritten
+    assert f"roadmap {roadmap}: routed through it; {nodes} nodes, unchanged" in done.stdout
+    assert roadmap.read_bytes() == before
     path = np.load(tmp_path / "p.npz")["path"]
     assert np.all(np.any(path[1:] != path[:-1], axis=1))  # no waypoint repeated
     task = get_task("sphere")

@@ -244,7 +244,8 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     held = result.extras.get("roadmap") if roadmap is not None else None
     dropped = held and held["dropped"]
     routed = held and (f"roadmap {roadmap}: {'routed through it' if held['routed'] else 'not routed'}; "
-                       f"{held['nodes']} nodes{' saved' if result.solved else ', the file not written'}"
+                       f"{held['nodes']} nodes"
+                       + (" saved" if held["written"] else ", unchanged" if result.solved else ", the file not written")
                        + (f"; dropped {dropped['nodes']} nodes and {dropped['edges']} edges read from it that "
                           "failed the check" if any(dropped.values()) else ""))
     if not result.solved:  # no path: nothing is written, so no file can pass for one

@@ -76,11 +76,16 @@ def plan_query(task: Task, scene: Scene, space: ConstrainedSpace, sampler, label
             if Path(roadmap).exists():
                 solver.load_roadmap(roadmap, about)
         result = solver.solve(scene.start, scene.goal, time_limit)
-        if roadmap is not None and result.solved:
-            solver.roadmap.save(roadmap, about)
+        held = solver.roadmap
+        if roadmap is not None and result.solved and not held.grown:
+            held.check_lone_nodes()  # cheap; what the file holds besides is checked where a route takes it
+        written = roadmap is not None and result.solved and (held.grown or any(held.dropped.values())
+                                                             or not roadmap.exists())
+        if written:  # a query that changed nothing leaves the file as it is (and skips the save's check of edges)
+            held.save(roadmap, about)
         if roadmap is not None:  # the roadmap's counts after the save's check
             result.extras["roadmap"].update(nodes=len(solver.roadmap), edges=solver.roadmap.edge_count(),
-                                            dropped=dict(solver.roadmap.dropped))
+                                            dropped=dict(solver.roadmap.dropped), written=written)
     report = space.validate_path(result.path) if result.solved else None
     if report is not None and not report.valid:  # the planners only return validated paths
         raise RuntimeError(f"internal error: a returned path failed validation: {report.reason}")

@@ -46,6 +46,7 @@ class Roadmap:
         self.unchecked: set[tuple[int, int]] = set()  # edges (a < b) read from a file, checked when first routed
         self.unchecked_nodes = 0  # nodes 0 .. unchecked_nodes - 1 were read from a file and are not checked yet
         self.dropped = {"nodes": 0, "edges": 0}  # what was read from a file and failed its check
+        self.grown = False  # nodes or edges added since it was made or read
 
     def __len__(self) -> int:
         return len(self.q)
@@ -62,21 +63,25 @@ class Roadmap:
 
     def check_read(self) -> None:
         """Check what was read from a file and is unchecked still: each edge by the dense check, then each node
-        left without an edge as the zero-length segment from it to itself (a node with an edge passed with it);
-        what fails is dropped and counted in ``dropped``."""
+        left without an edge (:meth:`check_lone_nodes`); what fails is dropped and counted in ``dropped``."""
         for a, b in sorted(self.unchecked):
             self.checks += 1
             if not self.valid(self.q[[a, b]]):
                 del self.edges[a][b], self.edges[b][a]
                 self.dropped["edges"] += 1
         self.unchecked.clear()
+        self.check_lone_nodes()
+        self.unchecked_nodes = 0
+
+    def check_lone_nodes(self) -> None:
+        """Check each node read from a file that has no edge as the zero-length segment from it to itself (a node
+        with an edge passes or fails with it; one state each: cheap); drop those that fail, counted in ``dropped``."""
         bad = []
         for node in range(self.unchecked_nodes):
             if not self.edges[node]:
                 self.checks += 1
                 if not self.valid(self.q[[node, node]]):
                     bad.append(node)
-        self.unchecked_nodes = 0
         if bad:
             keep = np.ones(len(self.q), bool)
             keep[bad] = False
@@ -84,6 +89,8 @@ class Roadmap:
             self.q = self.q[keep]
             self.edges = [{int(number[b]): length for b, length in out.items()}
                           for out, kept in zip(self.edges, keep) if kept]
+            self.unchecked = {(int(number[a]), int(number[b])) for a, b in self.unchecked}
+            self.unchecked_nodes -= len(bad)
             self.dropped["nodes"] += len(bad)
 
     def save(self, path: str | Path, meta: dict) -> None:
@@ -142,6 +149,7 @@ class Roadmap:
         for q, joined in ((start, first), (goal, last)):  # the ends become nodes, joined as found
             if 0.0 in joined.values():  # the end is a node already
                 continue
+            self.grown = True
             self.q = np.concatenate([self.q, q[None]])
             self.edges.append({})
             for node, length in joined.items():
@@ -151,6 +159,7 @@ class Roadmap:
     def add(self, path: np.ndarray) -> None:
         """Keep ``path (K, n)`` (it passed the dense check): its waypoints become nodes, its segments edges, and
         each waypoint is joined to its nearest earlier nodes where that segment passes the check."""
+        self.grown = True
         path = np.asarray(path, float)
         joins = [self._joins(q) if len(self.q) else {} for q in path]
         base = len(self.q)
