@@ -35,7 +35,7 @@ def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, sh
     ``tolerance`` (None when the constraint is not rechecked), ``limits``, ``collision_free``, ``valid``."""
     try:
         meta, arrays = read_npz(path, ("q", "y"))
-        q, y = arrays["q"], arrays["y"]
+        q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
             raise CannotRecheck(f"inconsistent shapes q {q.shape}, y {y.shape} for {len(meta['joints'])} joints")
         checker = Checker(meta, y.shape[1], urdf=urdf, srdf=srdf, near=Path(path).parent)

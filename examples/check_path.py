@@ -19,7 +19,8 @@ A folder written by ``manifoldgen bench plan`` is rechecked run by run: each sol
 blind baselines' too); unsolved runs have no path and are counted.
 
 Exit status: 0 every path valid; 1 some path invalid; 2 bad usage; 3 could not recheck (a user
-constraint type ``module:Class``, the robot not found or not the file's, an unreadable file).
+constraint type ``module:Class``, the robot not found or not the file's, an unreadable file, or one manifoldgen does
+not write: a resolution outside RESOLUTIONS, more than MAX_STATES states, a malformed scene object, another kind).
 """
 
 from __future__ import annotations
@@ -36,15 +37,61 @@ from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, BalancePart, CannotR
                      State, print_reports, read_npz)
 
 DEFAULT_RESOLUTION = 0.005  # what manifoldgen used before paths recorded their resolution
+RESOLUTIONS = (1e-5, 0.05)  # rad: the resolutions rechecked (manifoldgen writes 0.005; its planners check at 0.05)
+MAX_STATES = 1_000_000  # dense states one check may make
 ENDPOINT_TOLERANCE = 1e-6
+
+
+def checked_resolution(value, where: str) -> float:
+    """``value`` (from ``where``: the option or a meta key) when it is a number within RESOLUTIONS, else
+    CannotRecheck naming it and the range."""
+    low, high = RESOLUTIONS
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not low <= value <= high:
+        raise CannotRecheck(f"{where} {value!r} is outside the rechecked range [{low:g}, {high:g}] rad; pass "
+                            "--resolution R within it")
+    return float(value)
+
+
+def path_kind(meta: dict) -> None:
+    """CannotRecheck unless the meta is a path's (``kind`` "path", or absent as in manifoldgen's own reader)."""
+    if not isinstance(meta, dict):
+        raise CannotRecheck(f"the meta is not a JSON object: {meta!r:.80}")
+    if meta.get("kind", "path") != "path":
+        raise CannotRecheck(f"meta 'kind' is {meta.get('kind')!r}, not 'path' (check a roadmap with check_roadmap.py, "
+                            "a dataset with check_dataset.py)")
+
+
+def path_resolution(meta: dict, resolution: float | None, source: str = "meta") -> float:
+    """The spacing a path is rechecked at: ``resolution`` (--resolution) if given, else the meta's (read from
+    ``source``) ``validation.resolution`` (DEFAULT_RESOLUTION when absent), checked by :func:`checked_resolution`."""
+    if resolution is not None:
+        return checked_resolution(resolution, "--resolution")
+    validation = meta.get("validation") or {}
+    if not isinstance(validation, dict):
+        raise CannotRecheck(f"{source} 'validation' must be an object, got {validation!r:.80}; remake the file")
+    return checked_resolution(validation.get("resolution", DEFAULT_RESOLUTION), f"{source} validation.resolution")
+
+
+def segment_steps(distances: np.ndarray, resolution: float) -> np.ndarray:
+    """States each segment of these lengths gets (at least 1), as floats (no overflow), NaN lengths 1."""
+    return np.fmax(1.0, np.ceil(np.asarray(distances, float) / resolution))
+
+
+def within_budget(states: float, resolution: float) -> None:
+    """CannotRecheck when a check would make more than MAX_STATES states."""
+    if not states <= MAX_STATES:
+        raise CannotRecheck(f"checking every {resolution:g} would make {states:,.0f} states, more than the "
+                            f"{MAX_STATES:,} allowed; pass a coarser --resolution (at most {RESOLUTIONS[1]:g})")
 
 
 def densify(path: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """States every ``resolution`` (Euclidean) along each segment, the last waypoint included -> (M, n) states
-    and (M,) the segment of each state."""
+    and (M,) the segment of each state; CannotRecheck beyond MAX_STATES states."""
     if len(path) == 1:
         return path.copy(), np.zeros(1, int)
-    steps = np.maximum(1, np.ceil(np.linalg.norm(np.diff(path, axis=0), axis=1) / resolution).astype(int))
+    steps = segment_steps(np.linalg.norm(np.diff(path, axis=0), axis=1), resolution)
+    within_budget(steps.sum() + 1, resolution)
+    steps = steps.astype(int)
     segment = np.repeat(np.arange(len(steps)), steps)
     t = np.concatenate([np.arange(k) / k for k in steps])
     states = path[segment] + t[:, None] * (path[segment + 1] - path[segment])
@@ -66,7 +113,8 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
     try:
         if content is None:
             meta, arrays = read_npz(file, ("path",))
-            path = arrays["path"]
+            path_kind(meta)
+            path = np.asarray(arrays["path"], float)
         else:
             meta, path = content
         n = len(meta["joints"])
@@ -76,10 +124,9 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
         if isinstance(y, dict):  # a dataset-style condition table: not a path file
             raise CannotRecheck("meta 'condition' is not the query's condition values (is this a path file?)")
         y = np.asarray(y if y is not None else [], float).reshape(-1)
-        if resolution is None:
-            resolution = float((meta.get("validation") or {}).get("resolution", DEFAULT_RESOLUTION))
-        if not resolution > 0:
-            raise CannotRecheck(f"resolution must be positive, got {resolution}")
+        resolution = path_resolution(meta, resolution)
+        finite = len(path) and np.all(np.isfinite(path))  # else no state is checked: the path is invalid
+        states, segment = densify(path, resolution) if finite else (path[:0], np.zeros(0, int))
         checker = checker or Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf,
                                      near=near or Path(file).parent)
     except CannotRecheck as exc:
@@ -99,26 +146,23 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
                 recorded = np.asarray(meta[key], float)
                 if recorded.shape != row.shape or np.abs(recorded - row).max() > ENDPOINT_TOLERANCE:
                     reason = reason or f"the path does not {what} at the recorded {key} {recorded.round(4).tolist()}"
-    worst, violations, collisions, outside, count = 0.0, 0, 0, 0, 0
+    worst, violations, collisions, outside, count = 0.0, 0, 0, 0, len(states)
     rechecked = True
     balance = [p for p in checker.constraint.parts if isinstance(p, BalancePart)]
     depths, drifts = [], []
-    if len(path) and np.all(np.isfinite(path)):
-        states, segment = densify(path, resolution)
-        count = len(states)
-        for i, (q, seg) in enumerate(zip(states, segment)):
-            if balance:  # static stability with pinocchio's own centre of mass and frame placements
-                state = State(checker.robot, q)
-                depths.append(min(b.com_depth(state) for b in balance))
-                drifts.append(max(b.foot_drift(state) for b in balance))
-            v = checker.judge(q, y, explain=not reason)
-            worst = max(worst, v.worst)
-            rechecked &= v.ok_constraint is not None
-            violations += v.ok_constraint is False
-            collisions += not v.ok_collision
-            outside += not v.ok_limits
-            if not v.ok and not reason:
-                reason = f"segment {seg} (state {i}): " + "; ".join(v.reasons)
+    for i, (q, seg) in enumerate(zip(states, segment)):
+        if balance:  # static stability with pinocchio's own centre of mass and frame placements
+            state = State(checker.robot, q)
+            depths.append(min(b.com_depth(state) for b in balance))
+            drifts.append(max(b.foot_drift(state) for b in balance))
+        v = checker.judge(q, y, explain=not reason)
+        worst = max(worst, v.worst)
+        rechecked &= v.ok_constraint is not None
+        violations += v.ok_constraint is False
+        collisions += not v.ok_collision
+        outside += not v.ok_limits
+        if not v.ok and not reason:
+            reason = f"segment {seg} (state {i}): " + "; ".join(v.reasons)
     valid = not reason
     stability = None
     if depths:
@@ -154,6 +198,12 @@ def bench_checks(folder: Path, urdf: str | None, srdf: str | None, resolution: f
     except (OSError, ValueError) as exc:
         reason = f"not a readable bench folder (problem.json and runs.jsonl): {exc}"
         yield {"status": EXIT_CANNOT, "details": [], "line": f"{folder}: CANNOT RECHECK: {reason}"}
+        return
+    try:
+        path_kind(meta)
+        resolution = path_resolution(meta, resolution, "problem.json")
+    except CannotRecheck as exc:
+        yield {"status": EXIT_CANNOT, "details": [], "line": f"{folder}: CANNOT RECHECK: {exc}"}
         return
     unsolved = 0
     for record in records:

@@ -13,7 +13,8 @@ state; each recorded length is compared with its nodes' distance, and ``scene_sh
        of tolerance, 0 states violating the constraint, 0 in collision, 0 outside the limits): VALID
 
 Exit status: 0 every roadmap valid; 1 some edge invalid; 2 bad usage; 3 could not recheck (a user constraint type
-``module:Class``, the robot not found or not the file's, an unreadable file or not a roadmap).
+``module:Class``, the robot not found or not the file's, an unreadable file or not a roadmap, or one manifoldgen does
+not write: another format, a robot_identity not the robot files', malformed arrays or edges, an absurd resolution).
 """
 
 from __future__ import annotations
@@ -27,29 +28,62 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from check_path import outside_check  # noqa: E402
-from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker, exit_status,  # noqa: E402
-                     print_reports, read_npz)
+from check_path import checked_resolution, outside_check, segment_steps, within_budget  # noqa: E402
+from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker, RobotFiles,  # noqa: E402
+                     exit_status, print_reports, read_npz, sha256)
 
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance, as manifoldgen reads it
+FORMAT_VERSION = 1  # the roadmap format docs/file-formats.md describes
+REMAKE = "remake the file with `manifoldgen plan --roadmap`"
 
 
 def read_roadmap(file) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
-    """``meta``, ``nodes (N, n)``, ``edges (E, 2)`` int and ``lengths (E,)`` of a roadmap file, their shapes checked."""
+    """``meta``, ``nodes (N, n)``, ``edges (E, 2)`` int and ``lengths (E,)`` of a roadmap file, its kind, format,
+    array types and shapes checked, and every edge two distinct nodes, lower first, each pair once."""
     meta, arrays = read_npz(file, ("nodes", "edges", "lengths"))
     if meta.get("kind") != "roadmap":
         raise CannotRecheck(f"meta 'kind' is {meta.get('kind')!r}, not 'roadmap' (check a path with check_path.py)")
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise CannotRecheck(f"meta 'format_version' is {meta.get('format_version')!r}, not {FORMAT_VERSION} (the "
+                            f"roadmap format this checker reads); {REMAKE}")
     nodes, edges, lengths = arrays["nodes"], arrays["edges"], arrays["lengths"]
     n = len(meta["joints"])
-    if nodes.ndim != 2 or nodes.shape[1] != n:
-        raise CannotRecheck(f"nodes have shape {nodes.shape}, expected (N, {n}) for the file's joints")
-    if edges.ndim != 2 or edges.shape[1] != 2 or lengths.shape != (len(edges),) or np.any(edges != np.round(edges)):
-        raise CannotRecheck(f"edges {edges.shape} must be (E, 2) node indices and lengths {lengths.shape} (E,)")
-    if len(edges) and (edges.min() < 0 or edges.max() >= len(nodes)):
-        raise CannotRecheck(f"an edge names a node outside 0..{len(nodes) - 1}")
-    if not isinstance(meta.get("resolution"), (int, float)) or not meta["resolution"] > 0:
-        raise CannotRecheck(f"meta 'resolution' must be a positive number, got {meta.get('resolution')!r}")
+    if nodes.dtype != np.float64 or nodes.ndim != 2 or nodes.shape[1] != n:
+        raise CannotRecheck(f"nodes are {nodes.dtype} {nodes.shape}, the format stores float64 (N, {n}) for the "
+                            f"file's joints; {REMAKE}")
+    if edges.dtype.kind not in "iu" or edges.ndim != 2 or edges.shape[1] != 2:
+        raise CannotRecheck(f"edges are {edges.dtype} {edges.shape}, the format stores (E, 2) integer node indices; "
+                            f"{REMAKE}")
+    if lengths.dtype != np.float64 or lengths.shape != (len(edges),):
+        raise CannotRecheck(f"lengths are {lengths.dtype} {lengths.shape}, the format stores float64 ({len(edges)},), "
+                            f"one per edge; {REMAKE}")
+    first = {}
+    for e, (a, b) in enumerate(edges.tolist()):
+        if not (0 <= a < len(nodes) and 0 <= b < len(nodes)):
+            why = f"names a node outside 0..{len(nodes) - 1}"
+        elif a == b:
+            why = f"joins node {a} to itself"
+        elif a > b:
+            why = "has its higher node first (the format stores each edge lower node first)"
+        elif (a, b) in first:
+            why = f"repeats edge {first[a, b]}"
+        else:
+            first[a, b] = e
+            continue
+        raise CannotRecheck(f"edge {e} [{a}, {b}] {why}; {REMAKE}")
     return meta, nodes, edges.astype(int), lengths
+
+
+def identity_problem(identity, files: RobotFiles) -> str | None:
+    """Why meta ``robot_identity`` is not the robot files found (URDF and SRDF by sha256), or None."""
+    if not isinstance(identity, dict) or not identity.get("urdf_sha256"):
+        return f"meta 'robot_identity' {identity!r:.80} has no urdf_sha256; {REMAKE}"
+    for key, path in (("urdf_sha256", files.urdf), ("srdf_sha256", files.srdf)):
+        found = sha256(path) if path is not None else None
+        if identity.get(key) != found:
+            return (f"meta robot_identity {key} {str(identity.get(key))[:12]} is not that of the robot files found "
+                    f"({path or 'no SRDF'}: {str(found)[:12]}); pass the file's robot with --urdf/--srdf or {REMAKE}")
+    return None
 
 
 def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolution: float | None = None) -> dict:
@@ -58,11 +92,17 @@ def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolu
     ``violations``, ``collisions``, ``outside`` (states), ``states``, ``resolution``."""
     try:
         meta, nodes, edges, lengths = read_roadmap(file)
-        resolution = float(meta["resolution"]) if resolution is None else resolution
-        if not resolution > 0:
-            raise CannotRecheck(f"resolution must be positive, got {resolution}")
+        resolution = (checked_resolution(meta.get("resolution"), "meta resolution") if resolution is None else
+                      checked_resolution(resolution, "--resolution"))
+        pieces = [(f"edge {e} (nodes {a}-{b})", nodes[[a, b]], e) for e, (a, b) in enumerate(edges)]
+        pieces += [(f"node {i} (no edge)", nodes[[i]], -1) for i in sorted(set(range(len(nodes))) - set(edges.ravel()))]
+        steps = segment_steps(np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1), resolution)
+        within_budget(steps.sum() + len(pieces), resolution)  # each edge's states and its last node; lone nodes
         y = np.asarray(meta.get("condition") or [], float).reshape(-1)
         checker = Checker(meta, len(y), scene=meta.get("scene") or [], urdf=urdf, srdf=srdf, near=Path(file).parent)
+        problem = identity_problem(meta.get("robot_identity"), checker.files)
+        if problem:
+            raise CannotRecheck(problem)
     except CannotRecheck as exc:
         return {"status": EXIT_CANNOT, "details": [], "valid": False, "reason": str(exc), "invalid_edges": [],
                 "line": f"{file}: CANNOT RECHECK: {exc}"}
@@ -73,8 +113,6 @@ def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolu
     objects = json.dumps(meta.get("scene") or [], sort_keys=True, separators=(",", ":"))
     if hashlib.sha256(objects.encode()).hexdigest() != meta.get("scene_sha256"):
         problems.append("meta 'scene_sha256' is not the sha256 of the recorded scene's objects (the file was edited)")
-    pieces = [(f"edge {e} (nodes {a}-{b})", nodes[[a, b]], e) for e, (a, b) in enumerate(edges)]
-    pieces += [(f"node {i} (no edge)", nodes[[i]], -1) for i in sorted(set(range(len(nodes))) - set(edges.ravel()))]
     worst, violations, collisions, outside, states = 0.0, 0, 0, 0, 0
     for name, path, e in pieces:
         report = outside_check(f"{file} {name}", resolution=resolution, content=(meta, path), checker=checker)

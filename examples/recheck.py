@@ -35,6 +35,7 @@ import pinocchio as pin
 
 EXIT_VALID, EXIT_INVALID, EXIT_USAGE, EXIT_CANNOT = 0, 1, 2, 3
 LIMIT_MARGIN = 1e-9  # rad or m, as manifoldgen's within_limits
+MAX_METRES = 1e3  # largest scene position coordinate or extent, as manifoldgen's shapes.py
 ALWAYS_SAMPLES = 200  # random configurations for the "always colliding" pairs (robots whose SRDF disables few)
 BASE_JOINTS = ("base_x", "base_y", "base_z", "base_yaw", "base_pitch", "base_roll")
 BUILTIN_TYPES = ("pose", "orientation", "plane", "sphere", "joint_linear", "closed_chain", "rotation", "balance", "set")
@@ -51,7 +52,7 @@ class CannotRecheck(Exception):
 
 # ---------------------------------------------------------------------- files
 def read_npz(path: str | os.PathLike, arrays: tuple[str, ...]) -> tuple[dict, dict[str, np.ndarray]]:
-    """``meta`` (parsed JSON) and the named arrays of a manifoldgen .npz file."""
+    """``meta`` (parsed JSON) and the named arrays of a manifoldgen .npz file, as stored (numbers only)."""
     try:
         with np.load(path, allow_pickle=False) as f:
             found = {k: f[k] for k in f.files}
@@ -64,10 +65,15 @@ def read_npz(path: str | os.PathLike, arrays: tuple[str, ...]) -> tuple[dict, di
         meta = json.loads(str(found.pop("meta")))
     except ValueError as exc:
         raise CannotRecheck(f"{path}: meta is not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise CannotRecheck(f"{path}: meta is not a JSON object")
     for key in ("joints", "constraint"):
         if key not in meta:
             raise CannotRecheck(f"{path}: meta has no '{key}'")
-    return meta, {k: np.asarray(found[k], dtype=float) for k in arrays}
+    for k in arrays:
+        if found[k].dtype.kind not in "fiu":
+            raise CannotRecheck(f"{path}: array '{k}' holds {found[k].dtype}, not numbers; remake the file")
+    return meta, {k: found[k] for k in arrays}
 
 
 def sha256(path: Path) -> str:
@@ -239,9 +245,19 @@ class RobotModel:
             self.group_ids.append(self.model.getJointId(j))
         self.reference = pin.neutral(self.model)
         locked = meta.get("locked", task.get("locked", {})) or {}
+        if not isinstance(locked, dict):
+            raise CannotRecheck(f"meta 'locked' must map joint names to values, got {locked!r}; remake the file")
+        self.locked_problem = None  # a locked joint outside its URDF limits: every configuration is outside
         for j, value in locked.items():
             if not self.model.existJointName(j):
                 raise CannotRecheck(f"locked joint '{j}' of the file is not in {files.urdf}")
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                raise CannotRecheck(f"locked joint '{j}' has value {value!r}, not a number; remake the file")
+            jm = self.model.joints[self.model.getJointId(j)]
+            if jm.nq == 1 and self.locked_problem is None:
+                lo, hi = self.model.lowerPositionLimit[jm.idx_q], self.model.upperPositionLimit[jm.idx_q]
+                if not lo - LIMIT_MARGIN <= value <= hi + LIMIT_MARGIN:
+                    self.locked_problem = f"locked joint {j} = {value:.4f} not in [{lo:.4f}, {hi:.4f}]"
             self._set(self.reference, self.model.getJointId(j), float(value))
         bounds = np.asarray(task.get("base_bounds") or [[-2, -2, -1], [2, 2, 2]], float)
         lower, upper = [], []
@@ -299,9 +315,10 @@ class RobotModel:
         return (bodies or matches)[0]  # a link's frame where a joint shares its name, as manifoldgen reads it
 
     def limit_problem(self, q: np.ndarray) -> str | None:
+        """The first coordinate of ``q`` (or, for every ``q``, locked joint) outside its limits, or None."""
         bad = np.flatnonzero((q < self.lower - LIMIT_MARGIN) | (q > self.upper + LIMIT_MARGIN))
         if not len(bad):
-            return None
+            return self.locked_problem
         j = bad[0]
         return f"{self.joints[j]} = {q[j]:.4f} not in [{self.lower[j]:.4f}, {self.upper[j]:.4f}]"
 
@@ -736,26 +753,56 @@ class ConstraintCheck:
 
 
 # ---------------------------------------------------------------------- collisions
+def _numbers(obj: dict, key: str, size: int, positive: bool = False, metres: bool = True) -> list[float]:
+    """Scene object ``obj``'s ``key``: ``size`` finite numbers (positive ones for extents; metres within MAX_METRES),
+    as manifoldgen's scenes have (its ``plan`` refuses others); else CannotRecheck naming the object."""
+    value = obj.get(key)
+    items = value if isinstance(value, list) else [value]
+    ok = len(items) == size and all(isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1e300
+                                    for v in items)  # a JSON integer past 1e300 would overflow a float
+    if ok:
+        a = np.asarray(items, float)
+        ok = bool(np.all(np.isfinite(a)) and (not metres or np.all(np.abs(a) <= MAX_METRES))
+                  and (not positive or np.all(a > 0)))
+    if not ok:
+        what = (f"{size if size > 1 else 'a'} {'positive ' * positive}finite number{'s' * (size > 1)}"
+                + f" within {MAX_METRES:g} m" * metres)
+        raise CannotRecheck(f"scene object '{obj.get('name')}' {key} {value!r} is not {what} (manifoldgen refuses "
+                            "such a scene); remake the file")
+    return [float(v) for v in items]
+
+
 def _shape(obj: dict):
     kind = obj.get("type")
     if kind == "box":
-        return coal.Box(*[float(v) for v in obj["size"]])
+        return coal.Box(*_numbers(obj, "size", 3, positive=True))
     if kind == "sphere":
-        return coal.Sphere(float(obj["radius"]))
+        return coal.Sphere(*_numbers(obj, "radius", 1, positive=True))
     if kind == "cylinder":
-        return coal.Cylinder(float(obj["radius"]), float(obj["length"]))
+        return coal.Cylinder(*_numbers(obj, "radius", 1, positive=True), *_numbers(obj, "length", 1, positive=True))
     if kind == "mesh":
-        if not Path(obj["mesh"]).is_file():
-            raise CannotRecheck(f"mesh file {obj['mesh']} of scene object '{obj.get('name')}' not found")
-        return coal.MeshLoader().load(obj["mesh"], np.asarray(obj.get("scale", [1, 1, 1]), float))
+        if not isinstance(obj.get("mesh"), str) or not Path(obj["mesh"]).is_file():
+            raise CannotRecheck(f"mesh file {obj.get('mesh')!r} of scene object '{obj.get('name')}' not found")
+        scale = _numbers({"scale": [1.0] * 3, **obj}, "scale", 3, positive=True, metres=False)
+        return coal.MeshLoader().load(obj["mesh"], np.asarray(scale))
     raise CannotRecheck(f"scene object '{obj.get('name')}' has unknown type {kind!r}")
 
 
-def _se3(pose: dict) -> pin.SE3:
-    x, y, z, w = pose.get("quaternion", [0.0, 0.0, 0.0, 1.0])
+def _se3(obj: dict) -> pin.SE3:
+    """Scene object ``obj``'s pose: finite position within MAX_METRES, unit quaternion (as manifoldgen writes them)."""
+    pose = obj.get("pose")
+    if not isinstance(pose, dict):
+        raise CannotRecheck(f"scene object '{obj.get('name')}' has no pose {{'position', 'quaternion'}}; remake the "
+                            "file")
+    position = _numbers({"name": obj.get("name"), **pose}, "position", 3)
+    x, y, z, w = _numbers({"name": obj.get("name"), "quaternion": [0.0, 0.0, 0.0, 1.0], **pose}, "quaternion", 4,
+                          metres=False)
     q = pin.Quaternion(w, x, y, z)
+    if abs(q.norm() - 1.0) > 1e-3:
+        raise CannotRecheck(f"scene object '{obj.get('name')}' quaternion {[x, y, z, w]} has norm {q.norm():.4f}, "
+                            "not 1 (manifoldgen refuses such a scene); remake the file")
     q.normalize()
-    return pin.SE3(q.toRotationMatrix(), np.asarray(pose["position"], float))
+    return pin.SE3(q.toRotationMatrix(), np.asarray(position))
 
 
 class Collisions:
@@ -795,11 +842,11 @@ class Collisions:
                 fid = robot.frame(obj["attached_to"])
                 frame = model.frames[fid]
                 gid = geom.addGeometryObject(pin.GeometryObject(str(obj.get("name", "tool")), frame.parentJoint, fid,
-                                                                frame.placement * _se3(obj["pose"]), _shape(obj)))
+                                                                frame.placement * _se3(obj), _shape(obj)))
                 tools.append((gid, frame.parentJoint, set(obj.get("touch_links", []))))
             else:
                 obstacles.append(geom.addGeometryObject(pin.GeometryObject(str(obj.get("name", "obstacle")), 0, 0,
-                                                                           _se3(obj["pose"]), _shape(obj))))
+                                                                           _se3(obj), _shape(obj))))
         for oid in obstacles:
             for i, joint, _ in links:
                 if robot.moving[joint]:
@@ -848,6 +895,9 @@ class Collisions:
 def with_held(meta: dict, scene: list[dict] | None) -> list[dict]:
     """The scene's objects plus the object the task holds in every scene (``meta.task.attached``: a tray), unless
     the scene already lists it (path files do; datasets have no scene)."""
+    if not isinstance(scene or [], list) or not all(isinstance(o, dict) for o in scene or []):
+        raise CannotRecheck(f"meta 'scene' must be a list of objects with 'type' and 'pose', got {scene!r:.80}; "
+                            "remake the file")
     items = list(scene or [])
     held = (meta.get("task") or {}).get("attached")
     if isinstance(held, dict) and not any(o.get("attached_to") and o.get("name") == held.get("name") for o in items):

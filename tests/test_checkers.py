@@ -412,3 +412,165 @@ def test_robot_given_as_a_urdf_path_is_found_next_to_the_file(folder, tmp_path):
     (moved / "mypanda.urdf").unlink()
     result = run(folder, "check_dataset.py", moved / "mine.npz")
     assert result.returncode == 3 and "pass --urdf PATH" in result.stdout, result.stdout
+
+
+@pytest.fixture(scope="module")
+def wall(tmp_path_factory):
+    """(path file, roadmap file) of the panda pose task's wall scene, planned once by `manifoldgen plan --roadmap`
+    with the shipped CVAE (seed 0)."""
+    from typer.testing import CliRunner
+
+    from manifoldgen.cli import app
+    from manifoldgen.models import pretrained_model_dir
+
+    base = tmp_path_factory.mktemp("wall")
+    result = CliRunner().invoke(app, ["plan", "pose", "--robot", "panda", "--scene", "wall", "--sampler",
+                                      f"cvae:{pretrained_model_dir()}", "--seed", "0", "--time", "60", "--no-picture",
+                                      "--roadmap", str(base / "r.npz"), "-o", str(base / "p.npz")])
+    assert result.exit_code == 0, result.output
+    return base / "p.npz", base / "r.npz"
+
+
+def _edited(source: Path, out: Path, edit_meta=None, **arrays) -> Path:
+    """A copy of a path or roadmap file with ``edit_meta(meta)`` applied and ``arrays`` replaced; a roadmap's
+    ``scene_sha256`` recomputed (a tester's edit that keeps the fingerprint matching)."""
+    import hashlib
+
+    with np.load(source) as f:
+        found = {k: f[k] for k in f.files}
+    meta = json.loads(str(found.pop("meta")))
+    if edit_meta is not None:
+        edit_meta(meta)
+    if "scene_sha256" in meta:
+        objects = json.dumps(meta["scene"], sort_keys=True, separators=(",", ":"))
+        meta["scene_sha256"] = hashlib.sha256(objects.encode()).hexdigest()
+    np.savez(out, **{**found, **arrays}, meta=np.array(json.dumps(meta)))
+    return out
+
+
+def _set(*keys, value):
+    """A meta edit: ``meta[keys[0]]...[keys[-1]] = value``."""
+    def edit(meta):
+        for key in keys[:-1]:
+            meta = meta[key]
+        meta[keys[-1]] = value
+    return edit
+
+
+def test_absurd_resolutions_and_too_many_states_are_refused(wall, tmp_path, monkeypatch, capsys):
+    """A resolution outside [1e-5, 0.05] rad (the file's, a roadmap's, a bench folder's or --resolution) cannot
+    recheck, nor can a check that would make more than MAX_STATES states; the package's own files pass."""
+    sys.path.insert(0, str(EXAMPLES))
+    import check_path
+    from check_path import main, outside_check
+    from check_roadmap import roadmap_check
+
+    path, roadmap = wall
+    assert outside_check(path)["status"] == 0 and roadmap_check(roadmap)["status"] == 0
+    for value in (1e-300, 100.0, 0.0, float("nan")):
+        report = outside_check(_edited(path, tmp_path / "p.npz", _set("validation", "resolution", value=value)))
+        assert report["status"] == 3 and f"meta validation.resolution {value!r} is outside the rechecked range " \
+            "[1e-05, 0.05] rad" in report["line"], report["line"]
+        report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", _set("resolution", value=value)))
+        assert report["status"] == 3 and f"meta resolution {value!r} is outside" in report["line"], report["line"]
+    assert main([str(path), "--resolution", "100"]) == 3
+    assert capsys.readouterr().out.strip() == f"{path}: CANNOT RECHECK: --resolution 100.0 is outside the rechecked " \
+        "range [1e-05, 0.05] rad; pass --resolution R within it"
+    assert "--resolution 1e-06 is outside" in roadmap_check(roadmap, resolution=1e-6)["line"]
+    monkeypatch.setattr(check_path, "MAX_STATES", 500)
+    for report in (outside_check(path), roadmap_check(roadmap)):
+        assert report["status"] == 3 and "states, more than the 500 allowed; pass a coarser --resolution" \
+            in report["line"], report["line"]
+    # a bench folder: problem.json's resolution, refused once
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    with np.load(path) as f:
+        meta, waypoints = json.loads(str(f["meta"])), f["path"]
+    (bench / "runs.jsonl").write_text(json.dumps({"method": "m", "run": 0, "solved": True,
+                                                  "path": waypoints.tolist()}) + "\n")
+    (bench / "problem.json").write_text(json.dumps({**meta, "validation": {"resolution": 0.005}}))
+    monkeypatch.undo()
+    assert main([str(bench)]) == 0 and "1 solved runs rechecked above" in capsys.readouterr().out
+    (bench / "problem.json").write_text(json.dumps({**meta, "validation": {"resolution": 100.0}}))
+    assert main([str(bench)]) == 3
+    assert capsys.readouterr().out.strip() == f"{bench}: CANNOT RECHECK: problem.json validation.resolution 100.0 is " \
+        "outside the rechecked range [1e-05, 0.05] rad; pass --resolution R within it"
+
+
+@pytest.mark.parametrize("change,named", [
+    ({"size": [-0.2, -0.2, -0.2]}, "size [-0.2, -0.2, -0.2] is not 3 positive finite numbers"),
+    ({"size": [0.4, float("nan"), 0.6]}, "size [0.4, nan, 0.6] is not 3 positive finite numbers"),
+    ({"type": "sphere", "radius": -0.2}, "radius -0.2 is not a positive finite number"),
+    ({"type": "sphere", "radius": 0.0}, "radius 0.0 is not a positive finite number"),
+    ({"pose": {"position": [float("inf"), 0.0, 0.0]}}, "position [inf, 0.0, 0.0] is not 3 finite numbers"),
+])
+def test_malformed_scene_objects_are_refused(wall, tmp_path, change, named):
+    sys.path.insert(0, str(EXAMPLES))
+    from check_path import outside_check
+    from check_roadmap import roadmap_check
+
+    def edit(meta):
+        meta["scene"][0].update(change)
+
+    path, roadmap = wall
+    for report in (outside_check(_edited(path, tmp_path / "p.npz", edit)),
+                   roadmap_check(_edited(roadmap, tmp_path / "r.npz", edit))):
+        assert report["status"] == 3 and f"CANNOT RECHECK: scene object 'wall_left' {named}" in report["line"] \
+            and "(manifoldgen refuses such a scene)" in report["line"], report["line"]
+
+
+def test_a_locked_joint_outside_its_limits_is_invalid(wall, tmp_path):
+    sys.path.insert(0, str(EXAMPLES))
+    from check_path import outside_check
+    from check_roadmap import roadmap_check
+
+    path, roadmap = wall
+    locked = _set("locked", "panda_finger_joint1", value=5.0)
+    report = outside_check(_edited(path, tmp_path / "p.npz", locked))
+    assert report["status"] == 1 and report["outside"] == report["states"], report["line"]
+    assert report["reason"] == "segment 0 (state 0): limits: locked joint panda_finger_joint1 = 5.0000 not in " \
+        "[0.0000, 0.0400]"
+    report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", locked))
+    assert report["status"] == 1 and "limits: locked joint panda_finger_joint1 = 5.0000" in report["reason"]
+
+
+def test_check_path_refuses_another_kind_of_file(wall, tmp_path):
+    sys.path.insert(0, str(EXAMPLES))
+    from check_path import outside_check
+
+    for kind in ("roadmap", "dataset"):
+        report = outside_check(_edited(wall[0], tmp_path / "p.npz", _set("kind", value=kind)))
+        assert report["status"] == 3 and f"meta 'kind' is '{kind}', not 'path'" in report["line"], report["line"]
+
+
+def test_roadmap_format_identity_arrays_and_edges_are_checked(wall, tmp_path):
+    sys.path.insert(0, str(EXAMPLES))
+    from check_roadmap import roadmap_check
+
+    roadmap = wall[1]
+    with np.load(roadmap) as f:
+        nodes, edges = f["nodes"], f["edges"]
+
+    def lengths(e):
+        return np.linalg.norm(nodes[e[:, 1]] - nodes[e[:, 0]], axis=1)
+
+    self_edge, swapped = edges.copy(), edges.copy()
+    self_edge[2] = [4, 4]
+    swapped[2] = swapped[2, ::-1]
+    repeated = np.concatenate([edges, edges[1:2]])
+    cases = [
+        ({}, _set("robot_identity", "urdf_sha256", value="0" * 64), "meta robot_identity urdf_sha256 000000000000 "
+         "is not that of the robot files found"),
+        ({}, _set("robot_identity", "srdf_sha256", value="1" * 64), "meta robot_identity srdf_sha256 111111111111"),
+        ({}, _set("format_version", value=2), "meta 'format_version' is 2, not 1"),
+        ({"edges": self_edge, "lengths": lengths(self_edge)}, None, "edge 2 [4, 4] joins node 4 to itself"),
+        ({"edges": swapped, "lengths": lengths(swapped)}, None, f"edge 2 {swapped[2].tolist()} has its higher node "
+         "first"),
+        ({"edges": repeated, "lengths": lengths(repeated)}, None, f"edge {len(edges)} {edges[1].tolist()} repeats "
+         "edge 1"),
+        ({"edges": edges.astype(float)}, None, "edges are float64 "),
+        ({"nodes": nodes.astype(np.float32)}, None, f"nodes are float32 {nodes.shape}, the format stores float64"),
+    ]
+    for arrays, edit, named in cases:
+        report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", edit, **arrays))
+        assert report["status"] == 3 and named in report["line"], (named, report["line"])
