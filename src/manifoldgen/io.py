@@ -12,6 +12,7 @@ import json
 import os
 import re
 import tempfile
+import zipfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -262,6 +263,9 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
         with loaded as f:
             arrays = {k: f[k] for k in f.files}
     except Exception as exc:  # zipfile/np raise many types for damaged files
+        if "pickle" in str(exc) and zipfile.is_zipfile(path):
+            raise ManifoldgenError(f"{path} holds an object array (a pickle), which is never loaded: it could run "
+                                   "code; regenerate the file with manifoldgen") from None
         why = "neither a zip archive nor an .npy array" if "pickle" in str(exc) else \
             f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}"
         raise ManifoldgenError(f"{path} is not a readable .npz file ({why}); it may be truncated or another "

@@ -58,6 +58,9 @@ class Condition:
             raise ManifoldgenError(f"condition values must be numbers, got {self.values!r}") from None
         if not np.isfinite(grid).all():
             raise ManifoldgenError(f"condition values must be finite numbers, got {grid.tolist()}")
+        if self.k and not len(grid):
+            raise ManifoldgenError(f"condition values must hold at least one value of {', '.join(self.names)}, got "
+                                   "none; give values = [[v1], [v2], ...]")
         rows = [tuple(row) for row in grid.tolist()]
         twice = next((row for row in rows if rows.count(row) > 1), None)
         if self.k and twice is not None:

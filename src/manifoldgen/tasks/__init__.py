@@ -187,9 +187,12 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
 def _numbers(value, what: str) -> np.ndarray:
     """``value`` as a flat float array, or a clear error."""
     try:
-        return np.asarray(value, float).reshape(-1)
+        numbers = np.asarray(value, float).reshape(-1)
     except (TypeError, ValueError):
         raise ManifoldgenError(f"{what} must be a list of numbers, got {value!r}") from None
+    if not np.isfinite(numbers).all():
+        raise ManifoldgenError(f"{what} must be finite numbers, got {numbers.tolist()}")
+    return numbers
 
 
 # ---------------------------------------------------------------------- task files
