@@ -223,6 +223,11 @@ def test_a_damaged_or_foreign_roadmap_file_is_refused_in_one_line(saved, tmp_pat
     np.savez(tmp_path / "edited.npz", **arrays)
     with pytest.raises(ManifoldgenError, match="'lengths' are not the distances"):
         Roadmap.load(tmp_path / "edited.npz", lambda segment: True, 0.6)
+    arrays = dict(np.load(saved))
+    arrays["nodes"] = arrays["nodes"].astype(np.float32)  # narrowed: its lengths would disagree, its type says why
+    np.savez(tmp_path / "narrow.npz", **arrays)
+    with pytest.raises(ManifoldgenError, match="'nodes' must be finite float64 numbers .* got float32"):
+        Roadmap.load(tmp_path / "narrow.npz", lambda segment: True, 0.6)
 
 
 def test_plan_refuses_the_roadmap_of_another_scene(saved, tmp_path):

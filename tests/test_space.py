@@ -125,8 +125,9 @@ def test_query_states_and_settings_are_checked():
         space.check_query_state(_at(1.0, 0.0)[0], "goal")
     with pytest.raises(ManifoldgenError, match="start must be 3 finite joint values"):
         space.check_query_state(np.zeros(2), "start")
-    with pytest.raises(ManifoldgenError, match="resolution > 0 and 0 <= margin < 1"):
-        ValidationSettings(resolution=0.0)
-    with pytest.raises(ManifoldgenError, match="resolution > 0 and 0 <= margin < 1"):
+    for resolution in (0.0, 1e-300, 100.0, float("nan")):
+        with pytest.raises(ManifoldgenError, match=r"resolution in \[1e-05, 0.05\] rad and 0 <= margin < 1"):
+            ValidationSettings(resolution=resolution)
+    with pytest.raises(ManifoldgenError, match="0 <= margin < 1"):
         ValidationSettings(margin=1.0)
     assert space.counts()["evaluations"] > 0

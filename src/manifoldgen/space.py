@@ -32,6 +32,11 @@ REASONS = ("limits", "constraint", "inequality", "collision")  # the tests, in t
 CHUNK = 4096  # states validated per batch
 
 
+# the dense check's spacing, rad: finer would only exhaust memory, coarser is not a dense check (the outside
+# checkers, examples/check_path.py, accept the same range)
+RESOLUTION_RANGE = (1e-5, 0.05)
+
+
 @dataclass(frozen=True)
 class ValidationSettings:
     """resolution: spacing (rad, joint-space Euclidean) of the dense path validation, the one
@@ -42,9 +47,10 @@ class ValidationSettings:
     margin: float = 0.05
 
     def __post_init__(self):
-        if not self.resolution > 0 or not 0 <= self.margin < 1:
-            raise ManifoldgenError(f"validation needs resolution > 0 and 0 <= margin < 1, got resolution "
-                                   f"{self.resolution}, margin {self.margin}")
+        low, high = RESOLUTION_RANGE
+        if not low <= self.resolution <= high or not 0 <= self.margin < 1:
+            raise ManifoldgenError(f"validation needs resolution in [{low:g}, {high:g}] rad and 0 <= margin < 1, got "
+                                   f"resolution {self.resolution}, margin {self.margin}")
 
 
 @dataclass

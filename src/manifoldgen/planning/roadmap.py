@@ -265,17 +265,17 @@ def _show(value) -> str:
 
 
 def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The file's ``nodes (N, n)`` float64, ``edges (E, 2)`` int and ``lengths (E,)`` float64, checked: finite nodes
-    as wide as the meta's ``joints``, edges between distinct nodes, lengths their nodes' distances."""
+    """The file's ``nodes (N, n)`` float64, ``edges (E, 2)`` int and ``lengths (E,)`` float64, checked: finite float64
+    nodes as wide as the meta's ``joints``, edges between distinct nodes, lengths their nodes' distances."""
     fix = "the file is damaged or was edited: delete it (the next query starts a new roadmap)"
     missing = [k for k in ("nodes", "edges", "lengths") if k not in arrays]
     if missing:
         raise ManifoldgenError(f"{path}: no {', '.join(missing)} array; {fix}")
     nodes, edges, lengths = arrays["nodes"], arrays["edges"], arrays["lengths"]
     n = len(meta["joints"]) if isinstance(meta.get("joints"), list) else -1
-    if nodes.dtype.kind not in "fiu" or nodes.ndim != 2 or nodes.shape[1] != n or not np.isfinite(nodes).all():
-        raise ManifoldgenError(f"{path}: 'nodes' must be finite numbers of shape (N, {n}) (the meta's joints), got "
-                               f"{nodes.dtype} {nodes.shape}; {fix}")
+    if nodes.dtype != np.float64 or nodes.ndim != 2 or nodes.shape[1] != n or not np.isfinite(nodes).all():
+        raise ManifoldgenError(f"{path}: 'nodes' must be finite float64 numbers of shape (N, {n}) (the meta's "
+                               f"joints), got {nodes.dtype} {nodes.shape}; {fix}")
     if edges.dtype.kind not in "iu" or edges.ndim != 2 or edges.shape[1] != 2 or lengths.shape != (len(edges),) \
             or lengths.dtype.kind != "f":
         raise ManifoldgenError(f"{path}: 'edges' must be (E, 2) integers and 'lengths' (E,) numbers, got "
