@@ -182,6 +182,16 @@ def demo(name: str = typer.Argument("pose", help="Which experiment: pose (panda,
     run(name, output, seed, console)
 
 
+def _roadmap_line(roadmap: Path, result) -> str:
+    """What ``plan --roadmap`` did with the file: routed or not, its nodes, written or not, what it dropped."""
+    held = result.extras["roadmap"]
+    fate = " saved" if held["written"] else ", unchanged" if result.solved else ", the file not written"
+    dropped = held["dropped"]
+    lost = (f"; dropped {dropped['nodes']} nodes and {dropped['edges']} edges read from it that failed the check"
+            if any(dropped.values()) else "")
+    return f"roadmap {roadmap}: {'routed through it' if held['routed'] else 'not routed'}; {held['nodes']} nodes{fate}{lost}"
+
+
 @app.command()
 @friendly
 def plan(task: str = typer.Argument(..., help=TASK_HELP),
@@ -241,13 +251,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
                              local=local, smooth=smooth, settings=values, roadmap=roadmap_file)
-    held = result.extras.get("roadmap") if roadmap is not None else None
-    dropped = held and held["dropped"]
-    routed = held and (f"roadmap {roadmap}: {'routed through it' if held['routed'] else 'not routed'}; "
-                       f"{held['nodes']} nodes"
-                       + (" saved" if held["written"] else ", unchanged" if result.solved else ", the file not written")
-                       + (f"; dropped {dropped['nodes']} nodes and {dropped['edges']} edges read from it that "
-                          "failed the check" if any(dropped.values()) else ""))
+    routed = _roadmap_line(roadmap, result) if roadmap is not None else ""
     if not result.solved:  # no path: nothing is written, so no file can pass for one
         console.print(f"[red]not solved[/] in {result.time_s:.3f} s | {result.samples_drawn} samples, "
                       f"{result.iterations} iterations | {engine(result.extras)} | nothing written")

@@ -94,6 +94,6 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
     console.print(f"trajectory: {info['duration']:.2f} s for a path of {info['path_length']:.2f} rad "
                   f"({info['waypoints']} waypoints) | {check['states']} states every <= {dt:g} s and the motions "
                   f"between them: 100.0% valid (worst constraint use {check['worst_violation']:.2f} of tolerance, "
-                  f"limits and collisions checked) | velocity <= {vel_scale:g} x URDF, acceleration <= {acc_scale:g} x reference; "
-                  f"TOPP-RA timing stretched x{info['stretch_after_toppra']:.2f} -> {output}", markup=False,
+                  f"limits and collisions checked) | velocity <= {vel_scale:g} x URDF, acceleration <= "
+                  f"{acc_scale:g} x reference; TOPP-RA timing stretched x{info['stretch_after_toppra']:.2f} -> {output}", markup=False,
                   highlight=False)

@@ -3,8 +3,8 @@ scene) search before planning (as OMPL's Thunder keeps its solutions).
 
 Nodes are the waypoints of earlier paths; an edge is a straight segment that passed the space's dense path check
 (a path's consecutive waypoints, a new path's waypoints joined to the nearest nodes of earlier ones, a query's start
-and goal joined to their nearest nodes, two each at most). A query joins start and goal to the roadmap and takes the shortest route
-through it; a route is made of checked segments only, so it is valid as a whole by the same check.
+and goal joined to their nearest nodes, two each at most). A query joins start and goal to the roadmap and takes the
+shortest route through it; a route is made of checked segments only, so it is valid as a whole by the same check.
 
 A roadmap is saved to an ``.npz`` file (:meth:`Roadmap.save`, docs/file-formats.md) and read back
 (:meth:`Roadmap.load`) for later queries in another process. The file is an input like any other: its meta must

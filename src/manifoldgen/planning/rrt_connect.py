@@ -32,7 +32,8 @@ class RRTConnectSettings(PlannerSettings):
     Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace or
     ``compile`` is off, through callbacks (``extras['compile_fallback']``: why), else Python; the result's
     ``extras['core']`` says which, ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an
-    error when the core cannot run it); ``spheres``: the core's planning checks use conservative sphere models of the robot
+    error when the core cannot run it); ``spheres``: the core's planning checks use conservative sphere models of the
+    robot
     (:mod:`manifoldgen.spheres`; a geometry without them is checked exactly, ``extras['sphere_fallback']``
     says which and why), the final dense check of a path stays exact; ``reach``: a pooled sample is a
     stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
