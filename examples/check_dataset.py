@@ -18,6 +18,7 @@ Exit status: 0 every row of every file valid; 1 some row invalid; 2 bad usage; 3
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -25,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker,  # noqa: E402
-                     checker_parser, print_reports, read_npz)
+                     print_reports, read_npz)
 
 
 def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, show: int = 5) -> dict:
@@ -87,7 +88,11 @@ def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, sh
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = checker_parser("dataset / sample", "dataset or sample .npz files")
+    parser = argparse.ArgumentParser(description="Recheck manifoldgen dataset / sample files (pinocchio + coal only).",
+                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
+    parser.add_argument("files", nargs="+", help="dataset or sample .npz files")
+    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
+    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--show", type=int, default=5, help="invalid rows to explain per file (default 5)")
     args = parser.parse_args(argv)
     return print_reports(check(path, args.urdf, args.srdf, args.show) for path in args.files)

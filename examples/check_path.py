@@ -25,6 +25,7 @@ not write: a resolution outside RESOLUTIONS, more than MAX_STATES states, a malf
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -33,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, BalancePart, CannotRecheck, Checker,  # noqa: E402
-                     State, checker_parser, print_reports, read_npz)
+                     State, print_reports, read_npz)
 
 DEFAULT_RESOLUTION = 0.005  # what manifoldgen used before paths recorded their resolution
 RESOLUTIONS = (1e-5, 0.05)  # rad: the resolutions rechecked (manifoldgen writes 0.005; its planners check at 0.05)
@@ -217,8 +218,12 @@ def bench_checks(folder: Path, urdf: str | None, srdf: str | None, resolution: f
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = checker_parser("path", "path .npz files written by `manifoldgen plan`, or folders written by "
-                                    "`manifoldgen bench plan`")
+    parser = argparse.ArgumentParser(description="Recheck manifoldgen path files (pinocchio + coal only).",
+                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
+    parser.add_argument("files", nargs="+", help="path .npz files written by `manifoldgen plan`, or folders "
+                                                 "written by `manifoldgen bench plan`")
+    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
+    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--resolution", type=float,
                         help="state spacing along segments (default: the file's meta.validation.resolution)")
     args = parser.parse_args(argv)

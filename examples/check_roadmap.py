@@ -19,6 +19,7 @@ not write: another format, a robot_identity not the robot files', malformed arra
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import sys
@@ -29,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from check_path import checked_resolution, outside_check, segment_steps, within_budget  # noqa: E402
 from recheck import (EXIT_CANNOT, EXIT_INVALID, EXIT_VALID, CannotRecheck, Checker, RobotFiles,  # noqa: E402
-                     checker_parser, exit_status, print_reports, read_npz, sha256)
+                     exit_status, print_reports, read_npz, sha256)
 
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance, as manifoldgen reads it
 FORMAT_VERSION = 1  # the roadmap format docs/file-formats.md describes
@@ -146,7 +147,11 @@ def roadmap_check(file, urdf: str | None = None, srdf: str | None = None, resolu
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = checker_parser("roadmap", "roadmap .npz files written by `manifoldgen plan --roadmap`")
+    parser = argparse.ArgumentParser(description="Recheck manifoldgen roadmap files (pinocchio + coal only).",
+                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
+    parser.add_argument("files", nargs="+", help="roadmap .npz files written by `manifoldgen plan --roadmap`")
+    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
+    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--resolution", type=float,
                         help="state spacing along edges (default: the file's meta.resolution)")
     args = parser.parse_args(argv)

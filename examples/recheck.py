@@ -21,7 +21,6 @@ What is rechecked, per configuration ``q (n,)`` of the planning group:
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
@@ -944,17 +943,6 @@ def exit_status(statuses: list[int]) -> int:
     if EXIT_INVALID in statuses:
         return EXIT_INVALID
     return EXIT_CANNOT if EXIT_CANNOT in statuses else EXIT_VALID
-
-
-def checker_parser(kind: str, files: str) -> argparse.ArgumentParser:
-    """The command line every checker shares: ``files`` (help ``files``), ``--urdf`` and ``--srdf``; the checker
-    adds its own options."""
-    parser = argparse.ArgumentParser(description=f"Recheck manifoldgen {kind} files (pinocchio + coal only).",
-                                     epilog="exit status: 0 valid, 1 invalid, 2 usage, 3 could not recheck")
-    parser.add_argument("files", nargs="+", help=files)
-    parser.add_argument("--urdf", help="the robot's URDF, when the recorded one cannot be found")
-    parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
-    return parser
 
 
 def print_reports(reports) -> int:
