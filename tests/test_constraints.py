@@ -202,6 +202,26 @@ def test_constraint_contract(case, panda_task, pr2_both_arms, centauro_floating,
     _core_and_checker_agree(c, q, np.asarray(y, float), built_in=case != "user")
 
 
+def test_the_core_term_table_is_what_the_built_in_constraints_write(panda_task, pr2_both_arms, centauro_floating):
+    """The core's table of built-in terms (native/src/builtin_terms.cpp, ``BUILT_IN_TERMS``) holds exactly the term
+    types the built-in constraints write (:meth:`Constraint.core_terms`; the others trace): no table entry without a
+    constraint that uses it, no constraint term the table lacks. With the contract test above, adding a built-in constraint is its
+    Python file, its C++ term (a struct and its table entry, in one file) and its checker entry."""
+    import manifoldgen_core
+
+    from manifoldgen import core_extension, core_terms
+    from manifoldgen.space import ConstrainedSpace
+
+    if core_extension.core_problem():
+        pytest.skip(core_extension.core_problem())
+    written = set()
+    for make in CASES.values():
+        c, _, y = make(panda_task, pr2_both_arms, centauro_floating)
+        types = {term["type"] for term in core_terms.constraint_terms(ConstrainedSpace(c, np.asarray(y, float)))}
+        written |= types - {"expression", "expression_inequality"}  # a residual that traces (plane, a user's)
+    assert written == set(manifoldgen_core.BUILT_IN_TERMS)
+
+
 def _core_and_checker_agree(c, q, y, built_in: bool):
     """The compiled core runs the constraint with no Python callback (a built-in through its own core terms,
     :meth:`Constraint.core_terms`, or compiled from its trace) to the same residual and Jacobian; the outside

@@ -321,8 +321,8 @@ def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_ca
 
 
 def test_a_built_in_term_with_a_bad_type_or_field_is_refused_in_one_line(panda_task, wall):
-    """The core builds built-in terms from one table (native/src/term_table.hpp): an unknown type, a missing field
-    and a field of the wrong size are refused naming them, and a good term adds its rows."""
+    """The core builds built-in terms from one table (native/src/builtin_terms.cpp): an unknown type, a missing field,
+    a field of the wrong size and an axis out of range are refused naming them, and a good term adds its rows."""
     space, _ = _planner(panda_task, wall, 0)
     core = core_extension.empty_core(space, geometry=False)
     pose = core_terms.constraint_terms(space)[0]
@@ -332,6 +332,10 @@ def test_a_built_in_term_with_a_bad_type_or_field_is_refused_in_one_line(panda_t
         core.add_term("pose", {key: value for key, value in pose.items() if key != "y"})
     with pytest.raises(ValueError, match="field 'rotation' needs 9 numbers"):
         core.add_term("pose", {**pose, "rotation": [1.0, 0.0, 0.0]})
+    with pytest.raises(ValueError, match="pose axes must be 0, 1 or 2"):
+        core.add_term("pose", {**pose, "orientation_axes": [3]})
+    with pytest.raises(ValueError, match="pose frame id out of range"):
+        core.add_term("pose", {**pose, "frame_id": 10**6})
     assert core.m == 0
     core.add_term("pose", pose)
     assert core.m == len(pose["position_axes"]) + len(pose["orientation_axes"])

@@ -170,7 +170,7 @@ def test_native_rrt_connect_balance_path_passes_the_python_check_state_by_state(
 def test_core_refuses_a_misplaced_free_flyer_and_a_degenerate_polygon(problem):
     import manifoldgen_core
     task, scene, space, core = problem
-    with pytest.raises(RuntimeError, match="H >= 3"):
+    with pytest.raises(ValueError, match="H >= 3"):
         core.add_term("com_polygon", {"normals": [[0.0, 0.0], [0.0, 0.0]], "bounds": [0.0, 0.0]})
     if not task.robot.floating_base:
         return

@@ -9,7 +9,6 @@
 #include "problem.hpp"
 
 #include "core.hpp"
-#include "term_table.hpp"
 
 #include <boost/json.hpp>
 
@@ -58,19 +57,20 @@ mgcore::Expression expression_of(const json::object& to, int n) {
                             n);
 }
 
-// A constraint term's fields from its JSON object, as mgcore::add_term reads them (term_table.hpp).
-struct JsonFields {
+// A constraint term's fields from its JSON object (Space::add_term).
+struct JsonFields final : mgcore::TermFields {
   const json::object& fields;
+  explicit JsonFields(const json::object& fields) : fields(fields) {}
   const json::value& at(const char* name) const {
     if (!fields.contains(name))
       throw std::runtime_error(std::string("constraint term lacks its field '") + name + "'");
     return fields.at(name);
   }
-  int integer(const char* name) const { return static_cast<int>(at(name).to_number<long>()); }
-  double number(const char* name) const { return at(name).to_number<double>(); }
-  std::vector<int> ints(const char* name) const { return ints_of(at(name)); }
-  Eigen::VectorXd vector(const char* name) const { return vector_of(at(name)); }
-  mgcore::RowMat rows(const char* name) const { return rows_of(at(name)); }
+  int integer(const char* name) const override { return static_cast<int>(at(name).to_number<long>()); }
+  double number(const char* name) const override { return at(name).to_number<double>(); }
+  std::vector<int> ints(const char* name) const override { return ints_of(at(name)); }
+  Eigen::VectorXd vector(const char* name) const override { return vector_of(at(name)); }
+  mgcore::RowMat rows(const char* name) const override { return rows_of(at(name)); }
 };
 
 }  // namespace
@@ -120,7 +120,7 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
     } else if (kind == "expression_inequality") {
       p.space->add_expression_inequality(expression_of(to, p.space->n()));
     } else {
-      mgcore::add_term(*p.space, kind, JsonFields{to});
+      p.space->add_term(kind, JsonFields(to));
     }
   }
   p.tolerance = vector_of(c.at("tolerance"));

@@ -146,6 +146,17 @@ struct Active {
 };
 constexpr int FREE_FLYER = 7;
 
+// A built-in constraint term's fields, read by name (a Python dict in the binding, a JSON object in the C++ OMPL
+// baseline); each accessor throws std::invalid_argument naming a field that is missing.
+struct TermFields {
+  virtual ~TermFields() = default;
+  virtual int integer(const char* name) const = 0;
+  virtual double number(const char* name) const = 0;
+  virtual std::vector<int> ints(const char* name) const = 0;
+  virtual Vec vector(const char* name) const = 0;
+  virtual RowMat rows(const char* name) const = 0;  // a list of equal-length rows
+};
+
 class Space {
  public:
   // model_file / geometry_file: pinocchio binary serializations of the robot model and of the
@@ -157,28 +168,16 @@ class Space {
   ~Space();
 
   // Constraint terms, stacked in the order added (the condition y is baked in).
-  // pose: F = [p(q)[position_axes] - y ; log3(R^T R(q))[orientation_axes]]
-  void add_pose(int frame, const Eigen::Matrix3d& rotation, const std::vector<int>& position_axes,
-                const std::vector<int>& orientation_axes, const Vec& y);
-  // closed chain: F = [Ra^T (pb - pa) - offset ; log3(rotation^T Ra^T Rb)]
-  void add_chain(int frame_a, int frame_b, const Eigen::Matrix3d& rotation, const Eigen::Vector3d& offset);
-  // sphere: F = |p(q) - center| - radius
-  void add_sphere(int frame, const Eigen::Vector3d& center, double radius);
-  // Whole-body terms (their builders in space.cpp, their rows in terms.cpp, each under "Whole-body terms").
-  // orientation: F = basis (2, 3) . R(q) axis (constraints/orientation.py)
-  void add_orientation(int frame, const Eigen::Vector3d& axis, const Eigen::Matrix<double, 2, 3>& basis);
-  // linear: F = A (r, n) q - y (constraints/joint_linear.py)
-  void add_linear(const RowMat& A, const Vec& y);
+  // A built-in term by its type name (builtin_terms.cpp: pose, chain, sphere, orientation, linear; the inequalities
+  // com_polygon, hemisphere) with its fields; throws std::invalid_argument naming an unknown type or a bad field.
+  void add_term(const std::string& kind, const TermFields& fields);
+  static std::vector<std::string> built_in_terms();  // the type names add_term knows
   // expression: F = a compiled user residual's outputs (Expression above); its frame ids are checked here
   void add_expression(Expression expression);
   // Inequalities G(q) <= 0, stacked in the order added (checked after the equalities, before collision).
-  // com polygon: G = normals (H, 2) . com(q)[x, y] - bounds (H,) (constraints/balance.py's CoM margin)
-  void add_com_polygon(const RowMat& normals, const Vec& bounds);
-  // hemisphere: G = -direction . R(q) axis (constraints/orientation.py's inequality)
-  void add_hemisphere(int frame, const Eigen::Vector3d& axis, const Eigen::Vector3d& direction);
   // expression: G = a compiled user inequality's outputs
   void add_expression_inequality(Expression expression);
-  int g() const;                                    // built-in inequality rows
+  int g() const;                                    // built-in and compiled inequality rows
   void inequality(const double* q, double* G);      // (g,)
   bool inequalities_hold(const double* q);          // every G_i <= 0 (true when there is none)
   // callback: `rows` residual components from Python, stacked in order like the built-in terms.
@@ -258,8 +257,9 @@ class Space {
   Counters counts;
   int stop = VALID;  // reason of the latest motion check's stop (VALID: it passed)
 
+  struct Impl;  // its private parts (space_impl.hpp), named by the terms that read them
+
  private:
-  struct Impl;
   std::unique_ptr<Impl> impl_;
   // validate_path's dense states (M, n) and their segments, checked with certified sweeps
   PathCheck sweep_path(const std::vector<double>& states, const std::vector<int>& segment, bool certify);

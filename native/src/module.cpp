@@ -1,7 +1,6 @@
 // Python bindings of the compiled core (nanobind): batch-first numpy arrays in and out.
 // manifoldgen/native.py builds a Space from a ConstrainedSpace (its constraint: manifoldgen/core_terms.py).
 #include "core.hpp"
-#include "term_table.hpp"
 
 #include <pinocchio/config.hpp>
 
@@ -40,23 +39,32 @@ nb::ndarray<nb::numpy, typename M::Scalar> array_of(const M& a) {
 
 Vec vec_of(const In1& a) { return Eigen::Map<const Vec>(a.data(), static_cast<long>(a.shape(0))); }
 
-// A constraint term's fields from a Python dict, as mgcore::add_term reads them (term_table.hpp).
-struct DictFields {
+// A constraint term's fields from a Python dict (Space::add_term).
+struct DictFields final : mgcore::TermFields {
   const nb::dict& fields;
+  explicit DictFields(const nb::dict& fields) : fields(fields) {}
   nb::handle at(const char* name) const {
     if (!fields.contains(name))
       throw std::invalid_argument(std::string("constraint term lacks its field '") + name + "'");
     return fields[name];
   }
-  int integer(const char* name) const { return nb::cast<int>(at(name)); }
-  double number(const char* name) const { return nb::cast<double>(at(name)); }
-  std::vector<int> ints(const char* name) const { return nb::cast<std::vector<int>>(at(name)); }
-  Vec vector(const char* name) const {
+  int integer(const char* name) const override { return nb::cast<int>(at(name)); }
+  double number(const char* name) const override { return nb::cast<double>(at(name)); }
+  std::vector<int> ints(const char* name) const override { return nb::cast<std::vector<int>>(at(name)); }
+  Vec vector(const char* name) const override {
     const auto v = nb::cast<std::vector<double>>(at(name));
     return Eigen::Map<const Vec>(v.data(), static_cast<long>(v.size()));
   }
-  RowMat rows(const char* name) const {
-    return mgcore::rows_of(nb::cast<std::vector<std::vector<double>>>(at(name)), name);
+  RowMat rows(const char* name) const override {
+    const auto rows = nb::cast<std::vector<std::vector<double>>>(at(name));
+    const Eigen::Index cols = rows.empty() ? 0 : static_cast<Eigen::Index>(rows[0].size());
+    RowMat out(static_cast<Eigen::Index>(rows.size()), cols);
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      if (static_cast<Eigen::Index>(rows[i].size()) != cols)
+        throw std::invalid_argument(std::string("constraint term field '") + name + "' has rows of unequal length");
+      out.row(static_cast<Eigen::Index>(i)) = Eigen::Map<const Vec>(rows[i].data(), cols).transpose();
+    }
+    return out;
   }
 };
 
@@ -142,6 +150,8 @@ NB_MODULE(manifoldgen_core, m) {
   // the pinocchio whose headers this module was compiled with: manifoldgen.core_extension refuses the module when
   // the installed pinocchio differs (its libraries would not match the inline code compiled in here)
   m.attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
+  // the built-in constraint term types Space.add_term builds (native/src/builtin_terms.cpp)
+  m.attr("BUILT_IN_TERMS") = nb::cast(Space::built_in_terms());
 
   // the operations of compiled expressions (core.hpp), the one definition of their codes
   nb::enum_<mgcore::Op>(m, "Op", "Operations of a compiled expression (register i: instruction i's result)")
@@ -188,12 +198,10 @@ NB_MODULE(manifoldgen_core, m) {
           "active: (idx_q, idx_v, nq) per joint (nq 7: the free flyer, first, six coordinates x y z yaw pitch roll).")
       .def(
           "add_term",
-          [](Space& s, const std::string& kind, const nb::dict& fields) {
-            mgcore::add_term(s, kind, DictFields{fields});
-          },
+          [](Space& s, const std::string& kind, const nb::dict& fields) { s.add_term(kind, DictFields(fields)); },
           "kind"_a, "fields"_a,
-          "Add the built-in constraint term kind (pose, chain, sphere, orientation, linear; inequalities com_polygon, "
-          "hemisphere) with its fields as manifoldgen.core_terms.constraint_terms writes them (term_table.hpp).")
+          "Add the built-in constraint term kind (BUILT_IN_TERMS) with its fields as "
+          "manifoldgen.core_terms.constraint_terms writes them (native/src/builtin_terms.cpp).")
       .def_prop_ro("g", &Space::g, "built-in inequality rows (CoM polygon, hemisphere)")
       .def(
           "inequality",

@@ -1,7 +1,8 @@
 // The constrained space's private parts (core.hpp declares Space): Space::Impl with its members and the small types
-// it holds, shared by space.cpp (construction, the add_* builders), terms.cpp (residuals, Jacobians, inequalities,
-// projection), collision.cpp (sphere broad phase, hull mid phase, the validity rule) and sweeps.cpp (validate_path,
-// certified constraints and certified sweeps). Only those four files include it.
+// it holds, shared by space.cpp (construction, the compiled and callback terms), builtin_terms.cpp (the built-in
+// terms and their table), terms.cpp (residuals, Jacobians, inequalities, projection), collision.cpp (sphere broad
+// phase, hull mid phase, the validity rule) and sweeps.cpp (validate_path, certified constraints and certified
+// sweeps). Only those five files include it.
 #pragma once
 
 #include "core.hpp"
@@ -40,46 +41,56 @@ struct Compiled {
   explicit Compiled(Expression e) : expression(std::move(e)), leaves(expression.leaves()) {}
 };
 
-// What a residual term is: one per built-in constraint kind (Space::add_pose ... add_linear), a Python callback
-// (add_callback) or a compiled expression (add_expression).
-enum TermKind : int { POSE_TERM, CHAIN_TERM, SPHERE_TERM, ORIENTATION_TERM, LINEAR_TERM, CALLBACK_TERM, EXPRESSION_TERM };
-// What an inequality is: the CoM's support polygon, a hemisphere of directions, or a compiled expression.
-enum InequalityKind : int { COM_POLYGON, HEMISPHERE, EXPRESSION_INEQUALITY };
-
-struct Term {
-  TermKind kind;  // sphere: offset = its centre, y = (radius)
-  pinocchio::FrameIndex frame, frame_b;
-  Eigen::Matrix3d rotation;
-  std::vector<int> position_axes, orientation_axes;
-  Vec y;                   // pose: the conditioned positions; linear: y
-  Eigen::Vector3d offset;  // chain: d * axis
-  Eigen::Vector3d axis = Eigen::Vector3d::Zero();                    // orientation: the frame's axis
-  Eigen::Matrix<double, 2, 3> basis = Eigen::Matrix<double, 2, 3>::Zero();  // orientation: e1, e2
-  RowMat A;                                                          // linear: (r, n)
-  int callback = -1, callback_rows = 0;  // callback: its index in Impl::callbacks, its residual rows
-  std::shared_ptr<Compiled> compiled;    // expression
-  int rows() const {
-    return kind == POSE_TERM ? static_cast<int>(position_axes.size() + orientation_axes.size())
-           : kind == CHAIN_TERM ? 6
-           : kind == ORIENTATION_TERM ? 2
-           : kind == LINEAR_TERM ? static_cast<int>(A.rows())
-           : kind == CALLBACK_TERM ? callback_rows
-           : kind == EXPRESSION_TERM ? compiled->expression.rows()
-                       : 1;
-  }
+// The space's constraint as rows: equality terms stack F(q) = 0 (m rows), inequalities G(q) <= 0 (g rows), each in
+// the order added. The built-in ones (builtin_terms.cpp, by name from Space::add_term), a compiled expression and a
+// Python callback (terms.cpp) are subclasses; the space evaluates them through these methods only.
+struct Rows {
+  virtual ~Rows() = default;
+  virtual int rows() const = 0;
+  // Its rows at q (forward kinematics done, and the centre of mass when needs_com()).
+  virtual void values(Space::Impl& p, const double* q, double* out) const = 0;
+  virtual bool needs_com() const { return false; }
+  // Certified sweeps (sweeps.cpp): push each row's speed bound per active coordinate, (n,), to rows, and rows
+  // that keep those bounds sound to guards (a pose's rotation angle below 1 rad); false: no certificate.
+  virtual bool rates(const Space::Impl&, std::vector<Vec>&, std::vector<Vec>&) const { return false; }
+  // The guards' slack at the latest state values() saw (one per guard that rates pushed); returns how many.
+  virtual int guard_slack(const Space::Impl&, double*) const { return 0; }
 };
 
-// An inequality G(q) <= 0 (whole-body terms).
-struct Inequality {
-  InequalityKind kind;
-  pinocchio::FrameIndex frame = 0;
-  Eigen::Vector3d axis = Eigen::Vector3d::Zero(), direction = Eigen::Vector3d::Zero();
-  RowMat normals;  // (H, 2)
-  Vec bounds;      // (H,)
-  std::shared_ptr<Compiled> compiled;  // expression
-  int rows() const {
-    return kind == COM_POLYGON ? static_cast<int>(normals.rows()) : kind == EXPRESSION_INEQUALITY ? compiled->expression.rows() : 1;
-  }
+// An equality term: rows of F, with their Jacobian rows over the active coordinates.
+struct Term : Rows {
+  // Its rows of F and of J (joint Jacobians done; J: its first row's start, n per row).
+  virtual void jacobian(Space::Impl& p, const double* q, double* F, double* J) const = 0;
+  // A Python callback's index in Impl::callbacks (its rows are filled per batch); -1: evaluated here.
+  virtual int callback() const { return -1; }
+};
+
+// An inequality term: rows of G <= 0 (checked after the equalities; no Jacobian).
+struct Inequality : Rows {};
+
+// A compiled user residual or inequality (Space::add_expression, add_expression_inequality; terms.cpp).
+struct ExpressionTerm final : Term {
+  mutable Compiled compiled;  // its leaves are filled per state
+  explicit ExpressionTerm(Expression e) : compiled(std::move(e)) {}
+  int rows() const override { return compiled.expression.rows(); }
+  void values(Space::Impl& p, const double* q, double* F) const override;
+  void jacobian(Space::Impl& p, const double* q, double* F, double* J) const override;
+};
+struct ExpressionInequality final : Inequality {
+  mutable Compiled compiled;
+  explicit ExpressionInequality(Expression e) : compiled(std::move(e)) {}
+  int rows() const override { return compiled.expression.rows(); }
+  void values(Space::Impl& p, const double* q, double* G) const override;
+};
+
+// A Python callback's rows (Space::add_callback): filled by Impl::fill_callbacks per batch, not per state.
+struct CallbackTerm final : Term {
+  int index, count;  // in Impl::callbacks; its rows
+  CallbackTerm(int index, int count) : index(index), count(count) {}
+  int rows() const override { return count; }
+  void values(Space::Impl&, const double*, double*) const override {}
+  void jacobian(Space::Impl&, const double*, double*, double*) const override {}
+  int callback() const override { return index; }
 };
 
 // R = Rz(yaw) Ry(pitch) Rx(roll), manifoldgen.robot's floating-base rotation.
@@ -133,10 +144,10 @@ struct Space::Impl {
   bool floating = false;       // the first six coordinates are the free flyer's (x, y, z, yaw, pitch, roll)
   int base_q = 0, base_v = 0;  // where the free flyer sits in pinocchio's q and v
   Eigen::Matrix<double, 6, 6> base_map;  // d(free-flyer v) / d(base coordinates) at the latest Jacobian's q
-  std::vector<Term> terms;
-  std::vector<Inequality> inequalities;
+  std::vector<std::unique_ptr<const Term>> terms;
+  std::vector<std::unique_ptr<const Inequality>> inequalities;
   int g = 0;
-  bool com_needed = false;
+  bool com_needed = false;  // some inequality reads the centre of mass
   Vec full, lower, upper, tolerance;
   Matrix6x Ja, Jb;
   double margin, resolution;  // set by the constructor from the Python space
@@ -150,11 +161,23 @@ struct Space::Impl {
   Counters* tally = nullptr;  // the Space's counters (evaluations, hull and mesh tests are counted here)
 
   // Append a term: its rows to m, and whether forward kinematics is needed.
-  void add(const Term& t) {
-    m += t.rows();
-    terms.push_back(t);
+  void add(std::unique_ptr<const Term> t) {
+    m += t->rows();
+    native_terms = native_terms || t->callback() < 0;
+    terms.push_back(std::move(t));
     rates_stale = true;
-    native_terms = native_terms || t.kind != CALLBACK_TERM;
+  }
+  // Append an inequality: its rows to g, and whether the centre of mass is needed.
+  void add(std::unique_ptr<const Inequality> c) {
+    g += c->rows();
+    com_needed = com_needed || c->needs_com();
+    inequalities.push_back(std::move(c));
+    rates_stale = true;
+  }
+  pinocchio::FrameIndex frame_of(int id, const char* what) const {  // a term's frame id, checked
+    if (id < 0 || id >= static_cast<int>(model.nframes))
+      throw std::invalid_argument(std::string(what) + " frame id out of range");
+    return static_cast<pinocchio::FrameIndex>(id);
   }
 
   const Eigen::VectorXd& to_full(const double* q) {
@@ -208,10 +231,7 @@ struct Space::Impl {
   inline void fill_residual(const double* q, double* F);
   inline void fill_jacobian(const double* q, double* F, double* J);
   void fill_callbacks(const double* q, long B, Counters& counts, double* F, double* J);
-  // whole-body terms
   inline void map_base(const double* q);
-  inline int whole_body_residual(const Term& t, const double* q, double* F);
-  inline int whole_body_jacobian(const Term& t, const double* q, double* F, double* J);
   inline void fill_inequality(const double* q, double* G);
   inline void inequality_rows(const double* q, double* G);
   double state_check(const double* q, double limit, bool& hold);  // also called by collision.cpp and sweeps.cpp
@@ -274,15 +294,19 @@ struct Space::Impl {
 
   // ---------------------------------------------------------------- Certified constraints (sweeps.cpp)
   static constexpr double LOG_RATE = 0.5 / 0.479425538604203;  // (a/2)/sin(a/2) at a = 1 rad
-  RowMat rates;                        // (rows, n): m equality rows, g inequality rows, one angle row per pose
-  std::vector<int> angle_terms;        // the poses (term index) with orientation rows, in angle-row order
+  RowMat rates;                        // (rows, n): m equality rows, g inequality rows, then the terms' guards
+  std::vector<const Rows*> guarded;    // the terms with guard rows, in guard-row order
   bool rates_stale = true, certifiable = false;
   Vec slack;                           // (rows,) at the latest evaluated state
   Vec bound;                           // (rows,) certified()'s, kept to spare an allocation per state
   long evaluated = -1;                 // the latest evaluated state of the path being checked (-1: none yet)
 
-  inline Vec point_rates(int j, const Eigen::Vector3d& c, bool turning) const;
-  inline Vec frame_rates(pinocchio::FrameIndex f, bool turning) const;
+  // (n,) speed bounds per unit speed of each coordinate, over every configuration (also called by the terms'
+  // rates in builtin_terms.cpp): of a point at c in joint j's frame (turning: of the frame's rotation), of a
+  // frame, of the centre of mass.
+  Vec point_rates(int j, const Eigen::Vector3d& c, bool turning) const;
+  Vec frame_rates(pinocchio::FrameIndex f, bool turning) const;
+  Vec com_rates() const;
   inline void build_rates();
   inline void note_evaluated(long i, double limit);
   inline bool certified(const double* var, long i);

@@ -31,7 +31,7 @@ namespace mgcore {
 // polygon's rows: |normal_h| times the centre of mass's rates (the mass-weighted rates of the joints' inertia
 // centres); a hemisphere's: |direction| |axis| times the turning rates. A closed chain, a Python callback or Python
 // inequalities: no certificate (every state evaluated); nor a joint that is neither revolute, prismatic nor the base.
-// (LOG_RATE and the rates' members: space_impl.hpp.)
+// (Each term's rows and guards: its rates() in builtin_terms.cpp; LOG_RATE and the rates' members: space_impl.hpp.)
 
 // (n,) the speed bound of a point at c in joint j's frame (turning: of the frame's rotation) per unit speed of
 // each coordinate, over every configuration.
@@ -57,47 +57,33 @@ Vec Space::Impl::frame_rates(pinocchio::FrameIndex f, bool turning) const {
   return point_rates(static_cast<int>(frame.parentJoint), frame.placement.translation(), turning);
 }
 
-void Space::Impl::build_rates() {
-  rates_stale = false;
-  if (coord_of.size() != model.njoints) prepare_sweeps();
-  certifiable = joints_unsupported.empty() && !batched();
-  angle_terms.clear();
-  if (!certifiable) return;
-  std::vector<Vec> rows, angles;
-  for (std::size_t i = 0; i < terms.size(); ++i) {
-    const Term& t = terms[i];
-    if (t.kind == POSE_TERM) {
-      for (std::size_t k = 0; k < t.position_axes.size(); ++k) rows.push_back(frame_rates(t.frame, false));
-      for (std::size_t k = 0; k < t.orientation_axes.size(); ++k) rows.push_back(LOG_RATE * frame_rates(t.frame, true));
-      if (!t.orientation_axes.empty()) {
-        angle_terms.push_back(static_cast<int>(i));
-        angles.push_back(frame_rates(t.frame, true));
-      }
-    } else if (t.kind == SPHERE_TERM) {
-      rows.push_back(frame_rates(t.frame, false));
-    } else if (t.kind == ORIENTATION_TERM) {
-      for (int k = 0; k < 2; ++k) rows.push_back(t.basis.row(k).norm() * t.axis.norm() * frame_rates(t.frame, true));
-    } else if (t.kind == LINEAR_TERM) {
-      for (int k = 0; k < t.A.rows(); ++k) rows.push_back(t.A.row(k).cwiseAbs().transpose());
-    } else {
-      certifiable = false;
-      return;
-    }
-  }
+// The mass-weighted rates of the joints' inertia centres.
+Vec Space::Impl::com_rates() const {
   Vec com = Vec::Zero(n());
   const double mass = pinocchio::computeTotalMass(model);
   for (int j = 1; j < static_cast<int>(model.njoints) && mass > 0; ++j)
     com += (model.inertias[j].mass() / mass) * point_rates(j, model.inertias[j].lever(), false);
-  for (const Inequality& c : inequalities)
-    if (c.kind == EXPRESSION_INEQUALITY) {
-      certifiable = false;
-      return;
-    }
-  for (const Inequality& c : inequalities)
-    for (int h = 0; h < c.rows(); ++h)
-      rows.push_back(c.kind == COM_POLYGON ? Vec(c.normals.row(h).norm() * com)
-                                 : Vec(c.direction.norm() * c.axis.norm() * frame_rates(c.frame, true)));
-  rows.insert(rows.end(), angles.begin(), angles.end());
+  return com;
+}
+
+void Space::Impl::build_rates() {
+  rates_stale = false;
+  if (coord_of.size() != model.njoints) prepare_sweeps();
+  certifiable = joints_unsupported.empty() && !batched();
+  guarded.clear();
+  if (!certifiable) return;
+  std::vector<Vec> rows, guards;
+  auto add = [&](const Rows& t) {  // false: t has no certificate
+    const std::size_t before = guards.size();
+    if (!t.rates(*this, rows, guards)) return false;
+    if (guards.size() > before) guarded.push_back(&t);
+    return true;
+  };
+  for (const auto& t : terms)
+    if (!add(*t)) return void(certifiable = false);
+  for (const auto& c : inequalities)
+    if (!add(*c)) return void(certifiable = false);
+  rows.insert(rows.end(), guards.begin(), guards.end());
   rates.resize(static_cast<long>(rows.size()), n());
   for (std::size_t r = 0; r < rows.size(); ++r) rates.row(static_cast<long>(r)) = rows[r].transpose();
 }
@@ -108,11 +94,8 @@ void Space::Impl::note_evaluated(long i, double limit) {
   slack.resize(rates.rows());
   for (int r = 0; r < m; ++r) slack[r] = limit * tolerance[r] - std::abs(state_F[r]);
   for (int r = 0; r < g; ++r) slack[m + r] = -state_G[r];
-  for (std::size_t a = 0; a < angle_terms.size(); ++a) {
-    const Term& t = terms[angle_terms[a]];
-    const Eigen::Matrix3d R = t.rotation.transpose() * data.oMf[t.frame].rotation();
-    slack[m + g + static_cast<long>(a)] = 1.0 - std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0));
-  }
+  double* guard = slack.data() + m + g;
+  for (const Rows* t : guarded) guard += t->guard_slack(*this, guard);
 }
 
 // Whether state i of the path whose cumulative variation is var passes the equalities and built-in inequalities

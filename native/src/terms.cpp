@@ -1,6 +1,6 @@
-// The constraint terms of the constrained space (see space_impl.hpp): residual and Jacobian rows of the built-in
-// terms, compiled expressions and Python callbacks, the whole-body terms (floating base, orientation, linear) and
-// inequalities, the per-state check of validity and path checks (state_check), and the projection.
+// The constraint terms of the constrained space (see space_impl.hpp) evaluated: F, J and G stacked from the terms'
+// rows (the built-in terms' own in builtin_terms.cpp), compiled expressions, Python callbacks in batches, the
+// floating base's chain rule, the per-state check of validity and path checks (state_check), and the projection.
 #include "space_impl.hpp"
 
 #include <pinocchio/algorithm/center-of-mass.hpp>
@@ -45,39 +45,24 @@ void Space::Impl::expression_rows(Compiled& c, const double* q, double* F, doubl
   c.expression.evaluate(leaves, F, J);
 }
 
+void ExpressionTerm::values(Space::Impl& p, const double* q, double* F) const {
+  p.expression_rows(compiled, q, F, nullptr);
+}
+
+void ExpressionTerm::jacobian(Space::Impl& p, const double* q, double* F, double* J) const {
+  p.expression_rows(compiled, q, F, J);
+}
+
+void ExpressionInequality::values(Space::Impl& p, const double* q, double* G) const {
+  p.expression_rows(compiled, q, G, nullptr);
+}
+
 // Residual rows of every term from data's joint placements (forward kinematics done).
 void Space::Impl::fill_residual(const double* q, double* F) {
   int row = 0;
-  for (const Term& t : terms) {
-    if (t.kind == CALLBACK_TERM) {  // filled by the batch's callback
-      row += t.rows();
-      continue;
-    }
-    if (t.kind == EXPRESSION_TERM) {
-      expression_rows(*t.compiled, q, F + row, nullptr);
-      row += t.rows();
-      continue;
-    }
-    if (t.kind == ORIENTATION_TERM || t.kind == LINEAR_TERM) {
-      row += whole_body_residual(t, q, F + row);
-      continue;
-    }
-    const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-    if (t.kind == SPHERE_TERM) {
-      F[row++] = (A.translation() - t.offset).norm() - t.y[0];
-    } else if (t.kind == POSE_TERM) {
-      for (std::size_t k = 0; k < t.position_axes.size(); ++k)
-        F[row++] = A.translation()[t.position_axes[k]] - t.y[k];
-      const Eigen::Vector3d err = pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()));
-      for (int a : t.orientation_axes) F[row++] = err[a];
-    } else {
-      const pinocchio::SE3& B = pinocchio::updateFramePlacement(model, data, t.frame_b);
-      const Eigen::Vector3d rel = A.rotation().transpose() * (B.translation() - A.translation()) - t.offset;
-      const Eigen::Vector3d err = pinocchio::log3(
-          Eigen::Matrix3d(t.rotation.transpose() * A.rotation().transpose() * B.rotation()));
-      for (int i = 0; i < 3; ++i) F[row++] = rel[i];
-      for (int i = 0; i < 3; ++i) F[row++] = err[i];
-    }
+  for (const auto& t : terms) {
+    t->values(*this, q, F + row);
+    row += t->rows();
   }
 }
 
@@ -85,79 +70,17 @@ void Space::Impl::fill_residual(const double* q, double* F) {
 void Space::Impl::fill_jacobian(const double* q, double* F, double* J) {
   const int nn = n();
   if (floating) map_base(q);
-  auto put = [&](int row, const auto& rowvec) { put_row(J + static_cast<long>(row) * nn, rowvec); };  // rowvec over nv
   int row = 0;
-  for (const Term& t : terms) {
-    if (t.kind == CALLBACK_TERM) {  // filled by the batch's callback
-      row += t.rows();
-      continue;
-    }
-    if (t.kind == EXPRESSION_TERM) {
-      expression_rows(*t.compiled, q, F + row, J + static_cast<long>(row) * nn);
-      row += t.rows();
-      continue;
-    }
-    if (t.kind == ORIENTATION_TERM || t.kind == LINEAR_TERM) {
-      row += whole_body_jacobian(t, q, F + row, J + static_cast<long>(row) * nn);
-      continue;
-    }
-    const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-    Ja.setZero();
-    pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
-    if (t.kind == SPHERE_TERM) {
-      const Eigen::Vector3d d = A.translation() - t.offset;
-      const double r = d.norm();
-      F[row] = r - t.y[0];
-      put(row++, (d / std::max(r, 1e-12)).transpose() * Ja.topRows<3>());
-    } else if (t.kind == POSE_TERM) {
-      double theta;
-      const Eigen::Vector3d err =
-          pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * A.rotation()), theta);
-      Eigen::Matrix3d Jlog;
-      pinocchio::Jlog3(theta, err, Jlog);
-      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jrot = Jlog * A.rotation().transpose() * Ja.bottomRows<3>();
-      for (std::size_t k = 0; k < t.position_axes.size(); ++k) {
-        F[row] = A.translation()[t.position_axes[k]] - t.y[k];
-        put(row++, Ja.row(t.position_axes[k]));
-      }
-      for (int a : t.orientation_axes) {
-        F[row] = err[a];
-        put(row++, Jrot.row(a));
-      }
-    } else {
-      const pinocchio::SE3& B = pinocchio::updateFramePlacement(model, data, t.frame_b);
-      Jb.setZero();
-      pinocchio::getFrameJacobian(model, data, t.frame_b, pinocchio::LOCAL_WORLD_ALIGNED, Jb);
-      const Eigen::Matrix3d RaT = A.rotation().transpose();
-      const Eigen::Vector3d r = B.translation() - A.translation();
-      const Eigen::Vector3d rel = RaT * r - t.offset;
-      double theta;
-      const Eigen::Vector3d err =
-          pinocchio::log3(Eigen::Matrix3d(t.rotation.transpose() * RaT * B.rotation()), theta);
-      Eigen::Matrix3d Jlog;
-      pinocchio::Jlog3(theta, err, Jlog);
-      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jpos =
-          RaT * (Jb.topRows<3>() - Ja.topRows<3>() + pinocchio::skew(r) * Ja.bottomRows<3>());
-      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jrot =
-          Jlog * B.rotation().transpose() * (Jb.bottomRows<3>() - Ja.bottomRows<3>());
-      for (int i = 0; i < 3; ++i) {
-        F[row] = rel[i];
-        put(row++, Jpos.row(i));
-      }
-      for (int i = 0; i < 3; ++i) {
-        F[row] = err[i];
-        put(row++, Jrot.row(i));
-      }
-    }
+  for (const auto& t : terms) {
+    t->jacobian(*this, q, F + row, J + static_cast<long>(row) * nn);
+    row += t->rows();
   }
 }
 
-// ---------------------------------------------------------------- Whole-body terms
-// (set_base, which puts the six base coordinates into pinocchio's q, is in space_impl.hpp)
-
 // base_map: the free flyer's v (linear and angular velocity in the base frame) per unit change of
 // (x, y, z, yaw, pitch, roll): v_lin = R^T dp, omega = R^T E dtheta, E's columns the world axes of
-// yaw (z), pitch (Rz y) and roll (Rz Ry x).
+// yaw (z), pitch (Rz y) and roll (Rz Ry x). (set_base, which puts the six base coordinates into pinocchio's q,
+// is in space_impl.hpp.)
 void Space::Impl::map_base(const double* q) {
   const Eigen::Matrix3d Rz = zyx(q[3], 0.0, 0.0), Rzy = zyx(q[3], q[4], 0.0), R = zyx(q[3], q[4], q[5]);
   Eigen::Matrix3d E;
@@ -169,57 +92,19 @@ void Space::Impl::map_base(const double* q) {
   base_map.bottomRightCorner<3, 3>() = R.transpose() * E;
 }
 
-// Rows of an orientation or linear term at q (forward kinematics done); returns their count.
-int Space::Impl::whole_body_residual(const Term& t, const double* q, double* F) {
-  if (t.kind == LINEAR_TERM) {
-    Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, n()) - t.y;
-    return static_cast<int>(t.A.rows());
-  }
-  const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-  Eigen::Map<Eigen::Vector2d>{F} = t.basis * (A.rotation() * t.axis);
-  return 2;
-}
-
-// The same rows and their Jacobian rows (J: the first row's start, n per row; joint Jacobians done).
-int Space::Impl::whole_body_jacobian(const Term& t, const double* q, double* F, double* J) {
-  const int nn = n();
-  if (t.kind == LINEAR_TERM) {
-    Eigen::Map<Vec>(F, t.A.rows()) = t.A * Eigen::Map<const Vec>(q, nn) - t.y;
-    Eigen::Map<RowMat>(J, t.A.rows(), nn) = t.A;
-    return static_cast<int>(t.A.rows());
-  }
-  const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, t.frame);
-  Ja.setZero();
-  pinocchio::getFrameJacobian(model, data, t.frame, pinocchio::LOCAL_WORLD_ALIGNED, Ja);
-  const Eigen::Vector3d pointing = A.rotation() * t.axis;
-  Eigen::Map<Eigen::Vector2d>{F} = t.basis * pointing;
-  // d(R axis) = omega x (R axis) = -hat(R axis) omega
-  const Eigen::Matrix<double, 2, Eigen::Dynamic> rows = -(t.basis * pinocchio::skew(pointing)) * Ja.bottomRows<3>();
-  for (int r = 0; r < 2; ++r) put_row(J + static_cast<long>(r) * nn, rows.row(r));
-  return 2;
-}
-
-// G (g,) at q: the CoM polygon's rows from pinocchio's centre of mass, a hemisphere's from the frame.
+// G (g,) at q: forward kinematics, and pinocchio's centre of mass when an inequality reads it.
 void Space::Impl::fill_inequality(const double* q, double* G) {
   if (com_needed) pinocchio::centerOfMass(model, data, to_full(q), false);
   else pinocchio::forwardKinematics(model, data, to_full(q));
   inequality_rows(q, G);
 }
 
-// G (g,) at q from data's kinematics (and centre of mass when the polygon needs it).
+// G (g,) at q from data's kinematics (and centre of mass when an inequality reads it).
 void Space::Impl::inequality_rows(const double* q, double* G) {
   int row = 0;
-  for (const Inequality& c : inequalities) {
-    if (c.kind == EXPRESSION_INEQUALITY) {
-      expression_rows(*c.compiled, q, G + row, nullptr);
-    } else if (c.kind == COM_POLYGON) {
-      const Eigen::Vector2d com = data.com[0].head<2>();
-      Eigen::Map<Vec>(G + row, c.normals.rows()) = c.normals * com - c.bounds;
-    } else {
-      const pinocchio::SE3& A = pinocchio::updateFramePlacement(model, data, c.frame);
-      G[row] = -c.direction.dot(A.rotation() * c.axis);
-    }
-    row += c.rows();
+  for (const auto& c : inequalities) {
+    c->values(*this, q, G + row);
+    row += c->rows();
   }
 }
 
@@ -300,21 +185,21 @@ void Space::Impl::fill_callbacks(const double* q, long B, Counters& counts, doub
   const int nn = n(), mm = m;
   int offset = 0;
   std::vector<double> Fc, Jc;
-  for (const Term& t : terms) {
-    const int rows = t.callback_rows;
-    if (t.kind == CALLBACK_TERM && B > 0 && rows > 0) {
+  for (const auto& t : terms) {
+    const int rows = t->rows(), index = t->callback();
+    if (index >= 0 && B > 0 && rows > 0) {
       Fc.assign(B * rows, 0.0);
       if (J) Jc.assign(B * rows * nn, 0.0);
       ++counts.callback_calls;
       counts.callback_rows += B;
-      callbacks[t.callback](q, B, Fc.data(), J ? Jc.data() : nullptr);
+      callbacks[index](q, B, Fc.data(), J ? Jc.data() : nullptr);
       for (long b = 0; b < B; ++b)  // rows [offset, offset + rows) of each configuration's F and J
         for (int r = 0; r < rows; ++r) {
           F[b * mm + offset + r] = Fc[b * rows + r];
           if (J) std::copy_n(Jc.data() + (b * rows + r) * nn, nn, J + (b * mm + offset + r) * nn);
         }
     }
-    offset += t.rows();
+    offset += rows;
   }
 }
 

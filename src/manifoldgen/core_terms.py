@@ -164,7 +164,7 @@ def add_terms(core, space: ConstrainedSpace, layout: list[tuple[str, object]]) -
         if kind == "expression":
             _add_compiled(core, term[2])
             continue
-        core.add_term(term["type"], term)  # the core's table of built-in terms (native/src/term_table.hpp)
+        core.add_term(term["type"], term)  # the core's table of built-in terms (native/src/builtin_terms.cpp)
     core.set_tolerance(np.asarray(space.constraint.tolerance, float))
     python_inequalities = _python_inequalities(space, layout)
     if python_inequalities:
