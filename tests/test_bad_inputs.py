@@ -57,6 +57,11 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     changed["dims"]["d"] = 6
     changed["sha256"] = document_checksum(changed)
     (root / "resigned" / "model.json").write_text(json.dumps(changed))
+    shutil.copytree(root / "model", root / "rehidden")  # config hidden edited, checksum recomputed
+    changed = json.loads(json.dumps(doc))
+    changed["config"]["hidden"] = [9]
+    changed["sha256"] = document_checksum(changed)
+    (root / "rehidden" / "model.json").write_text(json.dumps(changed))
     shutil.copytree(root / "model", root / "cut")
     blob = (root / "cut" / "model.safetensors").read_bytes()
     (root / "cut" / "model.safetensors").write_bytes(blob[:len(blob) // 2])
@@ -70,6 +75,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     shutil.copytree(BUILTIN_DIR / "scenes", root / "scenes")
     wall = json.loads((BUILTIN_DIR / "scenes" / "panda-wall.json").read_text())
     (root / "scene.json").write_text(json.dumps(wall))
+    (root / "high.json").write_text(json.dumps({**wall, "condition": [0.95]}))  # its start and goal are at 0.5
     (root / "latin1.json").write_bytes(json.dumps(wall).replace("wall_left", "wäll").encode("latin-1"))
     (root / "bad.stl").write_text("solid x\n garbage\nendsolid\n")
     for name, obstacle in (("far", {"type": "box", "size": [0.1, 0.1, 0.1], "pose": {"position": [1e308, 0, 0]}}),
@@ -219,6 +225,10 @@ CASES = [
     cli("plan-missing-mesh", "plan pose --scene {I}/nomesh.json -o {O}/p.npz", "gone.stl"),
     cli("plan-obstacle-at-1e308", "plan pose --scene {I}/far.json -o {O}/p.npz", "1e+308"),
     cli("plan-huge-radius", "plan pose --scene {I}/huge.json -o {O}/p.npz", "1e+300"),
+    cli("plan-resealed-hidden", "plan pose --scene wall --sampler cvae:{I}/rehidden -o {O}/p.npz",
+        "gives config hidden = [9], but its 'decoder' weights have [8]: the file was edited"),
+    cli("plan-condition-beyond-the-task", "plan pose --scene {I}/high.json -o {O}/p.npz",
+        "the condition [0.95] lies outside the task's values (panda_hand_tcp.z in [0.2, 0.7] m): check the scene's"),
     cli("plan-negative-batch", "plan pose --scene wall --sampler project,batch=-5 -o {O}/p.npz", "batch=-5"),
     cli("plan-zero-batch", "plan pose --scene wall --sampler project,batch=0 -o {O}/p.npz", "batch=0"),
     cli("plan-project-refine", "plan pose --scene wall --sampler project,refine=2 -o {O}/p.npz", "refine"),

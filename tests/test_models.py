@@ -183,7 +183,7 @@ def test_model_dir_errors(trained, tmp_path):
         load_model(tampered)
     doc["sha256"] = document_checksum(doc)  # re-signed edits still meet the field checks
     (tampered / "model.json").write_text(json.dumps(doc))
-    with pytest.raises(ManifoldgenError, match="do not match the architecture"):
+    with pytest.raises(ManifoldgenError, match=r"config hidden = \[64, 64\], but its 'decoder' weights have \[32, 32\]"):
         load_model(tampered)
     doc["config"]["hidden"] = [32, 32]
     doc["normalisation"]["q_std"][0] = -1.0

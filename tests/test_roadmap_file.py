@@ -94,6 +94,12 @@ def test_a_roadmap_for_another_query_is_refused_naming_both_values(tmp_path):
     with pytest.raises(ManifoldgenError, match=r"condition \[0.0\] \(the file\) vs \[0.5\] \(this query\); scene "
                                                r"\"corridor\" \(the file\) vs \"maze\".*another roadmap file"):
         planner.load_roadmap(tmp_path / "r.npz", {**CORRIDOR, "condition": [0.5], "scene_name": "maze"})
+    other = {**CORRIDOR, "condition": [0.5], "scene_name": "maze", "tolerance": [0.5], "resolution": 0.5,
+             "joints": ["a", "b", "c"]}  # five differences: the first three named, the others counted
+    with pytest.raises(ManifoldgenError) as refused:
+        planner.load_roadmap(tmp_path / "r.npz", other)
+    assert str(refused.value).count("(the file) vs") == 3 and "(and 2 more differences)" in str(refused.value)
+    assert len(str(refused.value).replace(str(tmp_path / "r.npz"), "")) < 300
 
 
 def test_plan_in_a_fresh_process_is_routed_through_the_saved_roadmap(saved, tmp_path):

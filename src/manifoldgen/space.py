@@ -249,10 +249,20 @@ class ConstrainedSpace:
             raise ManifoldgenError(f"{what} must be {self.n} finite joint values, got shape {q.shape}")
         problem = self.problem(q)
         if problem:
-            fix = (f"choose a collision-free {what} or move the obstacle" if problem.startswith("is in collision")
-                   else f"choose a {what} that satisfies the constraint (project it onto the manifold)")
-            raise ManifoldgenError(f"{what} configuration {problem}; {fix}")
+            raise ManifoldgenError(f"{what} configuration {problem}; {self._fix(problem, what)}")
         return q
+
+    def _fix(self, problem: str, what: str) -> str:
+        """What to do about a start or goal that fails :meth:`problem`: a condition outside the task's values
+        comes first (the start and goal were most likely made for another one)."""
+        if problem.startswith("is in collision"):
+            return f"choose a collision-free {what} or move the obstacle"
+        condition = self.constraint.condition
+        outside = condition.k and np.any((self.y < condition.low - 1e-9) | (self.y > condition.high + 1e-9))
+        if problem.startswith("violates") and outside:
+            return (f"the condition {self.y.tolist()} lies outside the task's values ({condition.describe()}): "
+                    f"check the scene's condition, or choose a {what} that satisfies the constraint there")
+        return f"choose a {what} that satisfies the constraint (project it onto the manifold)"
 
     def validate_path(self, path: np.ndarray) -> PathReport:
         """Check every state every ``settings.resolution`` along the segments of ``path (K, n)``,

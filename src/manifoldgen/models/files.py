@@ -57,7 +57,28 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
         arrays = safetensors.numpy.load(blob)
     except Exception as exc:  # safetensors raises its own error types for damaged files
         raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} is not a readable safetensors file ({exc})") from exc
+    _check_config_fits_weights(path, doc, arrays)
     return doc, arrays
+
+
+def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
+    """Refuse a ``config`` whose sampling network's sizes (``hidden`` widths, ``latent``) differ from the weights the
+    ``decoder`` entry names: the file was edited and resealed (its checksum is not a signature), and what it says
+    about the model would mislead whoever reads it."""
+    decoder, config = doc.get("decoder"), doc["config"]
+    if not decoder:
+        return
+    shapes = [weights.get(f"{decoder['net']}.{2 * i}.weight") for i in range(decoder["layers"])]
+    if any(w is None or w.ndim != 2 for w in shapes):
+        return  # core_decoder names the missing weight when the network is built
+    claims = {"hidden": (config.get("hidden"), [int(w.shape[0]) for w in shapes[:-1]])}
+    if not decoder["steps"]:
+        claims["latent"] = (config.get("latent"), decoder["noise"])
+    for key, (said, held) in claims.items():
+        if said is not None and said != held:
+            raise ManifoldgenError(f"{path}/{CONFIG_FILE} gives config {key} = {said}, but its '{decoder['net']}' "
+                                   f"weights have {held}: the file was edited (its checksum is not a signature); "
+                                   "restore or retrain the model")
 
 
 def _validate_doc(path: Path, doc: object) -> None:

@@ -32,6 +32,7 @@ IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joi
             "constraint": "constraint", "tolerance": "tolerance", "condition": "condition", "scene_name": "scene",
             "scene_sha256": "scene objects (sha256)", "resolution": "check resolution"}
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance
+SHOWN_DIFFERENCES = 3  # identity differences a refusal names (the rest counted): an error stays one short line
 
 
 class Roadmap:
@@ -238,22 +239,25 @@ class Roadmap:
 
 def _check_identity(path: str | Path, meta: dict, expect: dict) -> None:
     """Refuse a roadmap whose ``meta`` names another query space than ``expect`` (the :data:`IDENTITY` keys it holds),
-    naming both values of each difference."""
-    differences = [_difference(key, meta.get(key), wanted) for key in IDENTITY if key in expect
-                   for wanted in [json.loads(json.dumps(expect[key]))] if meta.get(key) != wanted]
+    naming both values of the first few differences."""
+    differences = [line for key in IDENTITY if key in expect
+                   for wanted in [json.loads(json.dumps(expect[key]))] if meta.get(key) != wanted
+                   for line in _differences(key, meta.get(key), wanted)]
     if differences:
-        raise ManifoldgenError(f"{path} holds a roadmap for another query: {'; '.join(differences)}; give this query "
-                               f"another roadmap file (or delete {path} to start a new one)")
+        shown = "; ".join(differences[:SHOWN_DIFFERENCES])
+        more = len(differences) - SHOWN_DIFFERENCES
+        shown += f" (and {more} more difference{'s' * (more > 1)})" if more > 0 else ""
+        raise ManifoldgenError(f"{path} holds a roadmap for another query: {shown}; give this query another roadmap "
+                               f"file (or delete {path} to start a new one)")
 
 
-def _difference(key: str, made, wanted) -> str:
-    """``key``'s values in the file and in this query (of an object: its fields that differ), short enough for an
-    error line."""
+def _differences(key: str, made, wanted) -> list[str]:
+    """``key``'s values in the file and in this query (of an object: one line per field that differs)."""
     name = IDENTITY[key]
     if isinstance(made, dict) and isinstance(wanted, dict):
-        return ", ".join(f"{name} {field} {_show(made.get(field))} (the file) vs {_show(wanted.get(field))} "
-                         "(this query)" for field in sorted({*made, *wanted}) if made.get(field) != wanted.get(field))
-    return f"{name} {_show(made)} (the file) vs {_show(wanted)} (this query)"
+        return [f"{name} {field} {_show(made.get(field))} (the file) vs {_show(wanted.get(field))} (this query)"
+                for field in sorted({*made, *wanted}) if made.get(field) != wanted.get(field)]
+    return [f"{name} {_show(made)} (the file) vs {_show(wanted)} (this query)"]
 
 
 def _show(value) -> str:
