@@ -76,6 +76,9 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     wall = json.loads((BUILTIN_DIR / "scenes" / "panda-wall.json").read_text())
     (root / "scene.json").write_text(json.dumps(wall))
     (root / "high.json").write_text(json.dumps({**wall, "condition": [0.95]}))  # its start and goal are at 0.5
+    crowd = [{"name": f"b{i}", "type": "sphere", "radius": 0.01, "pose": {"position": [3.0 + 0.03 * i, 3.0, 0.0]}}
+             for i in range(1001)]
+    (root / "crowded.json").write_text(json.dumps({**wall, "obstacles": crowd}))
     (root / "latin1.json").write_bytes(json.dumps(wall).replace("wall_left", "wäll").encode("latin-1"))
     (root / "bad.stl").write_text("solid x\n garbage\nendsolid\n")
     for name, obstacle in (("far", {"type": "box", "size": [0.1, 0.1, 0.1], "pose": {"position": [1e308, 0, 0]}}),
@@ -227,6 +230,8 @@ CASES = [
     cli("plan-huge-radius", "plan pose --scene {I}/huge.json -o {O}/p.npz", "1e+300"),
     cli("plan-resealed-hidden", "plan pose --scene wall --sampler cvae:{I}/rehidden -o {O}/p.npz",
         "gives config hidden = [9], but its 'decoder' weights have [8]: the file was edited"),
+    cli("plan-too-many-obstacles", "plan pose --scene {I}/crowded.json -o {O}/p.npz",
+        "the scene has 1,001 objects; at most 1,000 are supported"),
     cli("plan-condition-beyond-the-task", "plan pose --scene {I}/high.json -o {O}/p.npz",
         "the condition [0.95] lies outside the task's values (panda_hand_tcp.z in [0.2, 0.7] m): check the scene's"),
     cli("plan-negative-batch", "plan pose --scene wall --sampler project,batch=-5 -o {O}/p.npz", "batch=-5"),

@@ -28,6 +28,10 @@ from manifoldgen.robot import Robot, as_batch
 
 MIN_SRDF_PAIRS = 1
 MATRIX_SAMPLES = 2000
+# Scene objects (obstacles and held tools) one checker takes: pinocchio's geometry model keeps a square table of
+# its objects' pairs and copies it whole on each object added, so set-up grows as the cube of the count
+# (1,000 objects: about 0.4 s; 2,000: 3 s; 20,000: hours).
+MAX_SCENE_OBJECTS = 1000
 
 
 def cache_dir() -> Path:
@@ -48,6 +52,11 @@ class CollisionChecker:
     def __init__(self, robot: Robot, obstacles: list[pin.GeometryObject] | None = None,
                  attached: list[pin.GeometryObject] | None = None, touch: list[list[str]] | None = None):
         self.robot = robot
+        count = len(obstacles or []) + len(attached or [])
+        if count > MAX_SCENE_OBJECTS:
+            raise ManifoldgenError(f"the scene has {count:,} objects; at most {MAX_SCENE_OBJECTS:,} are supported (the "
+                                   "collision model's set-up grows as the cube of their count): merge small obstacles "
+                                   "into mesh obstacles")
         self.geom = robot.collision_model.copy()
         self.geom.removeAllCollisionPairs()
         self.self_pairs = _self_pairs(robot)
