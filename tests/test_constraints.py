@@ -73,6 +73,8 @@ def test_condition_range_warns_or_refuses(panda_task):
         cond.check([[0.9]])
     with pytest.raises(ManifoldgenError, match="outside the trained range"):
         cond.check([[0.9]], strict=True)
+    with pytest.warns(UserWarning, match=r"conditions \[0.05\], \[0.1\], \[0.8\] and 1 more are outside"):
+        cond.check([[0.9], [0.1], [0.4], [0.05], [0.8], [0.9]])  # each value outside named once, the rest counted
     with pytest.raises(ManifoldgenError, match="needs 1 value"):
         cond.check([[0.3, 0.4]])
 

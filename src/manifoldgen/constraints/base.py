@@ -98,8 +98,10 @@ class Condition:
                                    f"numbers inside {self.describe()}")
         outside = np.any((y < self.low - margin) | (y > self.high + margin), axis=1)
         if outside.any():
-            msg = (f"condition {y[outside][0].tolist()} is outside the trained range "
-                   f"({self.describe()})")
+            rows = np.unique(y[outside], axis=0).tolist()
+            more = f" and {len(rows) - 3} more" if len(rows) > 3 else ""
+            said = "condition {} is" if len(rows) == 1 else "conditions {} are"
+            msg = f"{said.format(', '.join(map(str, rows[:3])) + more)} outside the trained range ({self.describe()})"
             if strict:
                 raise ManifoldgenError(msg + "; choose a value inside it or drop --strict")
             warnings.warn(msg + "; results may be poor", stacklevel=2)
