@@ -38,6 +38,9 @@ def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, sh
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
             raise CannotRecheck(f"inconsistent shapes q {q.shape}, y {y.shape} for {len(meta['joints'])} joints")
+        contradiction = task_copy_contradiction(meta)
+        if contradiction:
+            raise CannotRecheck(contradiction)
         checker = Checker(meta, y.shape[1], urdf=urdf, srdf=srdf, near=Path(path).parent)
     except CannotRecheck as exc:
         return {"status": EXIT_CANNOT, "line": f"{path}: CANNOT RECHECK: {exc}", "details": [], "rows": 0}
@@ -61,7 +64,7 @@ def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, sh
     rechecked = n == 0 or all(t is not None for t in tol)
     within = np.array([t is not False for t in tol], bool)
     valid = within & limits & free
-    robot = meta.get("robot", "?")
+    robot = robot_name(meta)
     parts = [f"{n} rows, {checker.constraint.describe()} on {robot}"]
     pct = (lambda a: f"{a.mean():.2%}" if n else "-")
     if rechecked and checker.constraint.recheckable:
@@ -85,6 +88,24 @@ def check(path: str | Path, urdf: str | None = None, srdf: str | None = None, sh
     return {"status": status, "line": line, "details": details, "rows": n,
             "tolerance": np.array(tol, bool) if rechecked and checker.constraint.recheckable else None,
             "limits": limits, "collision_free": free, "valid": valid, "meta": meta}
+
+
+def robot_name(meta: dict) -> str:
+    """The name of the robot the checker loads: the task's (``meta.task.robot.name``), else ``meta.robot``."""
+    task = meta.get("task") if isinstance(meta.get("task"), dict) else {}
+    identity = task.get("robot") if isinstance(task.get("robot"), dict) else {}
+    return str(identity.get("name") or meta.get("robot") or "?")
+
+
+def task_copy_contradiction(meta: dict) -> str | None:
+    """Why the file's top-level copies of its task (``robot``, ``locked``, ``floating_base``, ``constraint``)
+    contradict ``meta.task``, or None: the checker reads both, and would check one while naming the other."""
+    task = meta.get("task") if isinstance(meta.get("task"), dict) else {}
+    for key in ("robot", "locked", "floating_base", "constraint"):
+        made = robot_name(meta) if key == "robot" else task.get(key)
+        if key in meta and key in task and meta[key] != made:
+            return f"meta '{key}' {str(meta[key])[:40]} contradicts its task's {str(made)[:40]}; the file was edited"
+    return None
 
 
 def main(argv: list[str] | None = None) -> int:

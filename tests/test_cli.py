@@ -25,10 +25,11 @@ def test_collect_at_chosen_conditions_and_strict_range(tmp_path):
     ok = runner.invoke(app, ["collect", "pose", "--per-condition", "10", "--condition", "0.45", "-o", str(out)])
     assert ok.exit_code == 0, ok.output
     np.testing.assert_allclose(Dataset.load(out).y, 0.45)
-    warn = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "--condition", "0.72", "-o", str(out)])
+    wide = tmp_path / "wide.npz"  # another output: a finished one made with other settings is never replaced
+    warn = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "--condition", "0.72", "-o", str(wide)])
     assert warn.exit_code == 0 and "outside the trained range" in warn.output
     strict = runner.invoke(app, ["collect", "pose", "--per-condition", "5", "--condition", "0.72", "--strict",
-                                 "-o", str(out)])
+                                 "-o", str(tmp_path / "strict.npz")])
     assert strict.exit_code == 2 and "outside the trained range" in strict.output
 
 

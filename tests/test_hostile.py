@@ -160,11 +160,11 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     # path files
     meta, arrays = load_npz(root / "path.npz", ("path",))
     path = arrays["path"]
-    save_npz(root / "path-one.npz", meta, path=path[:1])
-    save_npz(root / "path-still.npz", meta, path=np.repeat(path[:1], 2, axis=0))
-    save_npz(root / "path-outside-limits.npz", meta, path=path + np.r_[0, 0, 0, 0, 0, 0, 5.0])
-    save_npz(root / "path-offmanifold.npz", meta, path=path + 0.3)
-    save_npz(root / "path-int.npz", meta, path=np.round(path).astype(np.int64))
+    for name, edited in (("one", path[:1]), ("still", np.repeat(path[:1], 2, axis=0)),
+                         ("outside-limits", path + np.r_[0, 0, 0, 0, 0, 0, 5.0]), ("offmanifold", path + 0.3),
+                         ("int", np.round(path).astype(np.int64))):  # its meta's start and goal are its ends
+        save_npz(root / f"path-{name}.npz", {**meta, "start": edited[0].tolist(), "goal": edited[-1].tolist()},
+                 path=edited)
     save_npz(root / "path-3d.npz", meta, path=path[None])
     save_npz(root / "path-condition-nan.npz", {**meta, "condition": [float("nan")]}, path=path)
     save_npz(root / "path-condition-str.npz", {**meta, "condition": "0.5"}, path=path)
@@ -452,7 +452,8 @@ CASES = [
     cli("sample-model-range-flipped", "sample {I}/model-range-flipped --condition 0.4 -o {O}/s.npz", "lower bound"),
     cli("sample-model-hidden-huge", "sample {I}/model-hidden-huge --condition 0.4 -o {O}/s.npz", "hidden"),
     cli("sample-model-hidden-text", "sample {I}/model-hidden-text --condition 0.4 -o {O}/s.npz", "hidden"),
-    cli("sample-model-hidden-other", "sample {I}/model-hidden-other --condition 0.4 -o {O}/s.npz", "weights do not match"),
+    cli("sample-model-hidden-other", "sample {I}/model-hidden-other --condition 0.4 -o {O}/s.npz",
+        "gives config hidden = [16], but its 'decoder' weights have [8]"),
     cli("sample-model-kind-code", "sample {I}/model-kind-code --condition 0.4 -o {O}/s.npz", "os:system"),
     cli("sample-model-kind-unknown", "sample {I}/model-kind-unknown --condition 0.4 -o {O}/s.npz", "cgan2"),
     cli("sample-model-latent-bool", "sample {I}/model-latent-bool --condition 0.4 -o {O}/s.npz", "latent"),

@@ -151,8 +151,8 @@ def test_an_unsolved_plan_writes_nothing_and_says_why(tmp_path):
 
 BROKEN_PATHS = [  # (what is changed in a planned path file, the words of the one-line refusal)
     ("format", lambda meta, path: ({**meta, "format_version": 99}, path), "path format 99 is not the one"),
-    ("no format", lambda meta, path: ({k: v for k, v in meta.items() if k != "format_version"}, path), "format None"),
-    ("kind", lambda meta, path: ({**meta, "kind": "dataset"}, path), "its meta says kind 'dataset'"),
+    ("no format", lambda meta, path: ({k: v for k, v in meta.items() if k != "format_version"}, path), "format null"),
+    ("kind", lambda meta, path: ({**meta, "kind": "dataset"}, path), 'its meta says kind "dataset"'),
     ("empty", lambda meta, path: (meta, path[:0]), "must be a non-empty (K, n) array of finite numbers"),
     ("NaN", lambda meta, path: (meta, np.where(np.arange(path.size).reshape(path.shape) == 3, np.nan, path)),
      "must be a non-empty (K, n) array of finite numbers"),

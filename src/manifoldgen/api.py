@@ -84,10 +84,28 @@ def _scene(function: str, task: Task, scene: Any) -> Scene:
     from manifoldgen.scene import Scene
 
     if isinstance(scene, Scene):
+        _check_scene(function, task, scene)
         return scene
     if _pathlike(scene):
         return load_scene(task, scene)
     raise _wrong(function, "scene", "a Scene (mg.load_scene) or a scene name or scene .json file", scene)
+
+
+def _check_scene(function: str, task: Task, scene: Scene) -> None:
+    """Refuse a Scene loaded for another robot, or for another task (its start, goal and condition sized for it)."""
+    import numpy as np
+
+    robot, fix = task.robot, "load the scene for this task: mg.load_scene(task, name)"
+    if scene.robot and scene.robot != robot.name:
+        raise ManifoldgenError(f"{function}: scene {scene.name!r} is for robot {scene.robot}, task {task.name} for "
+                               f"{robot.name}; {fix}")
+    sizes = {"start": robot.n, "goal": robot.n, "condition": task.condition.k}
+    wrong = [f"{key} has {np.size(getattr(scene, key))}" for key, size in sizes.items()
+             if np.shape(getattr(scene, key)) != (size,)]
+    if wrong:
+        raise ManifoldgenError(f"{function}: scene {scene.name!r} was loaded for another task ({', '.join(wrong)} "
+                               f"values; task {task.name} on {robot.name} takes {robot.n} joint values and "
+                               f"{task.condition.k} condition value(s)); {fix}")
 
 
 # ---------------------------------------------------------------------------------------------- tasks, scenes
@@ -134,6 +152,8 @@ def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out
 
     task = _task("collect", task)
     per_condition = _integer("collect", "per_condition", per_condition)
+    if per_condition <= 0:
+        raise ManifoldgenError(f"collect: per_condition must be a positive number of rows, got {per_condition}")
     seed = _seed("collect", seed)
     near_home = _number("collect", "near_home", near_home)
     if conditions is not None:
@@ -143,6 +163,8 @@ def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out
             conditions = np.asarray(conditions, dtype=float)
         except (TypeError, ValueError):
             raise _wrong("collect", "conditions", "None or condition values (V, k) as numbers", conditions) from None
+    if not isinstance(anchors, bool):
+        raise _wrong("collect", "anchors", "True or False", anchors)
     out = _optional_path("collect", "out", out)
     if out is not None:
         check_output_path(out, [task.file], what="out")
@@ -180,6 +202,8 @@ def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: 
         raise _wrong("train", "model", "a model name such as 'cvae'", model)
     seed = _seed("train", seed)
     epochs = None if epochs is None else _integer("train", "epochs", epochs)
+    if epochs is not None and epochs <= 0:
+        raise ManifoldgenError(f"train: epochs must be a positive number (None: the model's own), got {epochs}")
     out = _optional_path("train", "out", out)
     if out is not None:
         check_output_path(out, [source], directory=True, writes=OUTPUT_FILES + (SELECTION_FILE, "candidates"),
@@ -234,10 +258,14 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
     from manifoldgen.provenance import check_made_for
     from manifoldgen.runtime import REFINE
     from manifoldgen.sampling import DatasetSampler, model_sampler
-    from manifoldgen.specs import make_sampler
+    from manifoldgen.specs import LIMITS, make_sampler
 
     refine = None if refine is None else _integer(function, "refine", refine)
     batch = None if batch is None else _integer(function, "batch", batch)
+    for name, value in (("refine", refine), ("batch", batch)):  # the ranges of the spec string's options
+        low, high = LIMITS[name]
+        if value is not None and not low <= value <= high:
+            raise ManifoldgenError(f"{function}: {name} must be from {low} to {high:,}, got {value}")
     common = {"seed": seed, **({"batch": batch} if batch is not None else {})}
     if isinstance(model, str):
         options = ([f"refine={refine}"] if refine is not None else []) + ([f"batch={batch}"] if batch is not None else [])
@@ -247,6 +275,9 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
         refine = REFINE if refine is None else refine
         return model_sampler(space, model, refine=refine, **common), f"{model.name}:(in memory),refine={refine}"
     if isinstance(model, Dataset):
+        if refine is not None:
+            raise ManifoldgenError(f"{function}: refine applies to a model's samples; a Dataset's rows are drawn as "
+                                   "they are: leave refine out")
         check_made_for(model.meta, space.constraint, "the dataset")
         return DatasetSampler(space, model.q, model.y, **common), "pg:(in memory)"
     raise _wrong(function, argument, "a sampler spec (uniform, project, pg:DATASET.npz, MODEL:DIR), a trained model "
@@ -309,15 +340,18 @@ class QueryResult:
         return copy.deepcopy(self.meta)
 
     @classmethod
-    def load(cls, file: PathLike, task: Task | None = None, *, trust_code: bool = False) -> QueryResult:
+    def load(cls, file: PathLike, task: Task | PathLike | None = None, *, trust_code: bool = False) -> QueryResult:
         """A path file (``manifoldgen plan -o`` or :meth:`save`), checked whole
-        (:func:`manifoldgen.query.read_path_file`; ``task``, ``trust_code``: for a file whose task names a
-        user's constraint type)."""
+        (:func:`manifoldgen.query.read_path_file`; ``task`` (a Task, a task name or task file; refused unless the
+        file was made for it), ``trust_code``: for a file whose task names a user's constraint type)."""
         from manifoldgen.planning.result import PlanResult, path_length
         from manifoldgen.query import read_path_file
 
         if not _pathlike(file):
             raise _wrong("QueryResult.load", "file", "a file path (str or os.PathLike)", file)
+        if not isinstance(trust_code, bool):
+            raise _wrong("QueryResult.load", "trust_code", "True or False", trust_code)
+        task = None if task is None else _task("QueryResult.load", task)
         meta, path, _ = read_path_file(file, task, trust_code=trust_code)
         done = meta.get("result", {})
         result = PlanResult(True, path, float(done.get("time_s", 0.0)), int(done.get("iterations", 0)),
@@ -336,7 +370,7 @@ class QueryResult:
         if not self.result.solved:
             raise ManifoldgenError(f"QueryResult.save: the query was not solved, so there is no path to write "
                                    f"({self.result.why()})")
-        save_path(file, self.result, self.meta)
+        save_path(file, self.result, self.meta, what="QueryResult.save: file")
         return file
 
 

@@ -84,7 +84,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     on = parse_cluster(cluster)
-    check_output_path(output, [_file(task)])
+    check_output_path(output, [_file(task)], suffixes=(".npz",))
     task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     set_threads()
@@ -155,6 +155,8 @@ def robots(robot: str = typer.Argument(None, help="A robot name or URDF path to 
     """List the robots that load by name, or describe one: joints, limits, frames, SRDF and URDF hash."""
     from manifoldgen.robot import Robot, known_robots
     if robot is None:
+        if srdf is not None:
+            raise ManifoldgenError("--srdf goes with a robot to describe: give its name or URDF path too")
         console.print(", ".join(known_robots()), markup=False)
         return
     r = Robot.load(robot, srdf=srdf)
@@ -234,9 +236,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         raise ManifoldgenError(f"-o {output} and its picture {image or output.with_suffix('.png')}{also} would "
                                "overwrite each other; give -o a .npz name and --snapshots another .png")
     inputs = [_file(task), _file(scene), _file(parse_spec(sampler)[1]), config]
-    for out in (output, image, snapshots):
+    for out, what, suffix in ((output, "-o", ".npz"), (image, "-o", ".png"), (snapshots, "--snapshots", ".png")):
         if out is not None:
-            check_output_path(out, inputs, what="--snapshots" if out is snapshots else "-o")
+            check_output_path(out, inputs, what=what, suffixes=(suffix,))
     roadmap_file = roadmap.resolve() if roadmap is not None else None  # a link: the file it names, written through
     if roadmap_file is not None:
         clash = next((out for out in (output, image, snapshots) if out is not None
@@ -245,7 +247,7 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
             raise ManifoldgenError(f"--roadmap {roadmap} is also the output {clash} of this command; give the roadmap "
                                    "a file of its own (e.g. roadmap.npz)")
         check_output_path(roadmap_file, inputs, what="--roadmap" if roadmap_file == roadmap.absolute()
-                          else f"--roadmap {roadmap} ->")
+                          else f"--roadmap {roadmap} ->", suffixes=(".npz",))
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
@@ -305,7 +307,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                seconds_per_m=pace.seconds_per_m * duration_scale, settle_s=settle, hold_s=hold,
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
-        check_output_path(output, [path])
+        check_output_path(output, [path], suffixes=(".json",))
     result = check_path_file(path, settings, feet=feet, progress=True, task=made_for(task), trust_code=trust_code)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
@@ -395,8 +397,11 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
     from manifoldgen.tasks import task_from_meta
     set_threads(2)
     _bounded("--refine", refine)
+    if robot is not None and task is None:
+        raise ManifoldgenError("--robot picks the robot of a built-in --task; give --task too (the model's own "
+                               "task and robot are used without both)")
     net = load_model(model_dir)
-    check_output_path(output, [model_dir, _file(task)])
+    check_output_path(output, [model_dir, _file(task)], suffixes=(".npz",))
     task_obj = task_from_meta(net.meta, task=made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
@@ -456,7 +461,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
     from manifoldgen.cluster import parse_cluster
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
-    from manifoldgen.tasks import BUILTIN_DIR, get_task
+    from manifoldgen.tasks import BUILTIN_DIR
     on = parse_cluster(cluster, workers)
     _bounded("--runs", runs)
     _bounded("--time", time_limit)
@@ -464,7 +469,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
     check_output_path(output, [_file(task), _file(scene), config, *(models or []),
                                *(_file(parse_spec(s)[1]) for s in samplers if s)],
                       directory=True, writes=OUTPUT_FILES)
-    task_obj = get_task(task, robot)
+    task_obj = load_task(task, robot)
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR
     paper = PAPER_LIMITS.get(scene, OTHER_LIMITS) if builtin else OTHER_LIMITS

@@ -1,10 +1,13 @@
-"""What every module of the command line shares: the typer ``app`` its commands register on, the console, the
-error handling every command wears (:func:`friendly`), the help texts of the task options and the tasks they
-name. Importing it limits the thread pools first (see :func:`manifoldgen.runtime.limit_threads`)."""
+"""What every module of the command line shares: the typer ``app`` its commands register on, the consoles, the
+error handling every command wears (:func:`friendly`) and the app's own (usage errors as one line), the help texts
+of the task options and the tasks they name. Importing it limits the thread pools first (see
+:func:`manifoldgen.runtime.limit_threads`)."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import sys
 import warnings
 
 from manifoldgen.runtime import check_seed, limit_threads
@@ -14,41 +17,77 @@ limit_threads()  # before numpy and torch start their pools: on a busy machine, 
 import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.text import Text  # noqa: E402
+from typer.core import TyperGroup  # noqa: E402
 
 from manifoldgen.errors import ManifoldgenError, user_code  # noqa: E402
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=None,
+console = Console(soft_wrap=True)  # results
+errors = Console(soft_wrap=True, stderr=True)  # errors and warnings
+_click = sys.modules[typer.BadParameter.__module__]  # click's exceptions: typer's own copy of click, or click
+
+
+def say_error(message: str) -> None:
+    """Print ``message`` as the one ``error:`` line (verbatim: no markup)."""
+    errors.print(Text.assemble(("error: ", "red"), message))
+
+
+@contextlib.contextmanager
+def _usage_in_one_line():
+    """A usage error (a missing option, a value of the wrong type, an unknown option) as one ``error:`` line and
+    exit code 2, as every other error."""
+    try:
+        yield
+    except getattr(_click, "NoArgsIsHelpError", ()):
+        raise  # no arguments: the help
+    except _click.UsageError as exc:
+        message = exc.format_message().rstrip(".")
+        command = exc.ctx.command_path if exc.ctx is not None else "manifoldgen"
+        say_error(f"{message[:1].lower()}{message[1:]}; see `{command} --help`")
+        raise typer.Exit(2) from None
+
+
+class OneLineUsage(TyperGroup):
+    """The command group: its usage errors (and its subcommands') are one line (see :func:`_usage_in_one_line`)."""
+
+    def make_context(self, *args, **kwargs):
+        with _usage_in_one_line():
+            return super().make_context(*args, **kwargs)
+
+    def invoke(self, ctx):
+        with _usage_in_one_line():
+            return super().invoke(ctx)
+
+
+app = typer.Typer(cls=OneLineUsage, add_completion=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Constrained motion planning with learned samplers.")
-console = Console(soft_wrap=True)
 
 
 def friendly(command):
-    """Turn ManifoldgenError (and an OS error no library call turned into one) into a one-line error and
-    exit code 2; warnings print in yellow. Every command's ``seed`` is range-checked here."""
+    """Turn ManifoldgenError (and an OS error no library call turned into one) into a one-line error on stderr and
+    exit code 2; warnings print in yellow, on stderr too. Every command's ``seed`` is range-checked here."""
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         def show(message, category, filename, lineno, file=None, line=None):
-            console.print(Text.assemble(("warning: ", "yellow"), str(message)))
+            errors.print(Text.assemble(("warning: ", "yellow"), str(message)))
         warnings.showwarning = show
         try:
             if "seed" in kwargs:
                 check_seed(kwargs["seed"])
             return command(*args, **kwargs)
         except ManifoldgenError as exc:
-            console.print(Text.assemble(("error: ", "red"), str(exc)))  # verbatim: no markup
+            say_error(str(exc))
             raise typer.Exit(2) from None
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename else ""
-            console.print(Text.assemble(("error: ", "red"), f"{where}{exc.strerror or exc}; check the path and its "
-                                        "permissions"))
+            say_error(f"{where}{exc.strerror or exc}; check the path and its permissions")
             raise typer.Exit(2) from None
         except (Exception, SystemExit) as exc:
             blamed = user_code(exc)
             if blamed is None or isinstance(exc, (typer.Exit, typer.Abort)):
                 raise
             why = str(exc).strip().splitlines()[0][:200] if str(exc).strip() else ""
-            console.print(Text.assemble(("error: ", "red"), f"user code {blamed} raised {type(exc).__name__}"
-                                        f"{': ' + why if why else ''}; fix that module (see docs/tasks.md)"))
+            say_error(f"user code {blamed} raised {type(exc).__name__}{': ' + why if why else ''}; fix that module "
+                      "(see docs/tasks.md)")
             raise typer.Exit(2) from None
     return wrapper
 
@@ -65,6 +104,9 @@ TRUST_HELP = ("Import a module:Class constraint the input file names from PYTHON
 def load_task(task: str, robot: str | None):
     """The task a ``TASK`` argument names: a built-in task (for ``robot``) or a task file."""
     from manifoldgen.tasks import get_task
+    if robot is not None and not robot.strip():
+        raise ManifoldgenError("--robot is empty; give a robot name (`manifoldgen robots` lists them) or leave "
+                               "--robot out for the task's default robot")
     return get_task(task, robot)
 
 

@@ -32,9 +32,9 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
     if export is not None and snapshots is not None:
         raise ManifoldgenError("--export and --snapshots each write one file instead of serving; give one of them "
                                "per run")
-    for out, option in ((export, "--export"), (snapshots, "--snapshots")):
+    for out, option, suffix in ((export, "--export", ".html"), (snapshots, "--snapshots", ".png")):
         if out is not None:
-            check_output_path(out, [file], what=option)
+            check_output_path(out, [file], what=option, suffixes=(suffix,))
     if export is not None:
         from manifoldgen.viewer.export import export_html
         info = export_html(file, export, task, trust_code=trust_code)
@@ -75,9 +75,7 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
     """Time-parameterise a path with TOPP-RA within joint limits; every sample is rechecked."""
     from manifoldgen.io import check_output_path
     from manifoldgen.trajectory import trajectory_of_file
-    if output.suffix.lower() not in TRAJECTORY_FORMATS:
-        raise ManifoldgenError(f"-o must end in .json or .csv, got {output.name}")
-    check_output_path(output, [path_file])
+    check_output_path(output, [path_file], suffixes=TRAJECTORY_FORMATS)
     traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt, task=made_for(task), trust_code=trust_code)
     info, check = traj.info, traj.info["check"]
     if check["first_invalid"] is not None:

@@ -32,7 +32,7 @@ import numpy as np
 from manifoldgen.cluster import Cluster, Pool, connect
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.dataset import FORMAT_VERSION, Dataset
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.native import fast_space
 from manifoldgen.progress import progress_bar
@@ -44,6 +44,7 @@ from manifoldgen.tasks import Task, code_types, task_from_spec
 MAX_ROWS = 10_000_000  # rows one dataset may hold (they are kept in memory: 80 bytes per joint and 1000 rows)
 DEFAULT_ROWS = 10_000  # rows a collection makes by default, shared by its condition values ...
 MIN_PER_CONDITION = 200  # ... but at least this many at each
+DIAGNOSED = 256  # projected seeds that say why a condition gave too few rows
 
 
 def default_rows(conditions: int) -> int:
@@ -79,16 +80,16 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     if min(batch, max_batches, give_up) <= 0:
         raise ManifoldgenError(f"batch, max_batches and give_up must be positive, got {batch}, {max_batches}, "
                                f"{give_up}")
-    k = task.condition.k
-    values = task.condition.grid if conditions is None or not k else np.asarray(conditions, float).reshape(-1, k)
-    if not np.isfinite(values).all():
-        raise ManifoldgenError(f"condition values must be finite numbers, got {values.tolist()}")
+    values = _condition_values(task, conditions)
     if per_condition * len(values) > MAX_ROWS:
-        raise ManifoldgenError(f"--per-condition {per_condition} at {len(values)} condition value(s) makes more than "
-                               f"{MAX_ROWS:,} rows; collect several smaller datasets")
+        raise ManifoldgenError(f"{per_condition} rows per condition at {len(values)} condition value(s) make more "
+                               f"than {MAX_ROWS:,} rows; collect several smaller datasets")
     if cluster is not None and code_types(task.spec()):
         raise ManifoldgenError("--cluster rebuilds the task on every node, which never imports a user's module:Class "
                                "constraint; collect this task without --cluster")
+    if anchors is not None and not isinstance(anchors, Anchors):
+        raise ManifoldgenError(f"anchors must be query anchors (manifoldgen.scene.task_anchors) or None, got "
+                               f"{anchors!r:.60}")
     anchors = anchors if anchors is not None and len(anchors) else None
     if near_home and anchors is not None:
         raise ManifoldgenError("--near-home and query anchors are two seedings; give one (--no-anchors with "
@@ -105,6 +106,8 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
         out = check_output_path(out)
         partial = out.with_name(out.name + ".partial")
         owned = not partial.exists()
+        if owned and out.exists():
+            _check_finished(out, meta, values)
     try:
         if partial is not None:
             _prepare_partial(partial, {**meta, "conditions": values.tolist(), "batch": batch,
@@ -265,11 +268,28 @@ def _collect(task: Task, values: np.ndarray, per_condition: int, max_batches: in
             q = np.concatenate(got)[:per_condition]
             if len(q) < per_condition:
                 raise ManifoldgenError(f"only {len(q)} valid rows at condition {y.tolist()} after "
-                                       f"{len(got)} batches of {draw.batch}; the condition is probably unreachable: "
-                                       f"choose values inside {task.condition.describe()}")
+                                       f"{len(got)} batches of {draw.batch}; {_why_none(task, space, y)}")
             qs.append(q)
             ys.append(np.broadcast_to(y, (per_condition, len(y))))
     return Dataset(np.concatenate(qs), np.concatenate(ys).copy(), meta)
+
+
+def _why_none(task: Task, space: ConstrainedSpace, y: np.ndarray) -> str:
+    """Why few rows are valid at ``y``: outside the task's condition range, or (inside it) what rejects
+    :data:`DIAGNOSED` projected uniform seeds (the tolerance, the joint limits, the inequalities, collisions)."""
+    condition = task.condition
+    if np.any((y < condition.low) | (y > condition.high)):
+        return f"the condition is probably unreachable: choose values inside {condition.describe()}"
+    robot, constraint = task.robot, task.constraint
+    q = space.project(robot.sample_uniform(DIAGNOSED, np.random.default_rng(0))).q
+    limits = ~robot.within_limits(q)
+    tolerance = ~limits & (constraint.violation(q, y) > 1.0)
+    inequality = ~limits & ~tolerance & np.any(constraint.inequality(q, y) > 0, axis=1)
+    rest = ~(limits | tolerance | inequality)
+    collision = int(space.checker.in_collision(q[rest]).sum()) if space.checker is not None and rest.any() else 0
+    return (f"{y.tolist()} is inside {condition.describe()}, but of {DIAGNOSED} projected seeds {tolerance.sum()} "
+            f"missed the tolerance (smallest {constraint.tolerance.min():g}), {limits.sum()} left the limits, "
+            f"{inequality.sum()} broke an inequality, {collision} collided: check the task's tolerances")
 
 
 def coverage(dataset: Dataset, anchors: Anchors | None, seed: int = 0) -> dict:
@@ -302,21 +322,52 @@ def _prepare_partial(partial: Path, settings: dict) -> None:
         except (OSError, ValueError):
             raise ManifoldgenError(f"{partial} holds batches of an interrupted collection but no readable "
                                    f"meta.json; delete {partial} to start over") from None
-        changed = _differences(old, settings)
+        changed = differences(old, settings)
         if changed:
             raise ManifoldgenError(f"{partial} holds an interrupted collection made with other settings "
-                                   f"({'; '.join(changed)}); rerun the same command to resume it, or delete "
+                                   f"({changed}); rerun the same command to resume it, or delete "
                                    f"{partial} to start over")
     partial.mkdir(parents=True, exist_ok=True)
     atomic_write_text(stamp, json.dumps(settings))
 
 
-def _differences(old, new, where: str = "") -> list[str]:
-    """``'KEY: OLD then, NEW now'`` for every leaf (dicts are descended) where ``old`` and ``new`` differ."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        return [d for key in sorted(set(old) | set(new), key=str)
-                for d in _differences(old.get(key), new.get(key), f"{where}.{key}" if where else str(key))]
-    return [] if old == new else [f"{where or 'settings'}: {json.dumps(old)[:80]} then, {json.dumps(new)[:80]} now"]
+def _condition_values(task: Task, conditions) -> np.ndarray:
+    """The condition values to collect at, (V, k): ``conditions`` (default: the task's), each given once."""
+    k = task.condition.k
+    if conditions is None or not k:
+        return task.condition.grid
+    values = np.asarray(conditions, float)
+    if values.ndim == 1:  # one value per row (k = 1), or a single row
+        values = values[:, None] if k == 1 else values[None]
+    if values.ndim != 2 or values.shape[1] != k or not len(values):
+        names = ", ".join(task.condition.names)
+        raise ManifoldgenError(f"conditions must be condition values of shape (V, {k}) ({names} per row), got shape "
+                               f"{values.shape}")
+    if not np.isfinite(values).all():
+        raise ManifoldgenError(f"condition values must be finite numbers, got {values[~np.isfinite(values)][0]}")
+    rows = [tuple(row) for row in values.tolist()]
+    twice = next((row for row in rows if rows.count(row) > 1), None)
+    if twice is not None:
+        raise ManifoldgenError(f"condition value {list(twice)} is given twice; give each value once (rows per "
+                               "value: --per-condition)")
+    return values
+
+
+def _check_finished(out: Path, meta: dict, values: np.ndarray) -> None:
+    """Refuse to replace a finished dataset ``out`` unless this run, made with ``meta`` at ``values``, is the one
+    that wrote it (it then writes the same file again)."""
+    try:
+        old, arrays = load_npz(out, ("y",))
+        made = np.unique(arrays["y"], axis=0, return_index=True)
+        old = {**old, "conditions": arrays["y"][np.sort(made[1])].tolist()}
+    except ManifoldgenError:
+        raise ManifoldgenError(f"{out} exists and is not a dataset; choose another output (-o), or delete it") \
+            from None
+    old.pop("coverage", None)
+    changed = differences(old, {**meta, "conditions": values.tolist()})
+    if changed:
+        raise ManifoldgenError(f"{out} holds a dataset made with other settings ({changed}); choose another "
+                               "output (-o), or delete it to collect anew")
 
 
 def _load_batch(partial: Path | None, c: int, b: int, n: int) -> np.ndarray | None:

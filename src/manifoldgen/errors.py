@@ -1,11 +1,15 @@
 """The one exception type the library raises for bad input, its message for unknown names, the guard
-every file reader wears (:func:`file_reader`), :class:`SamplerFailed`, which ends a search unsolved, and the
-import of an optional extra's module (:func:`require`)."""
+every file reader wears (:func:`file_reader`), :class:`SamplerFailed`, which ends a search unsolved, the
+import of an optional extra's module (:func:`require`), and what keeps a refusal one short line however large the
+values it names (:func:`short`, :func:`listed`, :func:`differences`)."""
 
 import difflib
 import functools
 import importlib
+import json
 import os
+
+SHOWN = 3  # the items (differences, names) a refusal names before it counts the rest
 
 
 class ManifoldgenError(ValueError):
@@ -93,3 +97,33 @@ def require(module: str, extra: str, what: str):
         if exc.name is None or not (module == exc.name or module.startswith(exc.name + ".")):
             raise
         raise ManifoldgenError(f"{what} needs the [{extra}] extra: pip install 'manifoldgen[{extra}]'") from None
+
+
+def short(value, width: int = 40) -> str:
+    """``value`` as at most ``width`` characters of JSON (a file's meta may hold anything)."""
+    text = json.dumps(value, default=repr)
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
+def listed(items: list[str], separator: str = "; ") -> str:
+    """The first :data:`SHOWN` of ``items`` joined, the rest counted: ``a; b; c (and 2 more)``."""
+    more = len(items) - SHOWN
+    return separator.join(items[:SHOWN]) + (f" (and {more} more)" if more > 0 else "")
+
+
+def differences(old, new, where: str = "", words: tuple[str, str] = ("then", "now")) -> str:
+    """Where the JSON values ``old`` and ``new`` differ, leaf by leaf (``'KEY: OLD then, NEW now'``, values cut
+    short; ``where``: the values' own key), :func:`listed`; '' when they are equal."""
+    return listed(_leaves(json.loads(json.dumps(old)), json.loads(json.dumps(new)), where, words))
+
+
+def _leaves(old, new, where: str, words: tuple[str, str]) -> list[str]:
+    """``'KEY: OLD then, NEW now'`` for every leaf that differs (dicts descended in ``new``'s key order, equally long
+    lists of dicts item by item)."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return [line for key in [*new, *(key for key in old if key not in new)]
+                for line in _leaves(old.get(key), new.get(key), f"{where}.{key}" if where else str(key), words)]
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new) and old != new \
+            and any(isinstance(v, dict) for v in old):
+        return [line for i, (a, b) in enumerate(zip(old, new)) for line in _leaves(a, b, f"{where}[{i}]", words)]
+    return [] if old == new else [f"{where or 'settings'}: {short(old, 24)} {words[0]}, {short(new, 24)} {words[1]}"]

@@ -118,13 +118,15 @@ def _same(a: Path, b: Path) -> bool:
 
 
 def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = (), *,
-                      directory: bool = False, writes: Iterable[str] = (), what: str = "-o") -> Path:
+                      directory: bool = False, writes: Iterable[str] = (), what: str = "-o",
+                      suffixes: tuple[str, ...] = ()) -> Path:
     """Refuse an output that cannot be written or would destroy an input; returns it as a Path.
 
-    A file output (``directory=False``) must not be an existing directory and its directory must
-    exist; a directory output must not be an existing file. No file written (the output, or for a
-    directory output the names it ``writes`` inside it) may be one of ``inputs`` or a file of an input
-    folder (a model directory's model.json, say), and a directory output may not be an input folder.
+    A file output (``directory=False``) must end in one of ``suffixes`` (when given), must not be an existing
+    directory, and its directory must exist; a directory output must not be an existing file. The folder written
+    into must take a new file. No file written (the output, or for a directory output the names it ``writes``
+    inside it) may be one of ``inputs`` or a file of an input folder (a model directory's model.json, say), and a
+    directory output may not be an input folder.
     """
     path = Path(path)
     if directory:
@@ -143,6 +145,9 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
         if not path.parent.exists():
             raise ManifoldgenError(f"output directory {path.parent} does not exist; create it or choose "
                                    "another path")
+        if suffixes and path.suffix.lower() not in suffixes:
+            raise ManifoldgenError(f"{what} must end in {' or '.join(suffixes)}, got {path}; give a name such as "
+                                   f"{path.with_suffix(suffixes[0]).name}")
     written = [path / name for name in writes] if directory else [path]
     for given in inputs:
         if given is None or not Path(given).exists():
@@ -159,7 +164,19 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
             if hit is not None:
                 part = "" if hit == source else f", part of the input folder {given}"
                 raise ManifoldgenError(f"{what} {path} would overwrite the input {hit}{part}; choose another output")
+    _check_writable(path if directory and path.is_dir() else path.parent, path)
     return path
+
+
+def _check_writable(folder: Path, path: Path) -> None:
+    """Refuse (as a failed write would) an output ``path`` whose ``folder`` takes no new file: found before any
+    work, not after it."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp")
+    except OSError as exc:
+        raise write_error(path, exc) from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 NAME = re.compile(r"[A-Za-z0-9_@+=:,-][A-Za-z0-9_.@+=:,-]{0,99}")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,8 @@ from manifoldgen.models.base import dataset_task
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed, set_threads
 from manifoldgen.selection import RECALL_SLACK, score
-from manifoldgen.tasks import code_types
-from manifoldgen.training import VALIDATION, split
+from manifoldgen.tasks import Task, code_types
+from manifoldgen.training import DIMENSION_ROWS, VALIDATION, manifold_dimension, split
 
 SWEEP_FILE = "sweep.json"
 MODEL_FILES = ("model.safetensors", "model.json", "training.json", "loss.png")  # what a candidate's folder holds
@@ -70,7 +71,8 @@ def train_candidate(dataset: Dataset, model: str, latent: int | None, seed: int,
     set_threads()
     task = dataset_task(dataset)
     held_out = split(len(dataset), VALIDATION, torch.Generator().manual_seed(seed))[0].numpy()  # fit's own split
-    with tempfile.TemporaryDirectory(prefix="manifoldgen-sweep-") as folder:
+    with tempfile.TemporaryDirectory(prefix="manifoldgen-sweep-") as folder, warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".* is below the constraint manifold's dimension")  # see sweep
         net = get_model_class(model)(**({} if latent is None else {"latent": latent}))
         log = net.fit(dataset, epochs=epochs, seed=seed, out=folder, progress=False, task=task)
         trained = load_model(folder)
@@ -142,9 +144,10 @@ def sweep(dataset: Dataset, out: str | Path, *, models: list[str], latents: list
     if code_types(dataset.meta.get("task")):
         raise ManifoldgenError("a sweep rebuilds the dataset's task from its meta, which never imports a user's "
                                "module:Class constraint; train those models one by one with `manifoldgen train`")
-    dataset_task(dataset)  # a dataset no task can be rebuilt from fails here, before any training
+    task = dataset_task(dataset)  # a dataset no task can be rebuilt from fails here, before any training
     out = Path(out)
     jobs = candidates(models, latents, seeds)
+    _warn_small_latents(task, dataset, sorted({latent for _, latent, _ in jobs if latent is not None}))
     settings = _settings(dataset, jobs, epochs)
     (out / "candidates").mkdir(parents=True, exist_ok=True)
     done = _finished(out, settings)
@@ -165,6 +168,17 @@ def sweep(dataset: Dataset, out: str | Path, *, models: list[str], latents: list
         atomic_write_bytes(out / file, (out / "candidates" / ranked[0]["name"] / file).read_bytes())
     _write(out, settings, ranked)
     return ranked
+
+
+def _warn_small_latents(task: Task, dataset: Dataset, latents: list[int]) -> None:
+    """Warn, once for the sweep, about latent sizes below the manifold's dimension (the candidates' own warnings
+    are silenced: they would name train's option)."""
+    dimension = manifold_dimension(task, dataset.q[:DIMENSION_ROWS], dataset.y[:DIMENSION_ROWS])
+    small = [latent for latent in latents if latent < dimension]
+    if small:
+        warnings.warn(f"--latent {', '.join(map(str, small))} is below the constraint manifold's dimension "
+                      f"{dimension} (joints minus the constraint Jacobian's rank): those candidates' samples cover "
+                      f"at most a sheet of it; sweep with --latent {dimension} (or more)", stacklevel=3)
 
 
 def _train(dataset: Dataset, todo: list[tuple], epochs: int | None, cluster: Cluster | None):

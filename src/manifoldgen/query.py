@@ -10,6 +10,7 @@ placement and touch links).
 from __future__ import annotations
 
 import contextlib
+import difflib
 import hashlib
 import json
 from dataclasses import asdict
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, listed, short
 from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
@@ -30,6 +31,11 @@ from manifoldgen.specs import make_sampler
 from manifoldgen.tasks import Task
 
 PATH_FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
+PATH_KEYS = ("task", "robot", "joints", "locked", "floating_base", "constraint", "tolerance", "condition",
+             "format_version", "kind", "condition_names", "scene_name", "scene", "start", "goal", "planner",
+             "planner_settings", "sampler", "local", "seed", "time_limit", "smoothed", "result", "validation")
+# a path file's meta: the task's (Task.meta), the query's (query_meta) and the planner's (plan_query)
+ENDPOINT_TOLERANCE = 1e-6  # rad: how far path[0] and path[-1] may lie from the recorded start and goal
 
 
 def get_planner(name: str) -> type[Planner]:
@@ -137,17 +143,20 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     """A path file, checked whole before anything uses it: its ``meta``, ``path (K, n)`` (K >= 1 finite
     states) and the task rebuilt from the meta (``task``, ``trust_code``: see
     :func:`~manifoldgen.tasks.task_from_meta`). Refused in one line: another kind of file, another format
-    version, an empty or malformed path, a path that does not fit the task's joints, a missing condition."""
+    version, an array or a meta key a path file does not hold, an empty or malformed path, a path that does not
+    fit the task's joints (their number and names), a missing condition, a first or last state that is not the
+    recorded ``start`` or ``goal``."""
     from manifoldgen.io import load_npz
     from manifoldgen.tasks import task_from_meta
 
     meta, arrays = load_npz(path_file, ())
     if "path" not in arrays or meta.get("kind", "path") != "path":
         raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array, or its meta says kind "
-                               f"{meta.get('kind')!r}); give a file written by `manifoldgen plan`")
+                               f"{short(meta.get('kind'))}); give a file written by `manifoldgen plan`")
     if meta.get("format_version") != PATH_FORMAT_VERSION:
-        raise ManifoldgenError(f"{path_file}: path format {meta.get('format_version')!r} is not the one this version "
-                               f"reads ({PATH_FORMAT_VERSION}); plan the query again")
+        raise ManifoldgenError(f"{path_file}: path format {short(meta.get('format_version'))} is not the one this "
+                               f"version reads ({PATH_FORMAT_VERSION}); plan the query again")
+    _check_contents(path_file, meta, arrays)
     path = arrays["path"]
     if path.dtype.kind not in "fiu" or path.ndim != 2 or len(path) == 0 or not np.isfinite(path).all():
         raise ManifoldgenError(f"{path_file}: 'path' must be a non-empty (K, n) array of finite numbers, got "
@@ -157,11 +166,13 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     if path.shape[1] != task.robot.n:
         raise ManifoldgenError(f"{path_file}: its states have {path.shape[1]} coordinates, {task.robot.name}'s "
                                f"{task.name} task has {task.robot.n} joints")
+    _check_joints(path_file, meta.get("joints"), task)
     if meta.get("tolerance") != task.constraint.tolerance.tolist():  # what an outside checker checks against
-        raise ManifoldgenError(f"{path_file}: meta 'tolerance' {meta.get('tolerance')!r} is not its task's "
-                               f"{task.constraint.tolerance.tolist()}; the file was edited: plan the query again")
+        raise ManifoldgenError(f"{path_file}: meta 'tolerance' {short(meta.get('tolerance'))} is not its task's "
+                               f"{short(task.constraint.tolerance.tolist())}; the file was edited: plan the query "
+                               "again")
     if meta.get("robot") != task.robot.name:  # an outside checker reads this name: it must be the task's robot
-        raise ManifoldgenError(f"{path_file}: meta 'robot' {meta.get('robot')!r} is not its task's robot "
+        raise ManifoldgenError(f"{path_file}: meta 'robot' {short(meta.get('robot'))} is not its task's robot "
                                f"{task.robot.name!r}; the file was edited: plan the query again")
     try:
         y = np.asarray(meta.get("condition", []), dtype=float).reshape(-1)
@@ -169,10 +180,61 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
         y = np.array([np.nan])
     if not isinstance(meta.get("condition"), list) or len(y) != task.condition.k or not np.isfinite(y).all():
         raise ManifoldgenError(f"{path_file}: meta 'condition' must be {task.condition.k} finite numbers, got "
-                               f"{meta.get('condition')!r}")
+                               f"{short(meta.get('condition'))}")
+    _check_ends(path_file, meta, path)
     return meta, path, task
 
 
-def save_path(output: str | Path, result: PlanResult, meta: dict) -> None:
-    """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string)."""
-    save_npz(check_output_path(output), meta, path=result.path)
+def _check_contents(path_file: str | Path, meta: dict, arrays: dict) -> None:
+    """Refuse an array besides ``path`` or a meta key besides :data:`PATH_KEYS`: no reader checks what they say."""
+    extra = sorted(name for name in arrays if name != "path")
+    if extra:
+        raise ManifoldgenError(f"{path_file}: unknown array {listed([short(name) for name in extra])}; a path file "
+                               "holds only 'path' and 'meta': remove it or plan the query again")
+    unknown = sorted(key for key in meta if key not in PATH_KEYS)
+    if unknown:
+        close = difflib.get_close_matches(unknown[0], PATH_KEYS, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ManifoldgenError(f"{path_file}: unknown meta key {short(unknown[0])}{hint}; a "
+                               "path file's meta holds only the keys of docs/file-formats.md (Path files): remove "
+                               "it or plan the query again")
+
+
+def _check_joints(path_file: str | Path, joints, task: Task) -> None:
+    """Refuse a path file whose meta ``joints`` (the names of its columns, as an outside checker reads them) are
+    not its task's, naming the first few columns that differ."""
+    wanted = task.robot.joints
+    if joints == wanted:
+        return
+    if isinstance(joints, list) and len(joints) == len(wanted):
+        shown = listed([f"column {i} {short(made)} vs {name}" for i, (made, name) in enumerate(zip(joints, wanted))
+                        if made != name])
+    else:
+        shown = f"{short(joints)} vs {len(wanted)} names"
+    raise ManifoldgenError(f"{path_file}: meta 'joints' are not its {task.name} task's joints: {shown}; the file was "
+                           "edited: plan the query again")
+
+
+def _check_ends(path_file: str | Path, meta: dict, path: np.ndarray) -> None:
+    """Refuse a path whose first or last state lies more than :data:`ENDPOINT_TOLERANCE` from the recorded
+    ``start`` or ``goal`` (where the meta records them), as an outside checker does."""
+    for key, state, verb in (("start", path[0], "start"), ("goal", path[-1], "end")):
+        if key not in meta:
+            continue
+        try:
+            recorded = np.asarray(meta[key], dtype=float)
+        except (TypeError, ValueError):
+            recorded = np.array([np.nan])
+        if recorded.shape != state.shape or not np.isfinite(recorded).all():
+            raise ManifoldgenError(f"{path_file}: meta '{key}' must be {len(state)} finite numbers, got "
+                                   f"{short(meta[key])}; the file was edited: plan the query again")
+        gap = float(np.abs(recorded - state).max())
+        if gap > ENDPOINT_TOLERANCE:
+            raise ManifoldgenError(f"{path_file}: the path does not {verb} at the recorded {key} (meta '{key}'): "
+                                   f"{gap:.3g} rad apart; the file was edited: plan the query again")
+
+
+def save_path(output: str | Path, result: PlanResult, meta: dict, what: str = "-o") -> None:
+    """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string); ``what`` names ``output`` in a
+    refusal (the command line's option, the API's argument)."""
+    save_npz(check_output_path(output, what=what), meta, path=result.path)

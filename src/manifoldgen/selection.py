@@ -34,14 +34,15 @@ import numpy as np
 import torch
 
 from manifoldgen.dataset import Dataset
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import atomic_write_text, locks_output
 from manifoldgen.metrics import joint_features, prdc
 from manifoldgen.models import get_model_class, load_model
 from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_task
 from manifoldgen.runtime import CANDIDATES
+from manifoldgen.scene import Scene
 from manifoldgen.tasks import Task, code_types
-from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, split
+from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, fingerprint, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
 SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
@@ -74,11 +75,22 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
         raise ManifoldgenError(f"no checkpoint in {out}/candidates to resume (training finished or never started); "
                                "run without --resume")
+    recorded = dataset.meta.get("scenes") or []
+    for i, doc in enumerate(recorded):  # the race plans them: a damaged one is refused before any training
+        try:
+            Scene.from_json(json.dumps(doc), f"the dataset's scenes[{i}]")
+        except ManifoldgenError as exc:
+            raise ManifoldgenError(f"{exc}; the dataset was edited or is damaged: collect it again") from None
+    if (out / CONFIG_FILE).exists() and not (out / SELECTION_FILE).exists():
+        raise ManifoldgenError(f"{out} holds a model trained alone (no {SELECTION_FILE}); choose another directory "
+                               "(-o), or delete it to train anew")
     (out / "candidates").mkdir(parents=True, exist_ok=True)
     held_out = split(len(dataset), VALIDATION, torch.Generator().manual_seed(seed))[0].numpy()
     folders = {name: out / "candidates" / name for name in CANDIDATES}
     todo = [name for name, folder in folders.items()
             if not (folder / CONFIG_FILE).exists() or (folder / CHECKPOINT).exists()]
+    for name in set(folders) - set(todo):
+        _check_reused(folders[name], dataset, seed, epochs)
     jobs = [(name, dataset, epochs, seed, folders[name], resume and (folders[name] / CHECKPOINT).exists())
             for name in todo]
     if workers is None:
@@ -103,7 +115,7 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
                          if log.get("diverged_at") else {})})
     best_recall = max(row["recall"] for row in table)
     ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
-    raced = race(models, ruled["model"], task, dataset.meta.get("scenes") or [], progress=progress) \
+    raced = race(models, ruled["model"], task, recorded, progress=progress) \
         if race_scenes else []
     winner = max(raced, key=lambda r: (r["solved"], -r["cpu"])) if raced else None
     name = winner["model"] if winner else ruled["model"]
@@ -135,7 +147,7 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
     from manifoldgen.progress import progress_bar
     from manifoldgen.query import get_planner, task_settings
     from manifoldgen.sampling import ModelSampler, ProjectionSampler
-    from manifoldgen.scene import Scene, get_scene
+    from manifoldgen.scene import get_scene
     from manifoldgen.space import ConstrainedSpace
 
     entries = [(name, name, 0.0) for name in models] + [(PROJECTION, ruled, 1.0)]
@@ -172,6 +184,21 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
     return [{"label": label, "model": name, "mix": mix, "solved": sum(ok for ok, _ in runs[label]),
              "runs": len(runs[label]), "cpu": round(statistics.median(cpu for _, cpu in runs[label]), 4)}
             for label, name, mix in entries]
+
+
+def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None) -> None:
+    """Refuse to reuse the finished candidate in ``folder`` when it was trained on other rows, with another seed or
+    validation share, or (``epochs`` given) for another number of epochs than this run asks for."""
+    try:
+        made = json.loads((folder / "training.json").read_text()).get("identity") or {}
+    except (OSError, ValueError, AttributeError):
+        made = {}
+    wanted = {"dataset": fingerprint(dataset), "seed": seed, "validation": VALIDATION,
+              **({"epochs": epochs} if epochs is not None else {})}
+    changed = differences({key: made.get(key) for key in wanted}, wanted)
+    if changed:
+        raise ManifoldgenError(f"{folder} holds a candidate trained with other settings ({changed}); choose another "
+                               "directory (-o), or delete it to train anew")
 
 
 def _train_candidate(job: tuple, *, task: Task | None = None, progress: bool = False) -> None:

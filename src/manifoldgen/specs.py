@@ -26,15 +26,23 @@ LIMITS = {"refine": (0, 1000), "batch": (1, 1_000_000)}  # inclusive ranges of t
 
 
 def parse_spec(spec: str) -> tuple[str, str, dict[str, int]]:
-    """``'cvae:dir,refine=2'`` -> ``('cvae', 'dir', {'refine': 2})``."""
-    head, *options = spec.strip().split(",")
-    name, _, arg = head.partition(":")
+    """``'cvae:dir,refine=2'`` -> ``('cvae', 'dir', {'refine': 2})``. Commas separate the options, except in the
+    longest start of the spec that names an existing path (``cvae:runs/a,b,refine=2``: the folder ``runs/a,b``)."""
+    parts = spec.strip().split(",")
+    cut = 1  # parts[:cut] are the head NAME[:PATH], the others options
+    for k in range(len(parts), 1, -1):
+        path = ",".join(parts[:k]).partition(":")[2]
+        if path and Path(path).exists():
+            cut = k
+            break
+    name, _, arg = ",".join(parts[:cut]).partition(":")
     parsed = {}
-    for option in options:
+    for option in parts[cut:]:
         key, eq, value = option.partition("=")
         if key not in OPTIONS or not eq:
             raise ManifoldgenError(f"bad sampler option '{option}' in '{spec}'; options: "
-                                   f"{', '.join(f'{k}=N' for k in OPTIONS)}")
+                                   f"{', '.join(f'{k}=N' for k in OPTIONS)} (commas separate them; a path with a "
+                                   "comma is read whole when it exists)")
         try:
             parsed[key] = OPTIONS[key](value)
         except ValueError as exc:

@@ -27,10 +27,11 @@ import numpy as np
 import safetensors.torch
 import torch
 
-from manifoldgen.dataset import Dataset
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.dataset import Dataset, check_meta
+from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import atomic_write_bytes, atomic_write_text, locks_output
 from manifoldgen.progress import progress_bar
+from manifoldgen.provenance import check_task_copies
 from manifoldgen.runtime import REFINE, check_seed
 
 if TYPE_CHECKING:
@@ -114,6 +115,10 @@ def check_rows(dataset: Dataset) -> None:
         raise ManifoldgenError("dataset contains NaN or infinite values; recollect it or drop those rows")
     if len(q) < MIN_ROWS:
         raise ManifoldgenError(f"dataset has only {len(q)} rows; a model needs at least {MIN_ROWS}")
+    if not y.shape[1]:
+        raise ManifoldgenError("dataset has no condition (its task is unconditioned); a conditional model needs one: "
+                               "give the task's constraint a conditioned value (see docs/tasks.md), or plan with the "
+                               "projection sampler")
     if len(np.unique(y, axis=0)) < 2:
         raise ManifoldgenError(f"dataset has a single condition value {y[0].tolist()}; a conditional model "
                                "needs rows at two or more values (collect with several --condition values)")
@@ -130,6 +135,8 @@ def check_dataset(dataset: Dataset, task: TaskLike) -> None:
     if y.shape[1] != task.condition.k:
         raise ManifoldgenError(f"dataset has {y.shape[1]} condition columns but its task has {task.condition.k} "
                                f"({', '.join(task.condition.names)}); recollect the dataset")
+    check_meta(dataset.meta, y.shape[1], "dataset")
+    check_task_copies(dataset.meta, task.constraint, "dataset")
     rows = np.random.default_rng(0).choice(len(q), min(len(q), CHECKED_ROWS), replace=False)
     bad = rows[~task.constraint.satisfied(q[rows], y[rows])]
     if len(bad):
@@ -164,7 +171,8 @@ def split(rows: int, validation: float, generator: torch.Generator) -> tuple[tor
     return perm[:n_val], perm[n_val:]
 
 
-def _fingerprint(dataset: Dataset) -> str:
+def fingerprint(dataset: Dataset) -> str:
+    """A short digest of the dataset's rows (q and y): what a training run records as its data."""
     digest = hashlib.sha256(np.ascontiguousarray(dataset.q, dtype=np.float64).tobytes())
     digest.update(np.ascontiguousarray(dataset.y, dtype=np.float64).tobytes())
     return digest.hexdigest()[:16]
@@ -227,6 +235,7 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
         if has_checkpoint and not resume:
             raise ManifoldgenError(f"{out} holds a checkpoint of an interrupted run; pass --resume to continue "
                                    "it, or choose another directory")
+        finished = not has_checkpoint and (out / "model.json").exists()
     elif resume:
         raise ManifoldgenError("resume needs the output directory of the interrupted run")
 
@@ -250,9 +259,11 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
     log = TrainingLog(model.name, seed, epochs)
     best_state, bad = model.state_tensors(), 0
     identity = {"model": model.name, "config": model.config, "seed": seed, "epochs": epochs,
-                "dataset": _fingerprint(dataset), "validation": validation}
+                "dataset": fingerprint(dataset), "validation": validation}
     if resume:
         best_state, bad = _load_checkpoint(out, identity, model, optimizers, gen, log)
+    elif out is not None and finished:
+        _check_finished(out, identity)
 
     batch = int(model.config["batch"])
     steps = max(1, len(q_train) // batch)
@@ -304,9 +315,25 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
     model.refine = needed_refine(model, task, dataset.y[val_idx.numpy()], seed)
     if out is not None:
         model.save(out)
-        atomic_write_text(out / "training.json", json.dumps(log.to_dict(), indent=1))
+        atomic_write_text(out / "training.json", json.dumps({**log.to_dict(), "identity": identity}, indent=1))
         (out / CHECKPOINT).unlink(missing_ok=True)
     return log
+
+
+def _check_finished(out: Path, identity: dict) -> None:
+    """Refuse to replace the finished model in ``out`` unless its ``training.json`` records this run's
+    ``identity`` (model, config, seed, epochs, dataset, validation share): training it again gives the same files."""
+    try:
+        made = json.loads((out / "training.json").read_text()).get("identity")
+    except (OSError, ValueError, AttributeError):
+        made = None
+    if made is None:
+        raise ManifoldgenError(f"{out} holds a finished model whose settings are not recorded (training.json); "
+                               "choose another directory (-o), or delete it to train anew")
+    changed = differences(made, identity)
+    if changed:
+        raise ManifoldgenError(f"{out} holds a finished model made with other settings ({changed}); choose another "
+                               "directory (-o), or delete it to train anew")
 
 
 # ---------------------------------------------------------------------- checkpoints
@@ -345,9 +372,10 @@ def _load_checkpoint(out: Path, identity: dict, model: Trainable, optimizers: li
         raise ManifoldgenError(damaged.format(f"{type(exc).__name__}: {exc}")) from None
     except Exception as exc:  # safetensors raises its own error types for damaged files
         raise ManifoldgenError(damaged.format(type(exc).__name__)) from None
-    if json.loads(json.dumps(identity)) != doc.get("identity"):
-        raise ManifoldgenError(f"the checkpoint in {out} was made with another dataset, model, seed or "
-                               "settings; resume with the same command, or choose another directory")
+    changed = differences(doc.get("identity"), identity)
+    if changed:
+        raise ManifoldgenError(f"the checkpoint in {out} was made with another dataset, model, seed or settings "
+                               f"({changed}); resume with the same command, or choose another directory")
     model.nets.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
     best = {k[5:]: v for k, v in tensors.items() if k.startswith("best.")}
     for j, (opt, od) in enumerate(zip(optimizers, doc["optimizers"])):

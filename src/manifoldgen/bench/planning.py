@@ -452,23 +452,34 @@ def _prepare_pg(experiment: Experiment, methods: list[Method], out_dir: Path, ro
     return [m.resolved(f"pg:{path}") if m.sampler == "pg" else m for m in methods]
 
 
-def _check_config(out_dir: Path, config: dict, resume: bool, done: int) -> None:
+def _folder_config(out_dir: Path, experiment: dict, methods: list[Method], resume: bool, done: int) -> dict:
+    """The folder's ``config.json`` after this run: the experiment, and the methods of its earlier runs with this
+    run's added (a resume may add methods and runs). A folder with runs is refused without ``resume``; a resume
+    with another experiment, or another spec under a label the folder holds, is refused naming the difference."""
     path = out_dir / CONFIG_FILE
     if done and not resume:
         raise ManifoldgenError(f"{out_dir} already holds {done} runs; pass --resume to continue them or choose "
                                "another output folder")
+    held: dict[str, str] = {}
     if resume and path.is_file():
         try:
             old = json.loads(path.read_text())
-        except ValueError:
-            old = None
-        if not isinstance(old, dict) or "experiment" not in old:
+            old_experiment, old_specs = dict(old["experiment"]), [str(spec) for spec in old["methods"]]
+        except (ValueError, KeyError, TypeError):
             raise ManifoldgenError(f"{path} is damaged; delete it (the runs in {RUNS_FILE} are kept) or use "
                                    "another folder") from None
-        changed = [k for k in ("experiment",) if old.get(k) != config[k]]
+        changed = [f"{key} {old_experiment.get(key)!r}, not {value!r}" for key, value in experiment.items()
+                   if old_experiment.get(key) != value]
         if changed:
-            raise ManifoldgenError(f"{out_dir} was run with {old['experiment']}, not {config['experiment']}; "
-                                   "resume with the same scene, time limit and seed, or choose another folder")
+            raise ManifoldgenError(f"{out_dir} was run with other settings: {'; '.join(changed[:3])}"
+                                   f"{f' (and {len(changed) - 3} more)' if len(changed) > 3 else ''}; resume with "
+                                   "the same scene, time limit, seed, task and settings, or choose another folder")
+        held = {method.label: method.spec for method in map(Method.parse, old_specs)}
+        clash = next((m for m in methods if held.get(m.label, m.spec) != m.spec), None)
+        if clash is not None:
+            raise ManifoldgenError(f"{out_dir} holds method '{clash.label}' as '{held[clash.label]}', not "
+                                   f"'{clash.spec}'; give that method another label or use another folder")
+    return {"experiment": experiment, "methods": list({**held, **{m.label: m.spec for m in methods}}.values())}
 
 
 def _run_local(experiment: Experiment, todo: list[tuple[Method, int]], workers: int, runs_path: Path, done: int):
@@ -544,8 +555,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
     records = read_records(runs_path)
-    config = {"experiment": experiment.to_dict(), "methods": [m.spec for m in parsed]}
-    _check_config(out_dir, config, resume, len(records))
+    config = _folder_config(out_dir, experiment.to_dict(), parsed, resume, len(records))
     for record in records:
         match = next((m for m in parsed if m.label == record["method"]), None)
         if match is not None and match.spec != record.get("spec"):
@@ -569,8 +579,11 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     if snapshots:
         _draw_snapshots(experiment, [r for r in kept if r["run"] == 0 and "path" in r], out_dir)
     where = f"{workers} worker process(es)" if cluster is None else f"on {cluster.describe()}"
+    others = sorted({r["method"] for r in records} - set(labels))
     notes = (f"Scene `{experiment.scene}` ({experiment.task} task, {experiment.robot}), {runs} runs per method "
              f"(seeds {experiment.seed}..{experiment.seed + runs - 1}), {where}. Methods:\n\n"
-             + "\n".join(f"- `{m.label}`: `{m.spec}`" for m in parsed))
+             + "\n".join(f"- `{m.label}`: `{m.spec}`" for m in parsed)
+             + (f"\n\n{RUNS_FILE} also holds runs of {', '.join(f'`{o}`' for o in others)}, not in this table "
+                "(resume with their --methods too to include them)." if others else ""))
     return write_report(kept, out_dir, f"{experiment.scene} benchmark", methods=labels, baseline=baseline,
                         notes=notes)

@@ -36,6 +36,7 @@ def array_namespace(*arrays):
     return array_api_compat.array_namespace(*arrays)
 
 
+MIN_TOLERANCE = 1e-5  # m or rad: ten times the residual at which projection stops (constraints/projection.py)
 INEQUALITY_SCALE = 0.01  # G (metres or radians) per unit of the training penalty, like a tolerance
 
 
@@ -253,7 +254,8 @@ def check_arguments(cls: type, arguments: dict, name: str) -> None:
         elif isinstance(default, float) or note == "float":
             number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
             if key.endswith("tolerance"):
-                ok, need = number and value > 0, "a positive number"
+                ok, need = number and value >= MIN_TOLERANCE, (f"at least {MIN_TOLERANCE:g} (projection stops at a "
+                                                               "residual of 1e-6: a tighter one rejects every row)")
                 if ok and value > 1:
                     ok, need = False, "at most 1 (m or rad: a wider one accepts almost any configuration)"
             elif key == "margin":

@@ -9,6 +9,7 @@ the torch model on first use.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 from collections.abc import Callable
@@ -18,6 +19,7 @@ import numpy as np
 import safetensors.numpy
 
 from manifoldgen.constraints import Condition
+from manifoldgen.dataset import check_meta
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import read_json
 
@@ -25,6 +27,8 @@ MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its field
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
 DECODER_RANGES = {"noise": (1, 4096), "steps": (0, 1000), "layers": (1, 64)}  # a decoder entry's whole numbers
+DOC_KEYS = ("format_version", "model", "config", "dims", "normalisation", "meta", "refine", "mix", "decoder",
+            "weights_sha256", "sha256")
 
 
 def document_checksum(doc: dict) -> str:
@@ -72,8 +76,8 @@ def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndar
     if any(w is None or w.ndim != 2 for w in shapes):
         return  # core_decoder names the missing weight when the network is built
     claims = {"hidden": (config.get("hidden"), [int(w.shape[0]) for w in shapes[:-1]])}
-    if not decoder["steps"]:
-        claims["latent"] = (config.get("latent"), decoder["noise"])
+    if not decoder["steps"]:  # a sampling network fed noise and the condition
+        claims["latent"] = (config.get("latent"), int(shapes[0].shape[1]) - doc["dims"]["k"])
     for key, (said, held) in claims.items():
         if said is not None and said != held:
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} gives config {key} = {said}, but its '{decoder['net']}' "
@@ -94,6 +98,10 @@ def _validate_doc(path: Path, doc: object) -> None:
     if doc.get("sha256") != document_checksum(doc):
         raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
                   "other field was changed)")
+    unknown = next((key for key in doc if key not in DOC_KEYS), None)
+    if unknown is not None:
+        close = difflib.get_close_matches(str(unknown), DOC_KEYS, n=1)
+        raise bad(f"unknown key '{unknown}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
     for key, kind in (("model", str), ("config", dict), ("dims", dict),
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
@@ -115,6 +123,7 @@ def _validate_doc(path: Path, doc: object) -> None:
     joints = doc["meta"].get("joints")
     if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
         raise bad(f"meta must name the robot and its {d} joints")
+    check_meta(doc["meta"], k, f"{path}/{CONFIG_FILE}")
     decoder = doc.get("decoder")
     if decoder is not None and not (
             isinstance(decoder, dict) and isinstance(decoder.get("net"), str) and decoder.get("law") in LAWS

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, file_reader
+from manifoldgen.errors import ManifoldgenError, file_reader, listed, short
 from manifoldgen.io import load_npz, save_npz
 
 TRIES, JOINS = 6, 2  # a query's start or goal (or a new waypoint) tries its 6 nearest nodes, joins the first 2 it can
@@ -32,7 +32,6 @@ IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joi
             "constraint": "constraint", "tolerance": "tolerance", "condition": "condition", "scene_name": "scene",
             "scene_sha256": "scene objects (sha256)", "resolution": "check resolution"}
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance
-SHOWN_DIFFERENCES = 3  # identity differences a refusal names (the rest counted): an error stays one short line
 
 
 class Roadmap:
@@ -244,11 +243,8 @@ def _check_identity(path: str | Path, meta: dict, expect: dict) -> None:
                    for wanted in [json.loads(json.dumps(expect[key]))] if meta.get(key) != wanted
                    for line in _differences(key, meta.get(key), wanted)]
     if differences:
-        shown = "; ".join(differences[:SHOWN_DIFFERENCES])
-        more = len(differences) - SHOWN_DIFFERENCES
-        shown += f" (and {more} more difference{'s' * (more > 1)})" if more > 0 else ""
-        raise ManifoldgenError(f"{path} holds a roadmap for another query: {shown}; give this query another roadmap "
-                               f"file (or delete {path} to start a new one)")
+        raise ManifoldgenError(f"{path} holds a roadmap for another query: {listed(differences)}; give this query "
+                               f"another roadmap file (or delete {path} to start a new one)")
 
 
 def _differences(key: str, made, wanted) -> list[str]:
@@ -262,10 +258,7 @@ def _differences(key: str, made, wanted) -> list[str]:
 
 def _show(value) -> str:
     """A value as short JSON (a sha256: its first 12 digits)."""
-    if isinstance(value, str) and len(value) == 64:
-        return value[:12]
-    text = json.dumps(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    return short(value[:12] if isinstance(value, str) and len(value) == 64 else value, 60)
 
 
 def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -95,6 +95,9 @@ def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Pa
 
     srdf: an explicit SRDF path; by default the robot's own (for a path: the ``.srdf`` beside it).
     """
+    if not robot.strip():
+        raise ManifoldgenError("the robot name is empty; give a robot name (`manifoldgen robots` lists them) or the "
+                               "path of a .urdf")
     if is_path(robot):
         urdf = Path(robot)
         if not urdf.is_file():
@@ -106,8 +109,8 @@ def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Pa
         if robot not in catalogue:
             close = difflib.get_close_matches(robot, list(catalogue), n=3)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
-            raise ManifoldgenError(
-                f"unknown robot '{robot}'{hint}; known: {', '.join(catalogue)}, or a path to a .urdf")
+            raise ManifoldgenError(f"unknown robot '{robot}'{hint}; give one of the {len(catalogue)} names "
+                                   "`manifoldgen robots` lists, or the path of a .urdf")
         urdf, default = catalogue[robot]
     if srdf is None:
         return urdf, default
@@ -129,7 +132,8 @@ def find_robot(identity: dict, hint: str | None = None) -> str:
                                "give an identity from Robot.identity")
     catalogue = robot_files(robots_dir())
     tried = []
-    for source in ([name] if name in catalogue else []) + ([str(hint)] if hint is not None else []):
+    sources = ([name] if name in catalogue else []) + ([str(hint)] if hint is not None else [])
+    for source in dict.fromkeys(sources):
         urdf = Path(source) if is_path(source) else catalogue.get(source, (None,))[0]
         if urdf is not None and urdf.is_file():
             found = file_sha256(urdf)
@@ -140,8 +144,9 @@ def find_robot(identity: dict, hint: str | None = None) -> str:
             tried.append(f"{source} is not a URDF file or robot name")
     if name not in catalogue:
         tried.insert(0, f"'{name}' is not an example-robot-data robot")
-    raise ManifoldgenError(f"no URDF with sha256 {digest[:12]} (robot '{name}'): {'; '.join(tried)}; "
-                           "pass the path of the URDF the robot was built from")
+    raise ManifoldgenError(f"no URDF with sha256 {digest[:12]} (robot '{name}'): {'; '.join(tried)}; pass the path "
+                           "of the URDF the file was made with (on the command line: --task FILE, a task file whose "
+                           "robot is that path), or remake the file with this URDF")
 
 
 def file_sha256(path: Path) -> str:

@@ -103,7 +103,10 @@ class Robot:
         joints = _planning_group(model, mimics, name, joints, floating_base)
         q_ref = pin.neutral(model)
         if srdf is not None:
-            states = _srdf_states(srdf)
+            root = _read_srdf(srdf)
+            default = resolve_robot(source)[1]
+            _check_srdf_names(root, srdf, model, name, mostly=default is None or srdf.resolve() != default.resolve())
+            states = _srdf_states(root)
             for joint, value in (states[0][1].items() if states else []):
                 _set_joint(model, q_ref, joint, value)
         for joint, value in (reference or {}).items():
@@ -539,12 +542,35 @@ def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None
         q[jm.idx_q:jm.idx_q + 2] = np.cos(value), np.sin(value)
 
 
-def _srdf_states(srdf: Path) -> list[tuple[str, dict[str, float]]]:
-    """The SRDF's group states as (name, {joint: value})."""
+def _read_srdf(srdf: Path) -> ET.Element:
     try:
-        root = ET.parse(srdf).getroot()
+        return ET.parse(srdf).getroot()
     except ET.ParseError as exc:
         raise ManifoldgenError(f"cannot parse SRDF {srdf}: {exc}") from exc
+
+
+def _check_srdf_names(root: ET.Element, srdf: Path, model: pin.Model, robot: str, mostly: bool) -> None:
+    """Refuse an SRDF made for another robot: none of the links and joints it names is the robot's, or (``mostly``:
+    an SRDF given that is not the robot's own) most of them are not."""
+    names = []
+    for element in root.iter():
+        if element.tag in ("link", "joint", "passive_joint"):
+            names.append(element.get("name"))
+        elif element.tag == "disable_collisions":
+            names += [element.get("link1"), element.get("link2")]
+        elif element.tag == "chain":
+            names += [element.get("base_link"), element.get("tip_link")]
+    names = list(dict.fromkeys(n for n in names if n))
+    known = {frame.name for frame in model.frames}
+    unknown = [n for n in names if n not in known]
+    if names and (len(unknown) == len(names) or (mostly and 2 * len(unknown) > len(names))):
+        raise ManifoldgenError(f"SRDF {srdf.name} is not for robot {robot}: {len(unknown)} of the {len(names)} links "
+                               f"and joints it names are not {robot}'s ({', '.join(unknown[:3])}"
+                               f"{', ...' if len(unknown) > 3 else ''}); give {robot}'s own SRDF")
+
+
+def _srdf_states(root: ET.Element) -> list[tuple[str, dict[str, float]]]:
+    """The SRDF's group states as (name, {joint: value})."""
     states = []
     for state in root.iter("group_state"):
         values = {j.get("name"): float(j.get("value", "0").split()[0]) for j in state.iter("joint")}

@@ -376,7 +376,7 @@ def get_task(task: str, robot: str | None = None) -> Task:
     if task not in tasks:
         raise unknown_name("task", task, list(tasks))
     robots = tasks[task]
-    robot = robot or next(iter(robots))
+    robot = next(iter(robots)) if robot is None else robot
     if robot not in robots:
         resolve_robot(robot)  # an unknown robot is reported as such
         raise ManifoldgenError(f"task '{task}' is not defined for robot '{robot}'; robots with it: "
