@@ -5,11 +5,8 @@ written and no input changed."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
-from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -22,6 +19,7 @@ from manifoldgen.robot import resolve_robot, robots_dir
 from manifoldgen.robot.catalogue import file_sha256
 from manifoldgen.specs import parse_spec
 from manifoldgen.tasks import BUILTIN_DIR
+from refusals import cli, digest, refusal
 
 runner = CliRunner()
 UR5_SRDF = robots_dir() / "ur_description" / "srdf" / "ur5.srdf"
@@ -47,25 +45,6 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     (root / "task.toml").write_text(text)
     (root / "ur5srdf.toml").write_text(text.replace('robot = "panda"', f'robot = "panda"\nsrdf = "{UR5_SRDF}"'))
     return root
-
-
-def _digest(root: Path) -> dict[str, str]:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file()}
-
-
-@dataclass
-class Case:
-    """A command line (``{I}`` the inputs folder, ``{O}`` a fresh output folder) and text its error must hold."""
-
-    id: str
-    args: list[str]
-    needle: str
-
-
-def cli(id, args, needle):
-    """``args``: a string split at spaces, or a list (for an empty argument)."""
-    return Case(id, args.split() if isinstance(args, str) else args, needle)
 
 
 CASES = [
@@ -128,17 +107,13 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line_on_stderr(case, inputs, tmp_path):
-    before = _digest(inputs)
+    before = digest(inputs)
     out = tmp_path / "out"
     out.mkdir()
-    args = [a.format(I=inputs, O=out) for a in case.args]
-    result = runner.invoke(app, args, terminal_width=400)
-    assert result.exit_code == 2 and isinstance(result.exception, SystemExit), result.output
-    errors = [line for line in result.stderr.splitlines() if line.startswith("error: ")]
-    assert len(errors) == 1 and "error: " not in result.stdout and "Usage:" not in result.output, result.output
-    assert case.needle.format(I=inputs, O=out) in errors[0], errors[0]
-    assert len(errors[0].replace(str(inputs), "I").replace(str(out), "O")) < 300, errors[0]
-    assert _digest(inputs) == before, "an input file changed"
+    message = refusal(case, inputs, out)
+    assert case.needle.format(I=inputs, O=out) in message, message
+    assert len(message.replace(str(inputs), "I").replace(str(out), "O")) < 300, message
+    assert digest(inputs) == before, "an input file changed"
     assert not list(out.rglob("*")), "a refused command wrote files"
 
 

@@ -1,0 +1,61 @@
+"""The runner the refusal tables share (tests/test_bad_inputs.py, test_hostile_api.py, test_hostile_cli.py): a case
+is a command line or an API call that must be refused in one line naming the problem."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from manifoldgen.cli import app
+from manifoldgen.errors import ManifoldgenError
+
+runner = CliRunner()
+
+
+@dataclass
+class Case:
+    """A command line (``args``: ``{I}`` the inputs folder, ``{O}`` a fresh output folder) or an API call
+    (``call(I, O)``), the text its one-line error must hold, and the name of a set-up its table applies first
+    (``patch``: a read-only disk, a full one)."""
+
+    id: str
+    needle: str
+    args: list[str] | None = None
+    call: object = None
+    patch: str | None = None
+
+
+def cli(id: str, args: str | list[str], needle: str, patch: str | None = None) -> Case:
+    """``args``: a string split at spaces, or a list (for an empty argument)."""
+    return Case(id, needle, args=args.split() if isinstance(args, str) else list(args), patch=patch)
+
+
+def api(id: str, call, needle: str, patch: str | None = None) -> Case:
+    return Case(id, needle, call=call, patch=patch)
+
+
+def digest(root: Path) -> dict[str, str]:
+    """Every file below ``root`` by its SHA-256: what a refused case must leave as it was."""
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def refusal(case: Case, inputs: Path, out: Path) -> str:
+    """Run ``case`` and return its message: on the command line, exit code 2 with no traceback or usage text and
+    one ``error:`` line, on stderr; through the API, a ManifoldgenError of one line."""
+    if case.args is not None:
+        result = runner.invoke(app, [a.format(I=inputs, O=out) for a in case.args], terminal_width=400)
+        assert result.exit_code == 2 and isinstance(result.exception, SystemExit), result.output
+        assert "Traceback" not in result.output and "Usage:" not in result.output, result.output
+        errors = [line for line in result.stderr.splitlines() if line.startswith("error: ")]
+        assert len(errors) == 1 and "error: " not in result.stdout, result.output
+        return errors[0]
+    with pytest.raises(ManifoldgenError) as info:
+        case.call(inputs, out)
+    message = str(info.value)
+    assert "\n" not in message, message
+    return message
