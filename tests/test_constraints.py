@@ -274,3 +274,11 @@ def test_balance_on_centauro_with_floating_base(centauro_floating, rng):
     assert not c.satisfied(shifted, [0.75]).any()
     G = c.inequality(moved, [0.75])
     assert np.array_equal(c.satisfied(moved, [0.75]), np.all(G <= 0, axis=1) & robot.within_limits(moved))
+
+
+def test_joint_linear_refuses_a_row_too_short_to_move_its_residual(panda_task):
+    """A coefficient row of norm 1e-300 is as good as zero: refused when the constraint is built, not after
+    collect's batches fail."""
+    with pytest.raises(ManifoldgenError, match=r"none all zero \(a norm under 1e-09\); got shape \(1, 7\)"):
+        JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-300]], [[0.0]])
+    assert JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-3]], [[0.0]]).coefficients.shape == (1, 7)

@@ -235,7 +235,8 @@ def inputs(tmp_path_factory, panda_task, planned_path):
         "task-values-empty": POSE.replace("values = [[0.2], [0.3], [0.4], [0.5], [0.6], [0.7]]", "values = []"),
         "task-values-nan": POSE.replace("values = [[0.2], [0.3]", "values = [[nan], [0.3]"),
         "task-values-str": POSE.replace("values = [[0.2], [0.3]", 'values = [["high"], [0.3]'),
-        "task-values-flat": POSE.replace("values = [[0.2], [0.3], [0.4], [0.5], [0.6], [0.7]]", "values = [0.2, 0.3]"),
+        "task-values-flat": POSE.replace("values = [[0.2], [0.3], [0.4], [0.5], [0.6], [0.7]]", "values = [0.2, 0.3]")
+        .replace("home_condition = [0.45]", "home_condition = [0.25]"),
         "task-values-dup": POSE.replace("values = [[0.2], [0.3]", "values = [[0.3], [0.3]"),
         "task-home-short": POSE.replace("home = [0.0, -0.785398, 0.0, -2.35619, 0.0, 1.5707, 0.785398]", "home = [0.0, 1.0]"),
         "task-home-nan": POSE.replace("home = [0.0, -0.785398", "home = [nan, -0.785398"),

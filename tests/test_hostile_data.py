@@ -134,7 +134,7 @@ CASES = [
          "data.npz holds a dataset made with other settings (seed: 0 then, 1 now); choose another output (-o)"),
     Case("collect-over-other-conditions", lambda I, O: _collect_into(I, O, conditions=[[0.4]]),
          "(conditions: [[0.3], [0.5]] then, [[0.4]] now)"),
-    Case("collect-over-a-non-dataset", _collect_over_text, "t.npz exists and is not a dataset; choose another"),
+    Case("collect-over-a-non-dataset", _collect_over_text, "t.npz exists and was not written by manifoldgen"),
     Case("train-over-other-model", lambda I, O: _retrain(I, O, model=CGAN),
          'holds a finished model made with other settings (model: "cvae" then, "cgan" now;'),
     Case("train-over-other-seed", lambda I, O: _retrain(I, O, seed=2), "(seed: 0 then, 2 now)"),

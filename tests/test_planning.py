@@ -226,8 +226,10 @@ def test_bad_queries_are_refused_with_the_reason():
     constraint, y, checker, start, goal = corridor_problem()
     space = ConstrainedSpace(constraint, y, checker)
     planner = PLANNERS.get("rrt")(space, ProjectionSampler(space), seed=0)
-    with pytest.raises(ManifoldgenError, match="time limit must be a positive number of seconds, got 0"):
+    with pytest.raises(ManifoldgenError, match="time limit must be from 0.001 to 86400 seconds, got 0.0"):
         planner.solve(start, goal, 0.0)
+    with pytest.raises(ManifoldgenError, match="time limit must be from 0.001 to 86400 seconds, got 10000000000.0"):
+        planner.solve(start, goal, 1e10)  # the clock's arithmetic would overflow: "not solved in 0.000 s"
     with pytest.raises(ManifoldgenError, match=r"start configuration violates the constraint: .* 30.00 times"):
         planner.solve(start + [0, 0, 0.3], goal, 1.0)
     with pytest.raises(ManifoldgenError, match="goal configuration is in collision: point with box0"):

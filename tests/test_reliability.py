@@ -270,3 +270,22 @@ def test_a_tampered_sweep_file_is_refused_on_resume(tmp_path, field, value, prob
     path.write_text(json.dumps(table))
     with pytest.raises(ManifoldgenError, match=f"is damaged \\({rows[0]['name']}: {problem}"):
         sweep(dataset, tmp_path / "s", **args)
+
+
+@pytest.mark.slow
+def test_a_sweep_never_replaces_a_model_it_did_not_make_and_names_other_settings(tmp_path):
+    """A sweep into a folder holding a model trained alone is refused before anything is written; a rerun with
+    other settings names the first differences."""
+    from manifoldgen.model_sweep import sweep
+    from manifoldgen.models import CVAE
+    from manifoldgen.tasks import get_task
+    dataset = collect(get_task("sphere"), 60, 0, batch=64, progress=False)
+    CVAE(hidden=[8], batch=8, epochs=1).fit(dataset, seed=0, progress=False, out=tmp_path / "alone")
+    before = {p.name: p.read_bytes() for p in (tmp_path / "alone").iterdir()}
+    args = dict(models=["cvae"], latents=[2], seeds=[0], epochs=1, progress=False)
+    with pytest.raises(ManifoldgenError, match="holds a model that no sweep made .no sweep.json.; choose another"):
+        sweep(dataset, tmp_path / "alone", **args)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "alone").iterdir()} == before
+    sweep(dataset, tmp_path / "s", **args)
+    with pytest.raises(ManifoldgenError, match=r"made with other settings \(epochs: 1 then, 2 now\)"):
+        sweep(dataset, tmp_path / "s", **{**args, "epochs": 2})

@@ -54,6 +54,12 @@ def _number(function: str, argument: str, value: Any) -> float:
     return float(value)
 
 
+def _flag(function: str, argument: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise _wrong(function, argument, "True or False", value)
+    return value
+
+
 def _seed(function: str, value: Any) -> int:
     from manifoldgen.runtime import check_seed
 
@@ -106,6 +112,14 @@ def _check_scene(function: str, task: Task, scene: Scene) -> None:
         raise ManifoldgenError(f"{function}: scene {scene.name!r} was loaded for another task ({', '.join(wrong)} "
                                f"values; task {task.name} on {robot.name} takes {robot.n} joint values and "
                                f"{task.condition.k} condition value(s)); {fix}")
+
+
+def _scene_fingerprint(task: Task, scene: Scene) -> str:
+    """SHA-256 of the scene's obstacles and held object as the task's robot meets them (not its start or goal)."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(scene.to_meta(task.robot), sort_keys=True).encode()).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------- tasks, scenes
@@ -163,14 +177,13 @@ def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out
             conditions = np.asarray(conditions, dtype=float)
         except (TypeError, ValueError):
             raise _wrong("collect", "conditions", "None or condition values (V, k) as numbers", conditions) from None
-    if not isinstance(anchors, bool):
-        raise _wrong("collect", "anchors", "True or False", anchors)
+    anchors, progress = _flag("collect", "anchors", anchors), _flag("collect", "progress", progress)
     out = _optional_path("collect", "out", out)
     if out is not None:
-        check_output_path(out, [task.file], what="out")
+        check_output_path(out, [task.file], what="collect: out", suffixes=(".npz",), kind="dataset")
     found = task_anchors(task) if anchors and not near_home else None
     return run_collect(task, per_condition, seed, out, conditions=conditions, near_home=near_home, anchors=found,
-                       progress=bool(progress))
+                       progress=progress)
 
 
 def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: PathLike | None = None, *,
@@ -189,7 +202,7 @@ def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: 
     from manifoldgen.dataset import Dataset
     from manifoldgen.io import check_output_path
     from manifoldgen.models import get_model_class
-    from manifoldgen.selection import SELECTION_FILE, select_model
+    from manifoldgen.selection import SELECTION_FILE, check_recorded_scenes, select_model
     from manifoldgen.training import OUTPUT_FILES
 
     source = None
@@ -201,22 +214,24 @@ def train(dataset: Dataset | PathLike, model: str = "auto", seed: int = 0, out: 
     if not isinstance(model, str):
         raise _wrong("train", "model", "a model name such as 'cvae'", model)
     seed = _seed("train", seed)
+    progress = _flag("train", "progress", progress)
     epochs = None if epochs is None else _integer("train", "epochs", epochs)
     if epochs is not None and epochs <= 0:
         raise ManifoldgenError(f"train: epochs must be a positive number (None: the model's own), got {epochs}")
     out = _optional_path("train", "out", out)
     if out is not None:
         check_output_path(out, [source], directory=True, writes=OUTPUT_FILES + (SELECTION_FILE, "candidates"),
-                          what="out")
+                          what="train: out")
     if model == "auto":
         if hyper:
             raise ManifoldgenError(f"train: hyper-parameters ({', '.join(hyper)}) set one model's; name it, e.g. "
                                    "model='cvae'")
         with tempfile.TemporaryDirectory(prefix="manifoldgen-train-") as scratch:
             return select_model(dataset, out if out is not None else scratch, seed=seed, epochs=epochs,
-                                progress=bool(progress))[0]
+                                progress=progress)[0]
+    check_recorded_scenes(dataset)  # a model keeps them in its meta: read whole before training
     net = get_model_class(model)(**hyper)
-    net.fit(dataset, epochs=epochs, seed=seed, progress=bool(progress), out=out)
+    net.fit(dataset, epochs=epochs, seed=seed, progress=progress, out=out)
     return net
 
 
@@ -268,7 +283,7 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
             raise ManifoldgenError(f"{function}: {name} must be from {low} to {high:,}, got {value}")
     common = {"seed": seed, **({"batch": batch} if batch is not None else {})}
     if isinstance(model, str):
-        options = ([f"refine={refine}"] if refine is not None else []) + ([f"batch={batch}"] if batch is not None else [])
+        options = [f"{key}={value}" for key, value in (("refine", refine), ("batch", batch)) if value is not None]
         spec = ",".join([model, *options])
         return make_sampler(spec, space, seed), spec
     if isinstance(model, ConditionalSampler):
@@ -303,8 +318,11 @@ def sampler(task: Task | ConstrainedSpace | PathLike, scene: Scene | PathLike | 
         raise ManifoldgenError("sampler: give the scene (mg.load_scene or a scene name) after the task: the "
                                "sampler serves the scene's query (its condition, obstacles and held object)")
     else:
-        space = _space("sampler", task, scene)[2]
-    return _sampler_for("sampler", "model", space, model, seed, refine, batch)[0]
+        task, scene, space = _space("sampler", task, scene)
+    made = _sampler_for("sampler", "model", space, model, seed, refine, batch)[0]
+    if scene is not None:
+        made.scene = (scene.name, _scene_fingerprint(task, scene))
+    return made
 
 
 # ---------------------------------------------------------------------------------------------- planning
@@ -349,8 +367,7 @@ class QueryResult:
 
         if not _pathlike(file):
             raise _wrong("QueryResult.load", "file", "a file path (str or os.PathLike)", file)
-        if not isinstance(trust_code, bool):
-            raise _wrong("QueryResult.load", "trust_code", "True or False", trust_code)
+        trust_code = _flag("QueryResult.load", "trust_code", trust_code)
         task = None if task is None else _task("QueryResult.load", task)
         meta, path, _ = read_path_file(file, task, trust_code=trust_code)
         done = meta.get("result", {})
@@ -362,11 +379,12 @@ class QueryResult:
 
     def save(self, file: PathLike) -> Path:
         """Write the path file (``path (K, n)`` + ``meta``; atomic), as ``manifoldgen plan -o`` does."""
+        from manifoldgen.io import check_output_path
         from manifoldgen.query import save_path
 
         if not _pathlike(file):
             raise _wrong("QueryResult.save", "file", "a file path (str or os.PathLike)", file)
-        file = Path(file)
+        file = check_output_path(file, what="QueryResult.save: file", suffixes=(".npz",), kind="path")
         if not self.result.solved:
             raise ManifoldgenError(f"QueryResult.save: the query was not solved, so there is no path to write "
                                    f"({self.result.why()})")
@@ -408,8 +426,7 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
         raise _wrong("plan", "planner", "a planner name such as 'rrtconnect'", planner)
     if not isinstance(local, str):
         raise _wrong("plan", "local", "'auto', 'interpolate' or 'project'", local)
-    if not isinstance(smooth, bool):
-        raise _wrong("plan", "smooth", "True or False", smooth)
+    smooth = _flag("plan", "smooth", smooth)
     seed = _seed("plan", seed)
     time_limit = _number("plan", "time_limit", time_limit)
     if not math.isfinite(time_limit) or time_limit <= 0:
@@ -417,7 +434,7 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     values = _settings(planner, settings)
     if isinstance(sampler, str):  # exactly the command line's query
         result, meta = run_query(task, scene, sampler, planner, seed=seed, time_limit=time_limit, local=local,
-                                 smooth=bool(smooth), settings=values)
+                                 smooth=smooth, settings=values)
         return QueryResult(result, meta)
     if isinstance(sampler, Sampler):
         space, made = sampler.space, sampler
@@ -425,6 +442,10 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
         if space.constraint.spec() != task.constraint.spec() or not np.allclose(space.y, y):
             raise ManifoldgenError("plan: the sampler was made for another task or condition; make it with "
                                    "mg.sampler(task, scene, ...) for this task and scene")
+        if sampler.scene is not None and sampler.scene[1] != _scene_fingerprint(task, scene):
+            raise ManifoldgenError(f"plan: the sampler was made for scene {sampler.scene[0]!r}, whose obstacles or "
+                                   f"held object are not those of scene {scene.name!r}; make it with "
+                                   "mg.sampler(task, scene, ...) for this scene")
         label = type(sampler).__name__
     else:
         space = _space("plan", task, scene)[2]
@@ -432,7 +453,7 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     from manifoldgen.query import plan_query
 
     return QueryResult(*plan_query(task, scene, space, made, label, planner, seed=seed, time_limit=time_limit,
-                                   local=local, smooth=bool(smooth), settings=values))
+                                   local=local, smooth=smooth, settings=values))
 
 
 def check_path(task: Task | PathLike, scene: Scene | PathLike, path: Any, *,

@@ -33,7 +33,7 @@ def _bounded(option: str, value):
     """``value`` of ``option`` when inside its :data:`RANGES` entry (None passes: the default), else a one-line error."""
     low, high = RANGES[option]
     if value is not None and not low <= value <= high:
-        raise ManifoldgenError(f"{option} must be from {low:g} to {high:g}, got {value:g}" if isinstance(value, float)
+        raise ManifoldgenError(f"{option} must be from {low:g} to {high:g}, got {value!r}" if isinstance(value, float)
                                else f"{option} must be from {low} to {high}, got {value}")
     return value
 
@@ -84,7 +84,7 @@ def collect(task: str = typer.Argument(..., help=TASK_HELP),
     if per_condition is not None and per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be positive, got {per_condition}")
     on = parse_cluster(cluster)
-    check_output_path(output, [_file(task)], suffixes=(".npz",))
+    check_output_path(output, [_file(task)], suffixes=(".npz",), kind="dataset")
     task_obj = load_task(task, robot)
     values = _check_conditions(task_obj, condition, strict)
     set_threads()
@@ -235,19 +235,23 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         also = f" and --snapshots {snapshots}" if snapshots else ""
         raise ManifoldgenError(f"-o {output} and its picture {image or output.with_suffix('.png')}{also} would "
                                "overwrite each other; give -o a .npz name and --snapshots another .png")
+    if image is not None and image.is_dir():
+        raise ManifoldgenError(f"the path's picture {image} (the .png beside -o {output}) is a folder; give -o "
+                               "another name, or pass --no-picture")
     inputs = [_file(task), _file(scene), _file(parse_spec(sampler)[1]), config]
-    for out, what, suffix in ((output, "-o", ".npz"), (image, "-o", ".png"), (snapshots, "--snapshots", ".png")):
-        if out is not None:
-            check_output_path(out, inputs, what=what, suffixes=(suffix,))
     roadmap_file = roadmap.resolve() if roadmap is not None else None  # a link: the file it names, written through
-    if roadmap_file is not None:
-        clash = next((out for out in (output, image, snapshots) if out is not None
-                      and roadmap_file == out.resolve()), None)
-        if clash is not None:
-            raise ManifoldgenError(f"--roadmap {roadmap} is also the output {clash} of this command; give the roadmap "
-                                   "a file of its own (e.g. roadmap.npz)")
+    clash = next((out for out in (output, image, snapshots) if roadmap_file is not None and out is not None
+                  and roadmap_file == out.resolve()), None)
+    if clash is not None:
+        raise ManifoldgenError(f"--roadmap {roadmap} is also the output {clash} of this command; give the roadmap "
+                               "a file of its own (e.g. roadmap.npz)")
+    if roadmap_file is not None:  # read and checked before it is replaced
         check_output_path(roadmap_file, inputs, what="--roadmap" if roadmap_file == roadmap.absolute()
-                          else f"--roadmap {roadmap} ->", suffixes=(".npz",))
+                          else f"--roadmap {roadmap} ->", suffixes=(".npz",), owned=False)
+    for out, what, suffix, kind in ((output, "-o", ".npz", "path"), (image, "-o's picture", ".png", None),
+                                    (snapshots, "--snapshots", ".png", None)):
+        if out is not None:
+            check_output_path(out, inputs, what=what, suffixes=(suffix,), kind=kind)
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
     task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
@@ -286,8 +290,10 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
 @app.command()
 @friendly
 def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base robot (a balance task's path)"),
-            duration_scale: float = typer.Option(1.0, help="Multiplies the motion's duration (default: at most 0.5 "
-                                                 "rad/s per joint and 0.1 m/s for the base, eased in and out)"),
+            duration_scale: float = typer.Option(1.0, help="Divides the speed limits (0.5 rad/s per joint, 0.1 m/s "
+                                                 "for the base); the acceleration limits (1 rad/s², 0.1 m/s²) stay, "
+                                                 "so a segment they pace keeps its duration: below 1 it often "
+                                                 "changes nothing (a warning says so)"),
             settle: float = typer.Option(0.5, help="Seconds holding the first state before moving"),
             hold: float = typer.Option(1.0, help="Seconds holding the last state"),
             friction: float = typer.Option(0.8, help="Foot-ground sliding friction coefficient"),
@@ -309,9 +315,24 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
     if output is not None:
         check_output_path(output, [path], suffixes=(".json",))
     result = check_path_file(path, settings, feet=feet, progress=True, task=made_for(task), trust_code=trust_code)
+    if duration_scale != 1.0:
+        _warn_same_pace(path, settings, pace, duration_scale)
     console.print(summary(result), markup=False, highlight=False)
     if output is not None:
         atomic_write_text(output, to_json(result))
+
+
+def _warn_same_pace(path_file: Path, settings, default, duration_scale: float) -> None:
+    """Warn when ``--duration-scale`` leaves the path's motion as long as without it: the acceleration limits,
+    which it does not scale, pace every segment."""
+    import warnings
+
+    from manifoldgen.io import load_npz
+    from manifoldgen.physics.simulate import schedule
+    path = load_npz(path_file, ("path",))[1]["path"]
+    if schedule(path, settings)[1] == schedule(path, default)[1]:
+        warnings.warn(f"--duration-scale {duration_scale:g} changes nothing for this path: the acceleration limits, "
+                      "which it does not scale, pace every segment (physics.md, Time)", stacklevel=2)
 
 
 @app.command()
@@ -334,7 +355,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     taken from the data (latent: the manifold's dimension; width: from the joint count)."""
     from manifoldgen.dataset import Dataset
     from manifoldgen.models import get_model_class
-    from manifoldgen.selection import SELECTION_FILE, select_model
+    from manifoldgen.selection import SELECTION_FILE, check_recorded_scenes, select_model
     from manifoldgen.settings import parse_settings
     from manifoldgen.tasks import task_from_meta
     from manifoldgen.training import OUTPUT_FILES
@@ -367,6 +388,7 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     else:
         cls = get_model_class(model)
         net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))
+        check_recorded_scenes(data)  # the model keeps them in its meta: read whole before training
         log = net.fit(data, epochs=epochs, seed=seed, out=output, resume=resume, task=task_obj)
         console.print(f"trained {model} on {dataset}: {len(log.history)} epochs in {log.seconds:.0f} s, best epoch "
                       f"{log.best_epoch} (validation {log.best_val:.4g}{', stopped early' if log.stopped_early else ''}"
@@ -401,7 +423,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
         raise ManifoldgenError("--robot picks the robot of a built-in --task; give --task too (the model's own "
                                "task and robot are used without both)")
     net = load_model(model_dir)
-    check_output_path(output, [model_dir, _file(task)], suffixes=(".npz",))
+    check_output_path(output, [model_dir, _file(task)], suffixes=(".npz",), kind="dataset")
     task_obj = task_from_meta(net.meta, task=made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))
@@ -441,8 +463,8 @@ def bench_sampling(model_dirs: list[Path] = typer.Argument(..., help="Trained mo
                    task: str = typer.Option(None, help=MADE_FOR_HELP),
                    trust_code: bool = typer.Option(False, "--trust-code", help=TRUST_HELP)):
     """Table I: sampling time for 100..100k rows, accuracy and coverage per model."""
-    from manifoldgen.bench.sampling import OUTPUT_FILES, run_sampling_bench
-    check_output_path(output, [*model_dirs, _file(task)], directory=True, writes=OUTPUT_FILES)
+    from manifoldgen.bench.sampling import OUTPUT_FILES, RESULTS_FILE, run_sampling_bench
+    check_output_path(output, [*model_dirs, _file(task)], directory=True, writes=OUTPUT_FILES, markers=(RESULTS_FILE,))
     set_threads(_bounded("--threads", threads))
     run_sampling_bench(model_dirs, output, samples=samples, refine=refine, reference_rows=reference,
                        repeats=repeats, seed=seed, threads=threads, seen=_condition_rows(seen),
@@ -456,8 +478,8 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
                     baseline: str | None, task: str, robot: str | None, settings: list[str] | None = None,
                     config: Path | None = None, snapshots: bool = False, physics: bool = False,
                     cluster: str | None = None) -> None:
-    from manifoldgen.bench.planning import (OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment, Method,
-                                            default_baseline, default_methods, run_bench)
+    from manifoldgen.bench.planning import (BENCH_MARKERS, OTHER_LIMITS, OUTPUT_FILES, PAPER_LIMITS, Experiment,
+                                            Method, default_baseline, default_methods, run_bench)
     from manifoldgen.cluster import parse_cluster
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
@@ -468,7 +490,7 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
     samplers = [Method.parse(m).sampler for m in methods or []]
     check_output_path(output, [_file(task), _file(scene), config, *(models or []),
                                *(_file(parse_spec(s)[1]) for s in samplers if s)],
-                      directory=True, writes=OUTPUT_FILES)
+                      directory=True, writes=OUTPUT_FILES, markers=BENCH_MARKERS)
     task_obj = load_task(task, robot)
     get_scene(task_obj, scene)  # a bad scene fails before any run starts
     builtin = task_obj.file is not None and task_obj.file.parent == BUILTIN_DIR

@@ -94,7 +94,8 @@ def gap_lines(report: list[dict], what: str) -> list[str]:
 
 
 def anchors_from_meta(meta: dict) -> Anchors | None:
-    """The anchors a dataset's meta records (a model's meta is its dataset's), or None."""
+    """The anchors a dataset's meta records (a model's meta is its dataset's), or None. Every reader of a dataset or
+    model (and training) has checked them first: :func:`manifoldgen.dataset.check_meta`."""
     found = meta.get("anchors") or []
     if not found:
         return None

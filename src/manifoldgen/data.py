@@ -31,7 +31,7 @@ import numpy as np
 
 from manifoldgen.cluster import Cluster, Pool, connect
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
-from manifoldgen.dataset import FORMAT_VERSION, Dataset
+from manifoldgen.dataset import FORMAT_VERSION, MAX_NEAR_HOME, Dataset
 from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.native import fast_space
@@ -61,9 +61,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
 
     The seeds projected onto the manifold are uniform in the joint limits; with ``anchors`` (see
     :func:`manifoldgen.scene.task_anchors`; what ``manifoldgen collect`` passes for a task with scenes)
-    half of them are normal around the anchors instead; with ``near_home > 0`` all are
-    normal around the task's home with that standard deviation (rad, clipped to the limits): rows on
-    the home's IK branch (for a task whose manifold has many branches, such as baxter's dual-arm tray,
+    half of them are normal around the anchors instead; with ``near_home > 0`` all are normal around the task's
+    home with that standard deviation (rad, at most :data:`~manifoldgen.dataset.MAX_NEAR_HOME`, clipped to the
+    limits): rows on the home's IK branch (for a task whose manifold has many branches, such as baxter's dual-arm tray,
     where a unimodal model trained on uniform seeds averages the branches into a pose far from every
     query solved near the home).
 
@@ -75,8 +75,9 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
     if per_condition <= 0:
         raise ManifoldgenError(f"--per-condition must be a positive number of rows, got {per_condition}")
     seed = check_seed(seed)
-    if not np.isfinite(near_home) or near_home < 0:
-        raise ManifoldgenError(f"near_home must be a standard deviation >= 0 rad (0: uniform seeds), got {near_home}")
+    if not 0 <= near_home <= MAX_NEAR_HOME:
+        raise ManifoldgenError(f"near_home must be a standard deviation from 0 to {MAX_NEAR_HOME:g} rad (0: uniform "
+                               f"seeds; wider ones pile the rows at the joint limits), got {near_home}")
     if min(batch, max_batches, give_up) <= 0:
         raise ManifoldgenError(f"batch, max_batches and give_up must be positive, got {batch}, {max_batches}, "
                                f"{give_up}")
@@ -103,8 +104,11 @@ def collect(task: Task, per_condition: int, seed: int, out: str | Path | None = 
             **({"anchors": anchors.to_meta(), "scenes": anchors.scenes} if anchors else {})}
     partial, owned = None, False  # owned: this run may remove the partial folder when it fails
     if out is not None:
-        out = check_output_path(out)
+        out = check_output_path(out, kind="dataset")
         partial = out.with_name(out.name + ".partial")
+        if partial.exists() and not partial.is_dir():
+            raise ManifoldgenError(f"{partial} is a file where collect keeps the batches of an unfinished run (a "
+                                   "folder); move or delete it, or choose another output (-o)")
         owned = not partial.exists()
         if owned and out.exists():
             _check_finished(out, meta, values)

@@ -6,19 +6,25 @@ from __future__ import annotations
 
 import difflib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, file_reader, short
-from manifoldgen.io import load_npz, save_npz
+from manifoldgen.io import check_output_path, load_npz, save_npz
+from manifoldgen.runtime import MAX_SEED
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
 TASK_KEYS = ("task", "robot", "joints", "locked", "floating_base", "constraint", "tolerance", "condition")
 META_KEYS = ("format_version", *TASK_KEYS, "seed", "per_condition", "method", "near_home", "anchors", "scenes",
              "coverage",  # a dataset's; a sample file's besides:
              "dataset_seed", "rows", "refine", "generated_by", "raw_valid_rate", "refined_valid_rate")
+# The keys of meta["task"]: those manifoldgen.tasks.Task.spec writes (a layer above this one; a test holds them equal).
+TASK_SPEC_KEYS = ("name", "description", "robot", "robot_source", "srdf_source", "group", "floating_base",
+                  "base_bounds", "locked", "constraint", "home", "home_condition", "task_file", "attached", "planner")
+MAX_NEAR_HOME = 10.0  # rad: the widest spread of seeds around the task home that collect takes (near_home)
 
 
 @dataclass
@@ -36,16 +42,25 @@ class Dataset:
         """Write the file (atomic); rows with NaN or infinite values are refused (no reader would take them)."""
         if not (np.isfinite(self.q).all() and np.isfinite(self.y).all()):
             raise ManifoldgenError(f"dataset rows hold NaN or infinite values; {path} not written")
-        save_npz(path, self.meta, q=self.q, y=self.y)
+        save_npz(check_output_path(path, kind="dataset"), self.meta, q=self.q, y=self.y)
 
     @classmethod
     @file_reader
     def load(cls, path: str | Path) -> Dataset:
         """Read and validate a dataset file (clear errors for truncated or foreign files)."""
-        meta, arrays = load_npz(path, ("q", "y"))
+        meta, arrays = load_npz(path, ())
+        missing = [key for key in ("q", "y") if key not in arrays]
+        if missing:
+            kind = meta.get("kind") if meta.get("kind") in ("path", "roadmap") else None
+            what = f"a {kind} file, not a dataset" if kind else f"not a dataset (no {' or '.join(missing)} array)"
+            raise ManifoldgenError(f"{path} is {what}: give a dataset written by `manifoldgen collect`")
         if any(arrays[k].dtype.kind not in "fiu" for k in ("q", "y")):
             raise ManifoldgenError(f"{path}: q and y must be arrays of numbers, got {arrays['q'].dtype} and "
                                    f"{arrays['y'].dtype}; regenerate the file")
+        narrow = next((k for k in ("q", "y") if arrays[k].dtype.kind == "f" and arrays[k].dtype.itemsize < 8), None)
+        if narrow is not None:
+            raise ManifoldgenError(f"{path}: {narrow} is {arrays[narrow].dtype}, which rounds rows off the constraint "
+                                   "and past the joint limits; store q and y as float64 (what collect writes)")
         q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
         for key in ("format_version", "robot", "joints", "constraint"):
             if key not in meta:
@@ -76,19 +91,21 @@ class Dataset:
 
 
 def check_meta(meta: dict, k: int, where: str) -> None:
-    """Refuse a dataset's (or a model's) ``meta`` with an unknown key, copies of its task (``robot``, ``locked``,
-    ``floating_base``, ``constraint``) that contradict ``meta["task"]``, a ``tolerance`` or ``condition`` (for ``k``
-    condition columns) of the wrong form, or ``scenes`` and ``anchors`` that no reader could use. ``where``: the
-    file, for messages. (:func:`manifoldgen.provenance.check_task_copies` compares the rest once the task is built.)"""
+    """Refuse a dataset's (or a model's) ``meta`` with an unknown key (in it or in its ``task``), a value of the wrong
+    kind or range (:data:`KINDS`), copies of its task (``robot``, ``locked``, ``floating_base``, ``constraint``) that
+    contradict ``meta["task"]``, a ``tolerance`` or ``condition`` (for ``k`` condition columns) of the wrong form, or
+    ``scenes`` and ``anchors`` that no reader could use. ``where``: the file, for messages.
+    (:func:`manifoldgen.provenance.check_task_copies` compares the rest once the task is built.)"""
     def bad(why: str) -> ManifoldgenError:
         return ManifoldgenError(f"{where}: meta {why}; the file was edited or is damaged: make it again")
 
-    unknown = next((key for key in meta if key not in META_KEYS), None)
-    if unknown is not None:
-        close = difflib.get_close_matches(str(unknown), META_KEYS, n=1)
-        raise bad(f"has an unknown key '{unknown}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
+    _check_known(meta, META_KEYS, "has", bad)
+    for key, (fits, what) in KINDS.items():
+        if key in meta and not fits(meta[key]):
+            raise bad(f"'{key}' {short(meta[key])} must be {what}")
     task = meta.get("task")
-    if isinstance(task, dict):
+    if task is not None:
+        _check_known(task, TASK_SPEC_KEYS, "'task' has", bad)
         identity = task.get("robot")
         copies = {"robot": identity.get("name") if isinstance(identity, dict) else identity,
                   "locked": task.get("locked"), "floating_base": task.get("floating_base"),
@@ -105,24 +122,78 @@ def check_meta(meta: dict, k: int, where: str) -> None:
             and all(isinstance(condition[key], list) and len(condition[key]) == k
                     and all(isinstance(v, str) for v in condition[key]) for key in ("names", "units"))
             and isinstance(condition["values"], list) and condition["values"]
-            and all(isinstance(row, list) and len(row) == k and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in row) for row in condition["values"])):
+            and all(_numbers(row, k) for row in condition["values"])):
         raise bad(f"'condition' must hold names, units and value rows for y's {k} condition columns")
-    _check_scenes(meta, where, bad)
+    _check_scenes(meta, k, bad)
 
 
-def _check_scenes(meta: dict, where: str, bad) -> None:
+def _check_known(data: dict, known: tuple[str, ...], has: str, bad) -> None:
+    """Refuse a key of ``data`` not in ``known``, naming the nearest known one (``has``: the message's subject)."""
+    unknown = next((key for key in data if key not in known), None)
+    if unknown is not None:
+        close = difflib.get_close_matches(str(unknown), known, n=1)
+        raise bad(f"{has} an unknown key '{unknown}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
+
+
+def _number(value, low: float = -math.inf, high: float = math.inf) -> bool:
+    """Whether ``value`` (read from JSON) is a number (not a bool, not NaN) from ``low`` to ``high``."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and low <= value <= high
+
+
+def _whole(value, low: int = 0, high: float = math.inf) -> bool:
+    """Whether ``value`` (read from JSON) is a whole number (not a bool) from ``low`` to ``high``."""
+    return isinstance(value, int) and _number(value, low, high)
+
+
+def _numbers(values, count: int | None) -> bool:
+    """Whether ``values`` is a list of ``count`` (any number when None) finite numbers."""
+    return isinstance(values, list) and count in (None, len(values)) and all(
+        _number(v) and math.isfinite(v) for v in values)
+
+
+def _coverage(report) -> bool:
+    """Whether ``report`` has the form :func:`manifoldgen.data.coverage` writes."""
+    anchor_keys = {"label", "gap", "spacing", "missed"}
+    return (isinstance(report, dict) and "modes" in report and set(report) <= {"modes", "anchors"}
+            and isinstance(report["modes"], dict)
+            and all(isinstance(shares, list) and all(_number(s, 0, 1) for s in shares)
+                    for shares in report["modes"].values())
+            and isinstance(report.get("anchors", []), list)
+            and all(isinstance(a, dict) and set(a) == anchor_keys and isinstance(a["label"], str)
+                    and isinstance(a["missed"], bool) and _number(a["gap"], 0) and _number(a["spacing"], 0)
+                    for a in report.get("anchors", [])))
+
+
+KINDS = {  # meta key -> (whether its value fits, what it must be); the task's copies, scenes and anchors: apart
+    "task": (lambda v: isinstance(v, dict), "an object (the task's spec)"),
+    "seed": (lambda v: _whole(v, 0, MAX_SEED), f"a whole number from 0 to {MAX_SEED}"),
+    "per_condition": (lambda v: _whole(v, 1), "a positive whole number (rows per condition value)"),
+    "method": (lambda v: isinstance(v, str), "a string (how the rows were seeded)"),
+    "near_home": (lambda v: _number(v, 0, MAX_NEAR_HOME), f"a number from 0 to {MAX_NEAR_HOME:g} (rad)"),
+    "coverage": (_coverage, 'an object {"modes": {condition: [shares]}, "anchors": [...]} as collect writes it'),
+    "dataset_seed": (lambda v: v is None or _whole(v, 0, MAX_SEED), f"null or a whole number from 0 to {MAX_SEED}"),
+    "rows": (lambda v: v in ("raw", "refined"), '"raw" or "refined"'),
+    "refine": (lambda v: _whole(v, 0), "a whole number >= 0 (projection iterations)"),
+    "generated_by": (lambda v: isinstance(v, dict) and set(v) == {"model", "source"} and all(
+        isinstance(x, str) for x in v.values()), 'an object {"model": name, "source": path}'),
+    "raw_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
+    "refined_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
+}
+
+
+def _check_scenes(meta: dict, k: int, bad) -> None:
     """Refuse ``scenes`` that are not a list of scene documents (objects; read whole by the race that plans them,
     :func:`manifoldgen.selection.select_model`, before any training) and ``anchors`` that are not labelled
-    configurations."""
+    configurations (one number per joint) at conditions (``k`` numbers)."""
     scenes, anchors = meta.get("scenes", []), meta.get("anchors", [])
     if not isinstance(scenes, list) or not isinstance(anchors, list):
         raise bad("'scenes' and 'anchors' must be lists")
     if not all(isinstance(doc, dict) for doc in scenes):
         raise bad("'scenes' must hold scene documents (JSON objects)")
+    joints = meta.get("joints")
+    n = len(joints) if isinstance(joints, list) else None
     for i, anchor in enumerate(anchors):
-        if not (isinstance(anchor, dict) and set(anchor) == {"label", "q", "condition"} and isinstance(
-                anchor["label"], str) and all(isinstance(anchor[key], list) and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in anchor[key])
-                    for key in ("q", "condition"))):
-            raise bad(f"anchors[{i}] must hold a 'label', its configuration 'q' and its 'condition'")
+        if not (isinstance(anchor, dict) and set(anchor) == {"label", "q", "condition"}
+                and isinstance(anchor["label"], str) and _numbers(anchor["q"], n) and _numbers(anchor["condition"], k)):
+            raise bad(f"anchors[{i}] must hold a 'label', its configuration 'q' (a number per joint: {n}) and its "
+                      f"'condition' (a number per condition column: {k})")

@@ -4,6 +4,7 @@ import of an optional extra's module (:func:`require`), and what keeps a refusal
 values it names (:func:`short`, :func:`listed`, :func:`differences`)."""
 
 import difflib
+import errno
 import functools
 import importlib
 import json
@@ -47,6 +48,14 @@ def not_a_file(path, what: str = "file") -> str:
         return f"{what} {path} is a directory, not a file"
     if os.path.exists(path):
         return f"{what} {path} is not a regular file (a device, pipe or socket)"
+    if os.path.islink(path):  # a link that leads nowhere
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return (f"{what} {path} is a symbolic link loop (its links lead back to themselves); give the file "
+                        "itself")
+        return f"{what} {path} is a symbolic link to a missing file ({os.readlink(path)})"
     return f"{what} not found: {path}"
 
 
@@ -119,11 +128,17 @@ def differences(old, new, where: str = "", words: tuple[str, str] = ("then", "no
 
 def _leaves(old, new, where: str, words: tuple[str, str]) -> list[str]:
     """``'KEY: OLD then, NEW now'`` for every leaf that differs (dicts descended in ``new``'s key order, equally long
-    lists of dicts item by item)."""
+    lists of dicts item by item; lists that look the same cut short: their first differing item, or their lengths)."""
     if isinstance(old, dict) and isinstance(new, dict):
         return [line for key in [*new, *(key for key in old if key not in new)]
                 for line in _leaves(old.get(key), new.get(key), f"{where}.{key}" if where else str(key), words)]
     if isinstance(old, list) and isinstance(new, list) and len(old) == len(new) and old != new \
             and any(isinstance(v, dict) for v in old):
         return [line for i, (a, b) in enumerate(zip(old, new)) for line in _leaves(a, b, f"{where}[{i}]", words)]
+    if isinstance(old, list) and isinstance(new, list) and old != new and short(old, 24) == short(new, 24):
+        first = next((i for i, (a, b) in enumerate(zip(old, new)) if a != b), None)
+        if first is not None:
+            return _leaves(old[first], new[first], f"{where}[{first}]", words)
+        return [f"{where or 'settings'}: {len(old)} items {words[0]}, {len(new)} items {words[1]} (the first "
+                f"{min(len(old), len(new))} alike)"]
     return [] if old == new else [f"{where or 'settings'}: {short(old, 24)} {words[0]}, {short(new, 24)} {words[1]}"]

@@ -113,17 +113,68 @@ def save_figure(fig, path: str | Path) -> None:
     atomic_write_bytes(Path(path), buffer.getvalue())
 
 
+GENERATOR_MARK = '<meta name="generator" content="manifoldgen">'  # in the head of every page view --export writes
+
+
+NPZ_KINDS = ("path", "roadmap")  # the meta "kind" of an .npz that is not a dataset
+
+
+def npz_kind(path: Path) -> str | None:
+    """What an existing .npz holds when manifoldgen wrote it (its JSON ``meta`` has a ``format_version``): the
+    meta's ``kind`` (``path``, ``roadmap``), else ``dataset`` (a dataset or a sample file); None otherwise."""
+    import numpy as np
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            meta = json.loads(str(f["meta"]))
+    except Exception:  # not an .npz, no meta, a pickle ...: not one of ours
+        return None
+    if not isinstance(meta, dict) or "format_version" not in meta:
+        return None
+    return meta["kind"] if meta.get("kind") in NPZ_KINDS else "dataset"
+
+
+def written_by_manifoldgen(path: Path) -> bool:
+    """Whether the existing file ``path`` is of a kind manifoldgen writes and was written by it: an .npz holding
+    its JSON ``meta`` (:func:`npz_kind`), an .html page carrying :data:`GENERATOR_MARK`. A file of another kind
+    (a .png, .json or .csv) cannot be told apart and counts as written by it."""
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return npz_kind(path) is not None
+    if suffix == ".html":
+        with open(path, "rb") as f:
+            return GENERATOR_MARK.encode() in f.read(8192)
+    return True
+
+
+def check_own_folder(path: Path, markers: tuple[str, ...], what: str = "-o") -> None:
+    """Refuse an output folder ``path`` that holds files but none of ``markers`` (the files the command writes
+    first into a folder of its own): its files are someone else's and would be replaced."""
+    if not path.is_dir() or any((path / marker).exists() for marker in markers):
+        return
+    names = sorted(p.name for p in path.iterdir())
+    if names:
+        more = f" and {len(names) - 3} more" if len(names) > 3 else ""
+        raise ManifoldgenError(f"{what} {path} holds files this command did not write ({', '.join(names[:3])}{more}; "
+                               f"no {' or '.join(markers)}): give a new or empty folder, or delete them")
+
+
 def _same(a: Path, b: Path) -> bool:
     return a == b or (a.exists() and b.exists() and os.path.samefile(a, b))
 
 
 def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = (), *,
                       directory: bool = False, writes: Iterable[str] = (), what: str = "-o",
-                      suffixes: tuple[str, ...] = ()) -> Path:
-    """Refuse an output that cannot be written or would destroy an input; returns it as a Path.
+                      suffixes: tuple[str, ...] = (), markers: tuple[str, ...] = (), owned: bool = True,
+                      kind: str | None = None) -> Path:
+    """Refuse an output that cannot be written or would destroy an input or a file manifoldgen did not write;
+    returns it as a Path.
 
     A file output (``directory=False``) must end in one of ``suffixes`` (when given), must not be an existing
-    directory, and its directory must exist; a directory output must not be an existing file. The folder written
+    directory, and its directory must exist; an existing file it would replace must be one manifoldgen wrote
+    (:func:`written_by_manifoldgen`) unless ``owned`` is False (the command reads and checks that file itself
+    before it replaces it, as ``plan --roadmap`` does), and with ``kind`` (an .npz output: ``dataset``, ``path``) it
+    must hold that kind (a path never replaces a dataset). A directory output must not be an existing file, and with
+    ``markers`` an existing folder must be empty or hold one of them (:func:`check_own_folder`). The folder written
     into must take a new file. No file written (the output, or for a directory output the names it ``writes``
     inside it) may be one of ``inputs`` or a file of an input folder (a model directory's model.json, say), and a
     directory output may not be an input folder.
@@ -138,13 +189,17 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
                                    "another path")
     else:
         if path.is_dir():
+            example = path / f"out{suffixes[0] if suffixes else path.suffix or '.npz'}"
             raise ManifoldgenError(f"{what} {path} is a folder, but a file is meant here; give a file path "
-                                   f"such as {path / 'out.npz'}")
+                                   f"such as {example}")
         if path.exists() and not path.is_file():
             raise ManifoldgenError(f"{what} {path} is not a regular file (a device, pipe or socket); give a file path")
         if not path.parent.exists():
             raise ManifoldgenError(f"output directory {path.parent} does not exist; create it or choose "
                                    "another path")
+        if suffixes and path.name.lower() in suffixes:
+            raise ManifoldgenError(f"{what} {path} is only a suffix, not a file name; give a name such as "
+                                   f"out{suffixes[0]}")
         if suffixes and path.suffix.lower() not in suffixes:
             raise ManifoldgenError(f"{what} must end in {' or '.join(suffixes)}, got {path}; give a name such as "
                                    f"{path.with_suffix(suffixes[0]).name}")
@@ -164,6 +219,14 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
             if hit is not None:
                 part = "" if hit == source else f", part of the input folder {given}"
                 raise ManifoldgenError(f"{what} {path} would overwrite the input {hit}{part}; choose another output")
+    if directory and markers:
+        check_own_folder(path, markers, what)
+    if owned and not directory and path.is_file() and not written_by_manifoldgen(path):
+        raise ManifoldgenError(f"{what} {path} exists and was not written by manifoldgen; give another name, or "
+                               "delete it to replace it")
+    if kind and not directory and path.is_file() and (found := npz_kind(path)) not in (None, kind):
+        raise ManifoldgenError(f"{what} {path} holds a {found} file, which this {kind} file would replace; give "
+                               "another name, or delete it to replace it")
     _check_writable(path if directory and path.is_dir() else path.parent, path)
     return path
 

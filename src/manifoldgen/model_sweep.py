@@ -25,7 +25,7 @@ import torch
 
 from manifoldgen.cluster import Cluster, connect
 from manifoldgen.dataset import Dataset
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import atomic_write_bytes, atomic_write_text, check_name
 from manifoldgen.models import MODELS, get_model_class, load_model
 from manifoldgen.models.base import dataset_task
@@ -100,6 +100,9 @@ def _finished(out: Path, settings: dict) -> dict[str, dict]:
     """The rows of an earlier run of the same sweep whose candidate folders are complete (none without one)."""
     path = out / SWEEP_FILE
     if not path.is_file():
+        if (out / "model.json").exists():
+            raise ManifoldgenError(f"{out} holds a model that no sweep made (no {SWEEP_FILE}); choose another folder, "
+                                   "or delete it to sweep anew")
         return {}
     try:
         old = json.loads(path.read_text())
@@ -110,8 +113,9 @@ def _finished(out: Path, settings: dict) -> dict[str, dict]:
     if damaged:
         raise ManifoldgenError(f"{path} is damaged ({damaged}); delete it to start the sweep over")
     if old.get("settings") != settings:
-        raise ManifoldgenError(f"{out} holds a sweep made with other settings (dataset, models, latent sizes, seeds "
-                               "or epochs); rerun the same command to resume it, or choose another folder")
+        changed = differences(old.get("settings"), settings)
+        raise ManifoldgenError(f"{out} holds a sweep made with other settings ({changed}); rerun the same command to "
+                               "resume it, or choose another folder")
     return {name: row for name, row in rows.items()
             if all((out / "candidates" / name / file).is_file() for file in MODEL_FILES)}
 
@@ -149,8 +153,8 @@ def sweep(dataset: Dataset, out: str | Path, *, models: list[str], latents: list
     jobs = candidates(models, latents, seeds)
     _warn_small_latents(task, dataset, sorted({latent for _, latent, _ in jobs if latent is not None}))
     settings = _settings(dataset, jobs, epochs)
-    (out / "candidates").mkdir(parents=True, exist_ok=True)
     done = _finished(out, settings)
+    (out / "candidates").mkdir(parents=True, exist_ok=True)
     rows = list(done.values())
     todo = [job for job in jobs if candidate_name(*job) not in done]
     with progress_bar("training candidates", len(todo), progress) as bar:

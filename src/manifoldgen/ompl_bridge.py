@@ -43,6 +43,7 @@ import numpy as np
 from manifoldgen.constraints import Constraint
 from manifoldgen.errors import ManifoldgenError, require
 from manifoldgen.ompl_settings import OmplSettings
+from manifoldgen.planning.base import check_time_limit
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.sampling import Sampler
 from manifoldgen.space import ConstrainedSpace
@@ -232,8 +233,7 @@ class OmplPlanner:
     # ---------------------------------------------------------------- the contract
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
-        if not np.isfinite(time_limit) or time_limit <= 0:
-            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        check_time_limit(time_limit)
         n, joint = self.space.n, self.ompl_space == "joint"
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         _seed_ompl(self.seed)

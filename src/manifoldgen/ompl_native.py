@@ -50,6 +50,7 @@ from manifoldgen import native
 from manifoldgen.core_extension import active_coordinates, core_module, unsupported, write_models
 from manifoldgen.core_terms import constraint_terms
 from manifoldgen.ompl_settings import OmplSettings
+from manifoldgen.planning.base import check_time_limit
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.space import REASONS, ConstrainedSpace
 
@@ -171,8 +172,7 @@ class NativeOmplPlanner:
 
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
-        if not np.isfinite(time_limit) or time_limit <= 0:
-            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        check_time_limit(time_limit)
         n = self.space.n
         start, goal = (self.space.check_query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         self.dense_sphere_checks = self.dense_sweep_checks = 0

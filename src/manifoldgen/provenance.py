@@ -1,11 +1,14 @@
 """Whether a file was made for a constraint: a dataset's, model's or path's ``meta`` against the robot (by URDF
-content), planning group, locked joints and constraint specification of the constraint at hand."""
+content), planning group, locked joints and constraint specification of the constraint at hand, and a model's copy
+of the robot's joint limits."""
 
 from __future__ import annotations
 
 import json
 import math
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, differences, listed, short
 
@@ -40,6 +43,22 @@ def check_made_for(meta: dict, constraint: Constraint, what: str) -> None:
         raise ManifoldgenError(f"{what} was made for another task: {listed(found)}; use one made for this task "
                                "(collect / train on this task)")
     check_task_copies(meta, constraint, what)
+
+
+def check_model_for(model, constraint: Constraint, what: str = "the model") -> None:
+    """:func:`check_made_for` of a trained ``model``'s meta, then refuse a model whose copy of the joint limits
+    (its normalisation ``lower`` and ``upper``: what its samples are clamped to) is not the robot's."""
+    check_made_for(model.meta, constraint, what)
+    robot = constraint.robot
+    for key, limits in (("lower", robot.lower), ("upper", robot.upper)):
+        given = np.asarray(model.norm[key], float)
+        off = np.flatnonzero(np.abs(given - limits) > 1e-9)
+        if len(off):
+            j = int(off[0])
+            more = f" ({len(off) - 1} more joint(s) differ)" if len(off) > 1 else ""
+            raise ManifoldgenError(f"{what}: its normalisation '{key}' gives {robot.joints[j]} {given[j]:g}, but the "
+                                   f"robot's limit is {limits[j]:g}{more}; the model file was edited (its checksum "
+                                   "is not a signature): restore or retrain the model")
 
 
 def check_task_copies(meta: dict, constraint: Constraint, what: str) -> None:

@@ -13,6 +13,7 @@ import contextlib
 import difflib
 import hashlib
 import json
+import math
 from dataclasses import asdict
 from pathlib import Path
 
@@ -24,8 +25,9 @@ from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
 from manifoldgen.planning.local import DEFAULT_LOCAL
 from manifoldgen.planning.result import PlanResult
-from manifoldgen.runtime import check_seed
+from manifoldgen.runtime import MAX_SEED, check_seed
 from manifoldgen.scene import Scene
+from manifoldgen.settings import check_settings
 from manifoldgen.space import ConstrainedSpace
 from manifoldgen.specs import make_sampler
 from manifoldgen.tasks import Task
@@ -36,6 +38,26 @@ PATH_KEYS = ("task", "robot", "joints", "locked", "floating_base", "constraint",
              "planner_settings", "sampler", "local", "seed", "time_limit", "smoothed", "result", "validation")
 # a path file's meta: the task's (Task.meta), the query's (query_meta) and the planner's (plan_query)
 ENDPOINT_TOLERANCE = 1e-6  # rad: how far path[0] and path[-1] may lie from the recorded start and goal
+
+# the kinds of a path file's meta values besides the task's and the query's, as plan_query writes them
+TEXT, FLAG, COUNT, SEED = "a string", "true or false", "a whole number >= 0", f"a whole number from 0 to {MAX_SEED}"
+POSITIVE, AMOUNT, SEGMENT, OBJECT = "a finite number > 0", "a finite number >= 0", "a whole number >= -1", "an object"
+VALUE_KINDS = {"scene_name": TEXT, "planner": TEXT, "sampler": TEXT, "local": TEXT, "seed": SEED,
+               "time_limit": POSITIVE, "smoothed": FLAG, "planner_settings": OBJECT, "result": OBJECT,
+               "validation": OBJECT}
+NESTED_KINDS = {"result": {"solved": FLAG, "time_s": AMOUNT, "iterations": COUNT, "samples_drawn": COUNT,
+                           "projections": COUNT, "planner": TEXT, "length": AMOUNT, "waypoints": COUNT,
+                           "extras": OBJECT},
+                "validation": {"valid": FLAG, "worst_violation": AMOUNT, "reason": TEXT, "segment": SEGMENT,
+                               "states_checked": COUNT, "resolution": POSITIVE}}
+
+
+def _is_kind(value, kind: str) -> bool:
+    whole = isinstance(value, int) and not isinstance(value, bool)
+    real = whole or (isinstance(value, float) and math.isfinite(value))
+    return {TEXT: isinstance(value, str), FLAG: isinstance(value, bool), OBJECT: isinstance(value, dict),
+            COUNT: whole and value >= 0, SEED: whole and 0 <= value <= MAX_SEED, SEGMENT: whole and value >= -1,
+            POSITIVE: real and value > 0, AMOUNT: real and value >= 0}[kind]
 
 
 def get_planner(name: str) -> type[Planner]:
@@ -157,6 +179,7 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
         raise ManifoldgenError(f"{path_file}: path format {short(meta.get('format_version'))} is not the one this "
                                f"version reads ({PATH_FORMAT_VERSION}); plan the query again")
     _check_contents(path_file, meta, arrays)
+    _check_values(path_file, meta)
     path = arrays["path"]
     if path.dtype.kind not in "fiu" or path.ndim != 2 or len(path) == 0 or not np.isfinite(path).all():
         raise ManifoldgenError(f"{path_file}: 'path' must be a non-empty (K, n) array of finite numbers, got "
@@ -167,6 +190,10 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
         raise ManifoldgenError(f"{path_file}: its states have {path.shape[1]} coordinates, {task.robot.name}'s "
                                f"{task.name} task has {task.robot.n} joints")
     _check_joints(path_file, meta.get("joints"), task)
+    if "condition_names" in meta and meta["condition_names"] != list(task.condition.names):
+        raise ManifoldgenError(f"{path_file}: meta 'condition_names' {short(meta['condition_names'])} are not its "
+                               f"task's {short(list(task.condition.names))}; the file was edited: plan the query "
+                               "again")
     if meta.get("tolerance") != task.constraint.tolerance.tolist():  # what an outside checker checks against
         raise ManifoldgenError(f"{path_file}: meta 'tolerance' {short(meta.get('tolerance'))} is not its task's "
                                f"{short(task.constraint.tolerance.tolist())}; the file was edited: plan the query "
@@ -198,6 +225,37 @@ def _check_contents(path_file: str | Path, meta: dict, arrays: dict) -> None:
         raise ManifoldgenError(f"{path_file}: unknown meta key {short(unknown[0])}{hint}; a "
                                "path file's meta holds only the keys of docs/file-formats.md (Path files): remove "
                                "it or plan the query again")
+
+
+def _check_values(path_file: str | Path, meta: dict) -> None:
+    """Refuse a planner's meta value (:data:`VALUE_KINDS`, :data:`NESTED_KINDS`, the planner's settings) of the
+    wrong kind or range, or an unknown key inside ``result``, ``validation`` or ``planner_settings``, naming it."""
+    def refuse(key: str, why: str):
+        raise ManifoldgenError(f"{path_file}: meta '{key}' {why}; the file was edited: plan the query again")
+
+    for key, kind in VALUE_KINDS.items():
+        if key in meta and not _is_kind(meta[key], kind):
+            refuse(key, f"must be {kind}, got {short(meta[key])}")
+    for key, kinds in NESTED_KINDS.items():
+        for name, value in meta.get(key, {}).items():
+            if name not in kinds:
+                refuse(f"{key}.{name}", f"is not a key of '{key}' (known: {', '.join(kinds)})")
+            if not _is_kind(value, kinds[name]):
+                refuse(f"{key}.{name}", f"must be {kinds[name]}, got {short(value)}")
+    if "planner_settings" in meta:
+        planner = meta.get("planner")
+        if planner not in PLANNERS.names():
+            refuse("planner", f"{short(planner)} is not a planner (known: {', '.join(PLANNERS.names())})")
+        known = planner_settings(planner)
+        unknown = next((name for name in meta["planner_settings"] if name not in known), None)
+        if unknown is not None:
+            close = difflib.get_close_matches(unknown, list(known), n=1)
+            refuse(f"planner_settings.{unknown}", f"is not a setting of planner {planner}"
+                   + (f" (did you mean '{close[0]}'?)" if close else ""))
+        try:
+            check_settings(meta["planner_settings"], known, f"planner {planner}")
+        except ManifoldgenError as exc:
+            refuse("planner_settings", f"holds a wrong value ({exc})")
 
 
 def _check_joints(path_file: str | Path, joints, task: Task) -> None:
@@ -237,4 +295,4 @@ def _check_ends(path_file: str | Path, meta: dict, path: np.ndarray) -> None:
 def save_path(output: str | Path, result: PlanResult, meta: dict, what: str = "-o") -> None:
     """Write the path file (atomic): ``path (K, n)`` and ``meta`` (a JSON string); ``what`` names ``output`` in a
     refusal (the command line's option, the API's argument)."""
-    save_npz(check_output_path(output, what=what), meta, path=result.path)
+    save_npz(check_output_path(output, what=what, kind="path"), meta, path=result.path)

@@ -29,7 +29,7 @@ import numpy as np
 from manifoldgen.constraints import Constraint, project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.native import fast_space
-from manifoldgen.provenance import check_made_for
+from manifoldgen.provenance import check_model_for
 from manifoldgen.runtime import REFINE, check_seed
 from manifoldgen.space import ConstrainedSpace
 
@@ -41,6 +41,7 @@ CHECK_ROWS = 256  # model rows a query's start draws to measure its gaps at the 
 MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows while the model covers its ends
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
 MIX_AFTER = 20_000  # raw rows a query draws before a model that covers its ends starts mixing (full after twice)
+MAX_SAMPLES = 1_000_000  # rows one sample_many or raw_many call returns (a planner's pool asks for at most this)
 
 
 @dataclass
@@ -71,6 +72,8 @@ class Sampler(ABC):
 
     lazy_refine: int = 0  # projection iterations (constraints.project, default options) that refine a raw row
     row_cost: int | None = None  # multiply-adds to make a raw row (a model's decode); None: next to nothing
+    scene: tuple[str, str] | None = None  # (name, fingerprint) of the scene whose obstacles its space holds, where
+    # known (manifoldgen.api.sampler sets it, so that a plan of another scene's query refuses the sampler)
 
     @abstractmethod
     def candidates(self, count: int) -> np.ndarray:
@@ -102,8 +105,8 @@ class Sampler(ABC):
         return self.sample_many(1)[0]
 
     def sample_many(self, count: int) -> np.ndarray:
-        """(count, n) valid configurations: the buffer taken in order, in slices, refilled a batch at a
-        time; an error after ``max_batches`` refills in a row found none."""
+        """(count, n) valid configurations (``count`` at most :data:`MAX_SAMPLES`): the buffer taken in order, in
+        slices, refilled a batch at a time; an error after ``max_batches`` refills in a row found none."""
         rows = self._take(count, "_buffer", self._refill)
         self.stats.accepted += len(rows)
         return rows
@@ -111,15 +114,16 @@ class Sampler(ABC):
     def raw_many(self, count: int) -> np.ndarray:
         """(count, n) raw candidates (see :meth:`raw`), unrefined and unchecked: the caller refines each
         with ``lazy_refine`` projection iterations, checks it, and books ``stats.refined`` and
-        ``stats.accepted``. Made ``batch`` at a time as :meth:`sample_many`; an error after
-        ``max_batches`` empty batches in a row."""
+        ``stats.accepted``. At most :data:`MAX_SAMPLES`, made ``batch`` at a time as :meth:`sample_many`; an
+        error after ``max_batches`` empty batches in a row."""
         return self._take(count, "_raw", self._refill_raw)
 
     def _take(self, count: int, buffer: str, refill) -> np.ndarray:
         """(count, n) rows taken in order from the array attribute ``buffer``, in slices, ``refill()`` putting a
         new batch there when it is empty; an error after ``max_batches`` empty refills in a row."""
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 0:
-            raise ManifoldgenError(f"the number of samples must be a whole number >= 0, got {count!r}")
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count <= MAX_SAMPLES:
+            raise ManifoldgenError(f"the number of samples must be a whole number from 0 to {MAX_SAMPLES:,}, got "
+                                   f"{count!r}; draw more in several calls")
         rows, need, empty = [], int(count), 0
         while need:
             if not len(getattr(self, buffer)):
@@ -195,7 +199,7 @@ class ModelSampler(Sampler):
         refine = (model.refine if model.refine is not None else REFINE) if refine is None else refine
         if refine < 0:
             raise ManifoldgenError(f"refine must be >= 0 projection iterations, got {refine}")
-        check_made_for(model.meta, space.constraint, "the model")
+        check_model_for(model, space.constraint)
         model.check_condition(space.y)
         self.model, self.refine = model, int(refine)
         self.decoder = model.native_decoder()  # the model's network in the core, or None: torch runs it
@@ -282,7 +286,7 @@ def model_sampler(space: ConstrainedSpace, model, *, refine: int | None = None, 
     sampler where ``train``'s race found plain projection planned the task's scenes fastest (``model.mix`` 1)
     and no ``refine`` is asked for. ``common``: ``seed``, ``batch``."""
     if model.mix == 1 and refine is None:
-        check_made_for(model.meta, space.constraint, "the model")
+        check_model_for(model, space.constraint)
         return ProjectionSampler(space, **common)
     return ModelSampler(space, model, refine=refine, **common)
 
@@ -311,8 +315,8 @@ def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out
     seed = check_seed(seed)
     if refine < 0:
         raise ManifoldgenError(f"--refine must be >= 0 projection iterations, got {refine}")
-    out = check_output_path(out)
-    check_made_for(model.meta, constraint, "the model")
+    out = check_output_path(out, kind="dataset")
+    check_model_for(model, constraint, f"model {source}" if source else "the model")
     y = np.asarray(y, float).reshape(constraint.condition.k)
     raw, refined = generate(model, constraint, y, count, torch.Generator().manual_seed(seed), refine)
     y_rows = np.broadcast_to(y, (count, len(y))).copy()

@@ -42,7 +42,7 @@ from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_tas
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.scene import Scene
 from manifoldgen.tasks import Task, code_types
-from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, fingerprint, split
+from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
 SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
@@ -75,12 +75,8 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     if resume and not any((out / "candidates" / name / CHECKPOINT).exists() for name in CANDIDATES):
         raise ManifoldgenError(f"no checkpoint in {out}/candidates to resume (training finished or never started); "
                                "run without --resume")
-    recorded = dataset.meta.get("scenes") or []
-    for i, doc in enumerate(recorded):  # the race plans them: a damaged one is refused before any training
-        try:
-            Scene.from_json(json.dumps(doc), f"the dataset's scenes[{i}]")
-        except ManifoldgenError as exc:
-            raise ManifoldgenError(f"{exc}; the dataset was edited or is damaged: collect it again") from None
+    recorded = check_recorded_scenes(dataset)
+    check_unused(out, (CONFIG_FILE, "candidates"))
     if (out / CONFIG_FILE).exists() and not (out / SELECTION_FILE).exists():
         raise ManifoldgenError(f"{out} holds a model trained alone (no {SELECTION_FILE}); choose another directory "
                                "(-o), or delete it to train anew")
@@ -184,6 +180,18 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
     return [{"label": label, "model": name, "mix": mix, "solved": sum(ok for ok, _ in runs[label]),
              "runs": len(runs[label]), "cpu": round(statistics.median(cpu for _, cpu in runs[label]), 4)}
             for label, name, mix in entries]
+
+
+def check_recorded_scenes(dataset: Dataset) -> list[dict]:
+    """The scene documents the dataset's meta records (the race plans them, a trained model's meta keeps them), each
+    read whole, before any training; a damaged one is refused in one line."""
+    recorded = dataset.meta.get("scenes") or []
+    for i, doc in enumerate(recorded):
+        try:
+            Scene.from_json(json.dumps(doc), f"the dataset's scenes[{i}]")
+        except ManifoldgenError as exc:
+            raise ManifoldgenError(f"{exc}; the dataset was edited or is damaged: collect it again") from None
+    return recorded
 
 
 def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None) -> None:

@@ -22,6 +22,7 @@ from manifoldgen.robot import Robot
 
 OBSTACLE_TYPES = ("box", "sphere", "cylinder", "mesh")
 OBSTACLE_KEYS = ("name", "type", "pose", "size", "radius", "length", "mesh", "scale")
+SHAPE_KEYS = {"box": ("size",), "sphere": ("radius",), "cylinder": ("radius", "length"), "mesh": ("mesh", "scale")}
 HELD_KEYS = ("attached_to", "touch_links", "parent_joint")  # a held object's keys beside its shape's
 MAX_METRES = 1e3  # largest position coordinate or extent accepted (coal's bounding boxes overflow near 1e308)
 
@@ -33,8 +34,10 @@ def _bounded(values: np.ndarray, what: str) -> np.ndarray:
 
 
 def _vector(value, size: int, what: str) -> np.ndarray:
-    if any(isinstance(v, bool) for v in np.ravel(np.asarray(value, dtype=object))):
-        raise ManifoldgenError(f"{what} must be {size} numbers, not true/false, got {value!r}")
+    for item in np.ravel(np.asarray(value, dtype=object)):
+        if isinstance(item, (bool, np.bool_, str)):
+            kind = "a string" if isinstance(item, str) else "true/false"
+            raise ManifoldgenError(f"{what} must be {size} numbers, not {kind} ({item!r}), got {value!r}")
     try:
         out = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError) as exc:
@@ -85,7 +88,8 @@ class Pose:
         if not isinstance(data, dict) or "position" not in data:
             raise ManifoldgenError(f"{what}: pose needs 'position' [x, y, z] (and 'quaternion' [x, y, z, w])")
         check_keys(data, ("position", "quaternion"), f"{what} pose")
-        return cls(data["position"], data.get("quaternion", [0.0, 0.0, 0.0, 1.0]))
+        return cls(_vector(data["position"], 3, f"{what} pose position"),
+                   _vector(data.get("quaternion", [0.0, 0.0, 0.0, 1.0]), 4, f"{what} pose quaternion [x, y, z, w]"))
 
 
 @dataclass
@@ -187,9 +191,11 @@ class Obstacle:
         check_keys(data, OBSTACLE_KEYS, f"obstacle '{name}'")
         if "type" not in data:
             raise ManifoldgenError(f"obstacle '{name}' has no 'type'; known types: {', '.join(OBSTACLE_TYPES)}")
-        return cls(name, data["type"], Pose.from_dict(data.get("pose"), f"obstacle '{name}'"),
-                   size=data.get("size"), radius=data.get("radius"), length=data.get("length"),
-                   mesh=data.get("mesh"), scale=data.get("scale"))
+        obstacle = cls(name, data["type"], Pose.from_dict(data.get("pose"), f"obstacle '{name}'"),
+                       size=data.get("size"), radius=data.get("radius"), length=data.get("length"),
+                       mesh=data.get("mesh"), scale=data.get("scale"))
+        check_keys(data, ("name", "type", "pose", *SHAPE_KEYS[obstacle.type]), f"obstacle '{name}' (a {obstacle.type})")
+        return obstacle
 
 
 @dataclass

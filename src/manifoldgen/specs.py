@@ -3,10 +3,10 @@
 ``uniform`` (rejection in the joint limits), ``project`` (uniform seeds projected),
 ``pg:DATASET.npz`` (the paper's precomputed-graph baseline: rows of a dataset) or
 ``MODEL:DIR`` (a trained model directory, e.g. ``cvae:runs/cvae``; any registered model
-name, or ``model`` for whichever model the directory holds). Options follow after commas: ``cvae:runs/cvae,refine=0,batch=2048``; model samples
-get the projection iterations the model's training measured they need (``runtime.REFINE`` for a model that
-records none) unless ``refine`` says otherwise (``refine=0``:
-raw model samples, the paper's setting).
+name, or ``model`` for whichever model the directory holds). Options follow after commas:
+``cvae:runs/cvae,refine=0,batch=2048``; model samples get the projection iterations the model's training measured
+they need (``runtime.REFINE`` for a model that records none) unless ``refine`` says otherwise (``refine=0``: raw
+model samples, the paper's setting).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.provenance import check_made_for
+from manifoldgen.provenance import check_made_for, check_model_for
 from manifoldgen.sampling import DatasetSampler, ProjectionSampler, Sampler, UniformSampler
 from manifoldgen.space import ConstrainedSpace
 
@@ -84,5 +84,5 @@ def _model_sampler(name: str, path: str, space: ConstrainedSpace, refine: int | 
     model = open_model(path)
     if name not in ("model", model.name):
         raise ManifoldgenError(f"'{path}' holds a {model.name} model, not {name}; use '{model.name}:{path}'")
-    check_made_for(model.meta, space.constraint, f"model {path}")
+    check_model_for(model, space.constraint, f"model {path}")
     return model_sampler(space, model, refine=refine, **common)

@@ -28,7 +28,7 @@ import safetensors.torch
 import torch
 
 from manifoldgen.dataset import Dataset, check_meta
-from manifoldgen.errors import ManifoldgenError, differences
+from manifoldgen.errors import ManifoldgenError, differences, listed
 from manifoldgen.io import atomic_write_bytes, atomic_write_text, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.provenance import check_task_copies
@@ -141,9 +141,23 @@ def check_dataset(dataset: Dataset, task: TaskLike) -> None:
     bad = rows[~task.constraint.satisfied(q[rows], y[rows])]
     if len(bad):
         i = int(bad[0])
-        raise ManifoldgenError(f"dataset row {i} does not satisfy its task's constraint (worst residual "
-                               f"{task.constraint.violation(q[i], y[i])[0]:.3g} x tolerance, or outside the limits); "
-                               f"{len(bad)} of {len(rows)} rows checked fail: recollect the dataset")
+        raise ManifoldgenError(f"dataset row {i} does not satisfy its task's constraint "
+                               f"({_why_off(task, q[i], y[i])}); {len(bad)} of {len(rows)} rows checked fail: "
+                               "recollect the dataset")
+
+
+def _why_off(task: TaskLike, q: np.ndarray, y: np.ndarray) -> str:
+    """Why the row ``q (n,)`` at ``y (k,)`` does not satisfy ``task``'s constraint: the joint limit it leaves, its
+    residual beyond tolerance, or an inequality it breaks."""
+    robot = task.robot
+    past = np.maximum(robot.lower - q, q - robot.upper)
+    j = int(np.argmax(past))
+    if not robot.within_limits(q)[0]:
+        return f"joint {robot.joints[j]} is {past[j]:.3g} outside its limits [{robot.lower[j]:g}, {robot.upper[j]:g}]"
+    violation = float(task.constraint.violation(q, y)[0])
+    if violation > 1.0:
+        return f"worst residual {violation:.3g} x tolerance"
+    return "it breaks an inequality of the constraint"
 
 
 def needed_refine(model: Trainable, task: TaskLike, y: np.ndarray, seed: int) -> int:
@@ -236,6 +250,7 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
             raise ManifoldgenError(f"{out} holds a checkpoint of an interrupted run; pass --resume to continue "
                                    "it, or choose another directory")
         finished = not has_checkpoint and (out / "model.json").exists()
+        check_unused(out)
     elif resume:
         raise ManifoldgenError("resume needs the output directory of the interrupted run")
 
@@ -318,6 +333,20 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
         atomic_write_text(out / "training.json", json.dumps({**log.to_dict(), "identity": identity}, indent=1))
         (out / CHECKPOINT).unlink(missing_ok=True)
     return log
+
+
+def check_unused(out: Path, marks: tuple[str, ...] = ("model.json", CHECKPOINT)) -> None:
+    """Refuse a folder ``out`` that holds files but none of ``marks`` (the entries of a model directory, finished or
+    being trained): they are not a run's to replace (training.json, loss.png ...). Temporary files a killed writer
+    left do not count."""
+    if not out.is_dir() or any((out / mark).exists() for mark in marks):
+        return
+    leftovers = tuple(f".{name}." for name in OUTPUT_FILES)  # the start of a killed writer's temporary file
+    found = sorted(entry.name for entry in out.iterdir()
+                   if not (entry.name.startswith(leftovers) and entry.name.endswith(".tmp")))
+    if found:
+        raise ManifoldgenError(f"{out} holds {listed(found, ', ')} but no {' nor '.join(marks)}, so it is not a model "
+                               "directory; train into a new or empty folder (-o)")
 
 
 def _check_finished(out: Path, identity: dict) -> None:

@@ -52,13 +52,14 @@ from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.cluster import Cluster, connect
 from manifoldgen.data import MAX_ROWS
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text, check_name, locks_output
+from manifoldgen.io import atomic_write_text, check_name, check_own_folder, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
 
 RUNS_FILE = "runs.jsonl"
 CONFIG_FILE = "config.json"
 PROBLEM_FILE = "problem.json"  # the path meta every run's path shares: an outside checker rechecks each from it
+BENCH_MARKERS = (CONFIG_FILE, RUNS_FILE)  # a folder holding one of them is a benchmark's
 OUTPUT_FILES = (RUNS_FILE, CONFIG_FILE, PROBLEM_FILE, "results.md", "time.png", "length.png")
 PAPER_LIMITS = {"wall": {"runs": 1000, "time_limit": 200.0}, "maze": {"runs": 100, "time_limit": 200.0}}
 OTHER_LIMITS = {"runs": 20, "time_limit": 30.0}  # any other task's scene
@@ -209,25 +210,35 @@ def problem_meta(experiment: Experiment) -> dict:
     return {**query_meta(task, scene, scene.condition), "validation": {"resolution": ValidationSettings.resolution}}
 
 
+def method_space(experiment: Experiment, sampler: str | None):
+    """The space a method with ``sampler`` plans in, whose dense check judges its paths: limits and collisions
+    only (``blind``), the feet without the centre of mass (``feet-only``), else the task's constraint."""
+    from manifoldgen.space import ConstrainedSpace
+
+    task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
+    if sampler == BLIND:
+        from manifoldgen.stability import blind_space
+        return blind_space(task.robot, scene.checker(task.robot))
+    if sampler == FEET_ONLY:
+        from manifoldgen.stability import feet_only_space
+        return feet_only_space(task.constraint, scene.condition, scene.checker(task.robot))
+    return ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
+
+
 def build(experiment: Experiment, method: Method, seed: int):
     """(planner, scene, space) for one run, built from scratch (the scene's solved query is reused)."""
-    from manifoldgen.space import ConstrainedSpace
     from manifoldgen.specs import make_sampler
 
     task, scene = _scene(experiment.task, experiment.robot, experiment.scene)
+    if method.sampler == BLIND and (method.is_ompl or method.local != "direct"):
+        raise ManifoldgenError(f"method '{method.spec}': the blind baseline has no constraint to walk on; "
+                               "give one of our planners with straight segments, e.g. rrtconnect:direct@blind")
+    space = method_space(experiment, method.sampler)
     if method.sampler == BLIND:  # the balance-blind baseline: uniform samples, limits and collisions only
-        from manifoldgen.stability import blind_space
-        if method.is_ompl or method.local != "direct":
-            raise ManifoldgenError(f"method '{method.spec}': the blind baseline has no constraint to walk on; "
-                                   "give one of our planners with straight segments, e.g. rrtconnect:direct@blind")
-        space = blind_space(task.robot, scene.checker(task.robot))
         sampler = make_sampler("uniform", space, seed)
     elif method.sampler == FEET_ONLY:  # blind to the centre of mass only: feet kept, uniform seeds projected
-        from manifoldgen.stability import feet_only_space
-        space = feet_only_space(task.constraint, scene.condition, scene.checker(task.robot))
         sampler = make_sampler("project", space, seed)
     else:
-        space = ConstrainedSpace(task.constraint, scene.condition, scene.checker(task.robot))
         sampler = None if method.sampler is None else make_sampler(method.sampler, space, seed)
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
@@ -421,6 +432,28 @@ def record_problem(record) -> str:
     return ""
 
 
+def recheck_records(experiment: Experiment, records: list[dict], runs_path: Path) -> None:
+    """Refuse a kept record whose path the dense check of its method's space (the check a fresh run gives its
+    path) judges otherwise than the record's ``valid`` says: an edited or damaged record."""
+    spaces = {}
+    for record in records:
+        if "path" not in record:
+            continue
+        sampler = Method.parse(record["spec"]).sampler
+        kind = sampler if sampler in (BLIND, FEET_ONLY) else None
+        space = spaces[kind] if kind in spaces else spaces.setdefault(kind, method_space(experiment, sampler))
+        try:
+            report = space.validate_path(np.asarray(record["path"], dtype=float))
+        except (TypeError, ValueError):
+            raise ManifoldgenError(f"{runs_path}: run {record['run']} of '{record['method']}' has a path that is not "
+                                   "a list of configurations; remove that line or rerun into another folder") from None
+        if report.valid != record["valid"]:
+            found = "valid" if report.valid else f"invalid ({report.reason})"
+            raise ManifoldgenError(f"{runs_path}: run {record['run']} of '{record['method']}' is recorded "
+                                   f"{'valid' if record['valid'] else 'invalid'}, but its path rechecks {found}: "
+                                   "the record was edited; remove that line to rerun it, or use another folder")
+
+
 def drop_truncated_line(path: Path) -> None:
     """Cut an unfinished last line (a run interrupted while being written) before appending."""
     if path.is_file():
@@ -552,6 +585,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     if baseline is not None and baseline not in labels:
         raise ManifoldgenError(f"--baseline '{baseline}' is not one of the method labels {labels}")
     out_dir = Path(out_dir)
+    check_own_folder(out_dir, BENCH_MARKERS)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
     records = read_records(runs_path)
@@ -561,6 +595,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
         if match is not None and match.spec != record.get("spec"):
             raise ManifoldgenError(f"{runs_path} has runs of '{match.label}' made with '{record['spec']}', not "
                                    f"'{match.spec}'; give that method another label or use another folder")
+    recheck_records(experiment, records, runs_path)
     atomic_write_text(out_dir / CONFIG_FILE, json.dumps(config, indent=1))
     atomic_write_text(out_dir / PROBLEM_FILE, json.dumps(problem_meta(experiment), indent=1))
     drop_truncated_line(runs_path)

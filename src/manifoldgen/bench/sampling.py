@@ -21,17 +21,18 @@ import torch
 
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.io import atomic_write_text, locks_output
+from manifoldgen.io import atomic_write_text, check_own_folder, locks_output
 from manifoldgen.metrics import accuracy, coverage_metrics
 from manifoldgen.models import ConditionalSampler, load_model
 from manifoldgen.progress import progress_bar
-from manifoldgen.provenance import check_made_for
+from manifoldgen.provenance import check_model_for
 from manifoldgen.runtime import check_seed, set_threads
 from manifoldgen.tasks import Task, task_from_meta
 
 COUNTS = (100, 1_000, 10_000, 100_000)
 MIN_ROWS = 20  # samples and reference rows per condition: the k-NN metrics need more than k (5) of each
-OUTPUT_FILES = ("results.json", "table.md", "fig2_samples.png", "residuals.png", "coverage.png")
+RESULTS_FILE = "results.json"  # written first: a folder holding it is a sampling benchmark's
+OUTPUT_FILES = (RESULTS_FILE, "table.md", "fig2_samples.png", "residuals.png", "coverage.png")
 
 
 def time_sampling(model: ConditionalSampler, y: np.ndarray, counts: tuple[int, ...] = COUNTS, repeats: int = 7,
@@ -121,11 +122,12 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     if len({Path(d).resolve() for d in model_dirs}) < len(model_dirs):
         raise ManifoldgenError(f"a model directory is given twice in {[str(d) for d in model_dirs]}; give each once")
     out = Path(out)
+    check_own_folder(out, (RESULTS_FILE,))
     models = {str(d): load_model(d) for d in model_dirs}
     first = next(iter(models.values()))
     task = task_from_meta(first.meta, task=task, trust_code=trust_code, what=f"model {next(iter(models))}")
     for path, model in models.items():
-        check_made_for(model.meta, task.constraint, f"model {path}")
+        check_model_for(model, task.constraint, f"model {path}")
     out.mkdir(parents=True, exist_ok=True)
     k = task.condition.k
     if k == 0:
@@ -183,7 +185,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
             valid_rows[name] = np.concatenate(valid)
             violations[name] = np.concatenate(viol)
 
-    atomic_write_text(out / "results.json", json.dumps(results, indent=1))
+    atomic_write_text(out / RESULTS_FILE, json.dumps(results, indent=1))
     atomic_write_text(out / "table.md", markdown_table(results))
     from manifoldgen.viz.samples import plot_coverage, plot_end_effector, plot_residuals
     frame = task.constraint.spec().get("frame")

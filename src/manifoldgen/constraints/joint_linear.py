@@ -11,6 +11,8 @@ from manifoldgen.constraints.base import CONSTRAINTS, Condition, Constraint, as_
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.robot import Robot
 
+MIN_ROW_NORM = 1e-9  # a coefficient row shorter than this cannot move its residual
+
 
 @CONSTRAINTS.register("joint_linear")
 class JointLinearConstraint(Constraint):
@@ -18,9 +20,11 @@ class JointLinearConstraint(Constraint):
 
     def __init__(self, robot: Robot, coefficients, values, tolerance: float = 0.01):
         A = np.atleast_2d(np.asarray(coefficients, dtype=float))
-        if A.ndim != 2 or A.shape[1] != robot.n or not np.all(np.isfinite(A)) or np.any(np.all(A == 0, axis=1)):
+        if A.ndim != 2 or A.shape[1] != robot.n or not np.all(np.isfinite(A)) \
+                or np.any(np.linalg.norm(A, axis=1) < MIN_ROW_NORM):
             raise ManifoldgenError(f"joint_linear coefficients must be rows of {robot.n} numbers (one per joint "
-                                   f"of {', '.join(robot.joints)}), none all zero; got shape {A.shape}")
+                                   f"of {', '.join(robot.joints)}), none all zero (a norm under {MIN_ROW_NORM:g}); "
+                                   f"got shape {A.shape}")
         self.robot, self.coefficients = robot, A
         self.condition = Condition(tuple(f"joint_linear{i}" for i in range(len(A))), ("",) * len(A),
                                    np.asarray(values, float))

@@ -64,13 +64,14 @@ def open_model(path: str | Path):
 
 
 def pretrained_model_dir(name: str = "panda-pose-cvae") -> Path:
-    """Directory of a model shipped with the package (``load_model(pretrained_model_dir())``)."""
+    """Directory of a model shipped with the package (``load_model(pretrained_model_dir())``): ``name`` is the plain
+    name of one (a path is refused)."""
     root = Path(__file__).resolve().parent.parent / "data" / "pretrained"
-    path = root / name
-    if not (path / "model.json").is_file():
-        shipped = sorted(p.name for p in root.glob("*") if (p / "model.json").is_file()) if root.is_dir() else []
-        raise ManifoldgenError(f"no pretrained model '{name}'; shipped: {', '.join(shipped) or 'none'}")
-    return path
+    shipped = sorted(p.name for p in root.glob("*") if (p / "model.json").is_file()) if root.is_dir() else []
+    if name not in shipped:
+        raise ManifoldgenError(f"no pretrained model '{name}' (a shipped model's plain name, not a path); shipped: "
+                               f"{', '.join(shipped) or 'none'}")
+    return root / name
 
 
 __all__ = ["CGAN", "CVAE", "MODELS", "WGANGP", "ConditionalFlow", "ConditionalFlowMatching", "ConditionalSampler",

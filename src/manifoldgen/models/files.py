@@ -61,8 +61,48 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
         arrays = safetensors.numpy.load(blob)
     except Exception as exc:  # safetensors raises its own error types for damaged files
         raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} is not a readable safetensors file ({exc})") from exc
+    broken = next((name for name, array in arrays.items() if not np.isfinite(array).all()), None)
+    if broken is not None:
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE}: tensor '{broken}' holds NaN or infinite values (its samples "
+                               "would be NaN); the file was edited or is damaged: restore or retrain the model")
+    _check_decoder_fits_weights(path, doc, arrays)
     _check_config_fits_weights(path, doc, arrays)
     return doc, arrays
+
+
+def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -> str | None:
+    """How the sampling network's weights differ from what ``decoder`` (a validated model.json entry) says: a named
+    weight missing or of the wrong shape, a weight it does not name, widths that do not chain from its inputs
+    (noise and condition; state, condition and time for a velocity field) to ``d`` outputs; None where they fit."""
+    net, layers = decoder["net"], decoder["layers"]
+    named = [f"{net}.{2 * i}.{part}" for i in range(layers) for part in ("weight", "bias")]
+    missing = next((name for name in named if name not in weights), None)
+    if missing is not None:
+        return f"the weights lack '{missing}', which its {layers} layer(s) name"
+    extra = next((name for name in sorted(weights) if name.startswith(f"{net}.") and name not in named), None)
+    if extra is not None:
+        return f"the weights hold '{extra}' besides the {layers} layer(s) it names"
+    if decoder["steps"] and decoder["noise"] != dims["d"]:
+        return f"a velocity field's noise is a state of {dims['d']} values, not {decoder['noise']}"
+    width = dims["d"] + dims["k"] + 1 if decoder["steps"] else decoder["noise"] + dims["k"]
+    for i in range(layers):
+        weight, bias = weights[f"{net}.{2 * i}.weight"], weights[f"{net}.{2 * i}.bias"]
+        outputs = dims["d"] if i == layers - 1 else (weight.shape[0] if weight.ndim == 2 else -1)
+        if weight.shape != (outputs, width) or bias.shape != (outputs,):
+            return (f"'{net}.{2 * i}' has weight {list(weight.shape)} and bias {list(bias.shape)}, where "
+                    f"{[outputs, width]} and {[outputs]} fit")
+        width = outputs
+    return None
+
+
+def _check_decoder_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
+    """Refuse a ``decoder`` entry that does not describe its weights (:func:`_decoder_misfit`), so that every
+    command (torch or the compiled core) refuses the model alike."""
+    misfit = _decoder_misfit(doc["decoder"], doc["dims"], weights) if doc.get("decoder") else None
+    if misfit is not None:
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE}: its 'decoder' entry does not fit its weights ({misfit}); the "
+                               "files come from different models or were edited (the checksum is not a signature): "
+                               "restore or retrain the model")
 
 
 def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
@@ -72,9 +112,7 @@ def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndar
     decoder, config = doc.get("decoder"), doc["config"]
     if not decoder:
         return
-    shapes = [weights.get(f"{decoder['net']}.{2 * i}.weight") for i in range(decoder["layers"])]
-    if any(w is None or w.ndim != 2 for w in shapes):
-        return  # core_decoder names the missing weight when the network is built
+    shapes = [weights[f"{decoder['net']}.{2 * i}.weight"] for i in range(decoder["layers"])]
     claims = {"hidden": (config.get("hidden"), [int(w.shape[0]) for w in shapes[:-1]])}
     if not decoder["steps"]:  # a sampling network fed noise and the condition
         claims["latent"] = (config.get("latent"), int(shapes[0].shape[1]) - doc["dims"]["k"])
@@ -98,18 +136,17 @@ def _validate_doc(path: Path, doc: object) -> None:
     if doc.get("sha256") != document_checksum(doc):
         raise bad("its contents do not match its checksum 'sha256' (a normalisation, range, architecture or "
                   "other field was changed)")
-    unknown = next((key for key in doc if key not in DOC_KEYS), None)
-    if unknown is not None:
-        close = difflib.get_close_matches(str(unknown), DOC_KEYS, n=1)
-        raise bad(f"unknown key '{unknown}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
+    _refuse_unknown_keys(doc, DOC_KEYS, "", bad)
     for key, kind in (("model", str), ("config", dict), ("dims", dict),
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
             raise bad(f"field '{key}' is missing or not a {kind.__name__}")
+    _refuse_unknown_keys(doc["dims"], ("d", "k"), " in 'dims'", bad)
     d, k = doc["dims"].get("d"), doc["dims"].get("k")
     if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):
         raise bad("dims must hold positive integers d and k")
     sizes = {"q_mean": d, "q_std": d, "y_mean": k, "y_std": k, "y_low": k, "y_high": k, "lower": d, "upper": d}
+    _refuse_unknown_keys(doc["normalisation"], tuple(sizes), " in 'normalisation'", bad)
     for key, size in sizes.items():
         values = doc["normalisation"].get(key)
         if not (isinstance(values, list) and len(values) == size
@@ -124,7 +161,10 @@ def _validate_doc(path: Path, doc: object) -> None:
     if not isinstance(doc["meta"].get("robot"), str) or not isinstance(joints, list) or len(joints) != d:
         raise bad(f"meta must name the robot and its {d} joints")
     check_meta(doc["meta"], k, f"{path}/{CONFIG_FILE}")
+    _check_trained_range(norm, doc["meta"], bad)
     decoder = doc.get("decoder")
+    if isinstance(decoder, dict):
+        _refuse_unknown_keys(decoder, ("net", "law", *DECODER_RANGES), " in 'decoder'", bad)
     if decoder is not None and not (
             isinstance(decoder, dict) and isinstance(decoder.get("net"), str) and decoder.get("law") in LAWS
             and all(isinstance(decoder.get(key), int) and not isinstance(decoder.get(key), bool)
@@ -132,6 +172,43 @@ def _validate_doc(path: Path, doc: object) -> None:
         raise bad("'decoder' must name the sampling network 'net', its noise 'law' (normal or uniform), "
                   "'noise' width, integration 'steps' and number of Linear 'layers' (whole numbers in "
                   + ", ".join(f"{key} [{low}, {high}]" for key, (low, high) in DECODER_RANGES.items()) + ")")
+
+
+def _refuse_unknown_keys(entry: dict, keys: tuple[str, ...], where: str, bad) -> None:
+    """Refuse a key of ``entry`` (the document, or its object that ``where`` names: " in 'dims'") that is not one
+    of ``keys``, naming the nearest known one."""
+    unknown = next((key for key in entry if key not in keys), None)
+    if unknown is not None:
+        close = difflib.get_close_matches(str(unknown), keys, n=1)
+        raise bad(f"unknown key '{unknown}'{where}" + (f" (did you mean '{close[0]}'?)" if close else ""))
+
+
+def _check_trained_range(norm: dict, meta: dict, bad) -> None:
+    """Refuse a trained condition range (``y_low``, ``y_high``: the training rows' extremes) reaching beyond every
+    condition value the data had: its task's values (meta ``condition``) and, where the dataset recorded them, the
+    values it was collected at (the keys of meta ``coverage.modes``). A wider range would let ``--strict`` pass
+    conditions the model never saw."""
+    values = list(meta.get("condition", {}).get("values", []))
+    modes = meta.get("coverage", {}).get("modes") if isinstance(meta.get("coverage"), dict) else None
+    for key in modes if isinstance(modes, dict) else ():
+        try:
+            row = json.loads(key)
+        except ValueError:
+            continue
+        if isinstance(row, list) and len(row) == len(norm["y_low"]) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in row):
+            values.append(row)
+    if not values:
+        return
+    low, high = np.min(values, axis=0), np.max(values, axis=0)
+    slack = 1e-6 * (1.0 + np.abs(low) + np.abs(high))  # the rows' values as float32 round them
+    beyond = np.flatnonzero((np.asarray(norm["y_low"]) < low - slack) | (np.asarray(norm["y_high"]) > high + slack))
+    if len(beyond):
+        i = int(beyond[0])
+        name = (meta.get("condition", {}).get("names") or [f"y{j}" for j in range(len(low))])[i]
+        raise bad(f"normalisation y_low/y_high give {name} the range [{norm['y_low'][i]:g}, "
+                  f"{norm['y_high'][i]:g}], beyond the values its data had ([{low[i]:g}, {high[i]:g}] by meta "
+                  "'condition' and 'coverage')")
 
 
 def check_mix_refine(path: str | Path, doc: dict) -> tuple[int | None, float | None]:
@@ -162,12 +239,8 @@ def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: di
     if core is None:
         return None
     names = [f"{decoder['net']}.{2 * i}" for i in range(decoder["layers"])]
-    try:
-        w = [np.ascontiguousarray(weights[f"{name}.weight"], dtype=np.float32) for name in names]
-        b = [np.ascontiguousarray(weights[f"{name}.bias"], dtype=np.float32) for name in names]
-    except KeyError as exc:
-        raise ManifoldgenError(f"the model's weights lack {exc.args[0]}, which its 'decoder' entry names; the "
-                               "files come from different models: retrain or restore them") from None
+    w = [np.ascontiguousarray(weights[f"{name}.weight"], dtype=np.float32) for name in names]
+    b = [np.ascontiguousarray(weights[f"{name}.bias"], dtype=np.float32) for name in names]
     try:
         return core.Decoder(w, b, d if decoder["steps"] else decoder["noise"], decoder["law"] == "uniform",
                             *(np.asarray(norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -29,13 +30,30 @@ def check_path_file(path_file: str | Path, settings: PhysicsSettings | None = No
     if not meta.get("floating_base"):
         raise ManifoldgenError(f"{path_file} is a path of {meta.get('robot', 'a robot')} with a fixed base; the "
                                "physics check needs a floating-base robot standing on its feet (a balance task's path)")
-    feet = list(feet) if feet else balance_feet(meta.get("constraint") or {})
+    balance = balance_feet(meta.get("constraint") or {})
+    feet = _given_feet(task.robot, list(feet), balance) if feet else balance
     if not feet:
         raise ManifoldgenError(f"{path_file}: its constraint ({(meta.get('constraint') or {}).get('type')}) names no "
                                "feet; give the foot frames (--feet), or check a balance task's path")
     result = check_path(task.robot, path, feet, settings, progress=progress)
     result.path_file = str(path_file)
     return result
+
+
+def _given_feet(robot: Robot, feet: list[str], balance: list[str]) -> list[str]:
+    """The ``--feet`` given, each a frame of ``robot`` given once; an unknown one is refused naming the frames
+    nearest to it, else the balance constraint's feet."""
+    names = [frame.name for frame in robot.model.frames]
+    for i, foot in enumerate(feet):
+        if foot in feet[:i]:
+            raise ManifoldgenError(f"foot frame '{foot}' is given twice; give each foot once")
+        if foot not in names:
+            close = difflib.get_close_matches(foot, names, n=3)
+            hint = (f"did you mean {', '.join(close)}?" if close else
+                    f"the balance constraint's feet are {', '.join(balance)}" if balance else
+                    f"`manifoldgen robots {robot.name}` lists its frames")
+            raise ManifoldgenError(f"unknown frame '{foot}' for robot {robot.name}, given as a foot; {hint}")
+    return feet
 
 
 def balance_feet(spec: dict) -> list[str]:

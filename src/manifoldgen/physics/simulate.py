@@ -23,6 +23,18 @@ _PEAK_SPEED = 1.875  # peak / mean speed of the quintic ease 10u^3 - 15u^4 + 6u^
 _PEAK_ACCELERATION = 10 / np.sqrt(3)  # peak acceleration of the quintic ease over distance D in time T, times T^2 / D
 
 
+def schedule(path: np.ndarray, s: PhysicsSettings) -> tuple[np.ndarray, float]:
+    """Waypoint stamps (K,) in s from the first, and the motion's duration (see the module doc): segment k lasts
+    long enough that its quintic ease keeps every joint within the peak speeds and accelerations."""
+    step = np.abs(np.diff(path, axis=0))
+    angle, shift = step[:, 3:].max(axis=1, initial=0.0), np.linalg.norm(step[:, :3], axis=1)
+    duration = np.maximum.reduce([_PEAK_SPEED * s.seconds_per_rad * angle, _PEAK_SPEED * s.seconds_per_m * shift,
+                                  np.sqrt(_PEAK_ACCELERATION * angle / s.max_acceleration_rad),
+                                  np.sqrt(_PEAK_ACCELERATION * shift / s.max_acceleration_m)])
+    stamps = np.concatenate([[0.0], np.cumsum(duration)])
+    return stamps, float(stamps[-1])
+
+
 class Simulation:
     """The MuJoCo model of ``robot`` on a ground plane, with servos and foot sites."""
 
@@ -297,16 +309,8 @@ class Simulation:
 
     # ------------------------------------------------------------------ run
     def schedule(self, path: np.ndarray) -> tuple[np.ndarray, float]:
-        """Waypoint stamps (K,) in s from the first, and the motion's duration (see the module doc): segment k lasts
-        long enough that its quintic ease keeps every joint within the peak speeds and accelerations."""
-        s = self.settings
-        step = np.abs(np.diff(path, axis=0))
-        angle, shift = step[:, 3:].max(axis=1, initial=0.0), np.linalg.norm(step[:, :3], axis=1)
-        duration = np.maximum.reduce([_PEAK_SPEED * s.seconds_per_rad * angle, _PEAK_SPEED * s.seconds_per_m * shift,
-                                      np.sqrt(_PEAK_ACCELERATION * angle / s.max_acceleration_rad),
-                                      np.sqrt(_PEAK_ACCELERATION * shift / s.max_acceleration_m)])
-        stamps = np.concatenate([[0.0], np.cumsum(duration)])
-        return stamps, float(stamps[-1])
+        """:func:`schedule` with this simulation's settings."""
+        return schedule(path, self.settings)
 
     def _plan_at(self, path: np.ndarray, stamps: np.ndarray, motion_s: float, t: float) -> np.ndarray:
         """The planned configuration (n,) at simulated time t: held, each segment eased from rest to rest, held."""

@@ -28,6 +28,7 @@ from manifoldgen.planning.smoothing import shortcut
 from manifoldgen.sampling import Sampler, cost_scale
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
+TIME_LIMITS = (1e-3, 86_400.0)  # s: a query's time limit (beyond a day, the search's clock arithmetic overflows)
 SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/benchmarks.md, "Shorter paths")
 # each numeric planner setting's range: a resolution finer than 1e-4 rad or a pool of millions of rows would
 # only exhaust memory
@@ -76,6 +77,13 @@ class PlannerSettings:
         for key in ("partial", "reuse"):
             if not isinstance(getattr(self, key), bool):
                 raise ManifoldgenError(f"planner setting {key} must be true or false, got {getattr(self, key)!r}")
+
+
+def check_time_limit(time_limit: float) -> None:
+    """Refuse a query's time limit outside :data:`TIME_LIMITS` (NaN included), in one line."""
+    low, high = TIME_LIMITS
+    if not low <= time_limit <= high:
+        raise ManifoldgenError(f"time limit must be from {low:g} to {high:g} seconds, got {time_limit!r}")
 
 
 class Tree:
@@ -161,8 +169,7 @@ class Planner(ABC):
     # ---------------------------------------------------------------- the contract
     def solve(self, start: np.ndarray, goal: np.ndarray, time_limit: float) -> PlanResult:
         """Plan from ``start (n,)`` to ``goal (n,)`` within ``time_limit`` seconds."""
-        if not np.isfinite(time_limit) or time_limit <= 0:
-            raise ManifoldgenError(f"time limit must be a positive number of seconds, got {time_limit}")
+        check_time_limit(time_limit)
         start, goal = (self._query_state(q, what) for q, what in ((start, "start"), (goal, "goal")))
         before = self.sampler.stats.to_dict()
         counts, projections = self.space.counts(), self.local.projections

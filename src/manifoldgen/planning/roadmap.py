@@ -31,6 +31,7 @@ FORMAT_VERSION = 1
 IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joints", "base_bounds": "base bounds",
             "constraint": "constraint", "tolerance": "tolerance", "condition": "condition", "scene_name": "scene",
             "scene_sha256": "scene objects (sha256)", "resolution": "check resolution"}
+SAVED_KEYS = {"format_version", "kind", "reach"}  # what Roadmap.save adds to its caller's meta
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance
 
 
@@ -108,7 +109,7 @@ class Roadmap:
              expect: dict | None = None) -> Roadmap:
         """The roadmap saved at ``path``, checked whole (one-line errors for another kind of file, another format,
         damaged arrays), with the dense check ``valid`` and ``reach`` of the planner that searches it; refused when
-        its meta differs from ``expect`` in any :data:`IDENTITY` key ``expect`` holds. Its edges count as unchecked
+        its meta is not ``expect`` (the meta this query saves) with :data:`SAVED_KEYS`. Its edges count as unchecked
         until a route takes them or :meth:`check_read` runs, its nodes until :meth:`check_read`."""
         meta, arrays = load_npz(path, ())
         if meta.get("kind") != "roadmap":
@@ -237,11 +238,14 @@ class Roadmap:
 
 
 def _check_identity(path: str | Path, meta: dict, expect: dict) -> None:
-    """Refuse a roadmap whose ``meta`` names another query space than ``expect`` (the :data:`IDENTITY` keys it holds),
-    naming both values of the first few differences."""
-    differences = [line for key in IDENTITY if key in expect
-                   for wanted in [json.loads(json.dumps(expect[key]))] if meta.get(key) != wanted
-                   for line in _differences(key, meta.get(key), wanted)]
+    """Refuse a roadmap whose ``meta`` is not the one this query writes (``expect``, less what :meth:`Roadmap.save`
+    adds): another query space (the :data:`IDENTITY` keys first), or copies of the task, condition or scene that
+    were edited, or keys of its own; naming the first few differences."""
+    wanted = json.loads(json.dumps(expect))
+    keys = [*(key for key in IDENTITY if key in wanted), *sorted(set(wanted) - set(IDENTITY))]
+    differences = [line for key in keys if meta.get(key) != wanted[key]
+                   for line in _differences(key, meta.get(key), wanted[key])]
+    differences += [f"key {key!r} of its own" for key in sorted(set(meta) - set(wanted) - SAVED_KEYS)]
     if differences:
         raise ManifoldgenError(f"{path} holds a roadmap for another query: {listed(differences)}; give this query "
                                f"another roadmap file (or delete {path} to start a new one)")
@@ -249,7 +253,7 @@ def _check_identity(path: str | Path, meta: dict, expect: dict) -> None:
 
 def _differences(key: str, made, wanted) -> list[str]:
     """``key``'s values in the file and in this query (of an object: one line per field that differs)."""
-    name = IDENTITY[key]
+    name = IDENTITY.get(key, key)
     if isinstance(made, dict) and isinstance(wanted, dict):
         return [f"{name} {field} {_show(made.get(field))} (the file) vs {_show(wanted.get(field))} (this query)"
                 for field in sorted({*made, *wanted}) if made.get(field) != wanted.get(field)]

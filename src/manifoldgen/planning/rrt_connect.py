@@ -22,6 +22,7 @@ from manifoldgen.planning.base import Planner, PlannerSettings, Tree
 
 
 EDGE_CHECKS = ("coarse", "dense")  # see RRTConnectSettings.edges
+MAX_EDGE_STRIDE = 10**6  # planning-resolution states between coarse checks (beyond, a motion is one check anyway)
 TARGET_BATCH = 32  # samples the core's search fetches per callback for its targets (the pool draws pool_batch)
 
 
@@ -67,10 +68,10 @@ class RRTConnectSettings(PlannerSettings):
     def edge_checks(self) -> tuple[int, bool]:
         """``edges`` as (stride K >= 1, dense), or a one-line error."""
         kind, _, stride = str(self.edges).partition(":")
-        if kind not in EDGE_CHECKS or not stride.isdigit() or int(stride) < 1:
-            raise ManifoldgenError(f"edges must be 'coarse:K' or 'dense:K' with K a whole number >= 1 (coarse:1: "
-                                   f"every motion state checked for collision at once), got {self.edges!r}; e.g. "
-                                   "edges='coarse:3'")
+        if kind not in EDGE_CHECKS or not stride.isdigit() or not 1 <= int(stride) <= MAX_EDGE_STRIDE:
+            raise ManifoldgenError(f"edges must be 'coarse:K' or 'dense:K' with K a whole number from 1 to "
+                                   f"{MAX_EDGE_STRIDE:,} (coarse:1: every motion state checked for collision at once), "
+                                   f"got {self.edges!r}; e.g. edges='coarse:3'")
         return int(stride), kind == "dense"
 
 

@@ -107,7 +107,9 @@ def resolve_robot(robot: str, srdf: str | os.PathLike | None = None) -> tuple[Pa
     else:
         catalogue = robot_files(robots_dir())
         if robot not in catalogue:
-            close = difflib.get_close_matches(robot, list(catalogue), n=3)
+            lower = {name.lower(): name for name in catalogue}  # a name in other letter case is the closest
+            close = [lower[robot.lower()]] if robot.lower() in lower else \
+                difflib.get_close_matches(robot, list(catalogue), n=3)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ManifoldgenError(f"unknown robot '{robot}'{hint}; give one of the {len(catalogue)} names "
                                    "`manifoldgen robots` lists, or the path of a .urdf")

@@ -218,8 +218,9 @@ class Robot:
         if not matches:
             names = [f.name for f in self.model.frames]
             close = difflib.get_close_matches(str(frame), names, n=3)
-            raise ManifoldgenError(f"unknown frame '{frame}' for robot {self.name}; "
-                                   f"did you mean {', '.join(close) or 'one of its links'}?")
+            hint = (f"did you mean {', '.join(close)}?" if close
+                    else f"`manifoldgen robots {self.name}` lists its frames")
+            raise ManifoldgenError(f"unknown frame '{frame}' for robot {self.name}; {hint}")
         bodies = [i for i in matches if self.model.frames[i].type == pin.FrameType.BODY]
         return (bodies or matches)[0]
 
@@ -543,10 +544,22 @@ def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None
 
 
 def _read_srdf(srdf: Path) -> ET.Element:
+    """The root of an SRDF file: a ``.srdf`` file whose root is ``<robot>`` holding SRDF elements, not a URDF's
+    links and joints."""
+    if srdf.suffix != ".srdf":
+        raise ManifoldgenError(f"SRDF {srdf} must be a .srdf file (an SRDF's XML), got a '{srdf.suffix}' file; "
+                               "give the robot's .srdf")
     try:
-        return ET.parse(srdf).getroot()
+        root = ET.parse(srdf).getroot()
     except ET.ParseError as exc:
         raise ManifoldgenError(f"cannot parse SRDF {srdf}: {exc}") from exc
+    urdf_tag = next((child.tag for child in root if child.tag in ("link", "joint")), None)
+    if root.tag != "robot" or urdf_tag is not None:
+        what = f"its root element is <{root.tag}>, not <robot>" if root.tag != "robot" else \
+            f"it has a top-level <{urdf_tag}>, as a URDF does"
+        raise ManifoldgenError(f"SRDF {srdf} is not an SRDF: {what}; give the robot's .srdf (groups, "
+                               "disable_collisions ...)")
+    return root
 
 
 def _check_srdf_names(root: ET.Element, srdf: Path, model: pin.Model, robot: str, mostly: bool) -> None:

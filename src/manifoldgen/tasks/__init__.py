@@ -156,9 +156,8 @@ def task_from_meta(meta: dict, robot_hint: str | None = None, *, task: Task | No
 def _finish(name: str, robot: Robot, constraint: Constraint, home, home_condition, notes: str,
             scenes: dict[str, Path]) -> Task:
     """A task with a home on the manifold: ``home`` projected, else the first of HOME_SEEDS uniform seeds that converges."""
-    grid = constraint.condition.grid
-    y = (grid[0] if home_condition is None
-         else constraint.condition.check(_numbers(home_condition, "home_condition"))[0])
+    condition = constraint.condition
+    y = condition.grid[0] if home_condition is None else _home_condition(condition, home_condition)
     seeds = (_numbers(home, "home")[None] if home is not None
              else robot.sample_uniform(HOME_SEEDS, np.random.default_rng(0)))
     if seeds.shape[1] != robot.n:
@@ -182,6 +181,15 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         raise ManifoldgenError(f"task '{name}': projecting {where} onto the constraint at condition {y.tolist()} "
                                "failed; give a home configuration closer to the manifold, or check the constraint")
     return Task(name, robot, constraint, res.q[int(np.argmax(res.converged))], y, notes, scenes)
+
+
+def _home_condition(condition: Condition, value) -> np.ndarray:
+    """The task's ``home_condition``: one of the condition's values or between them."""
+    y = _numbers(value, "home_condition")
+    if y.shape == (condition.k,) and np.any((y < condition.low - 1e-9) | (y > condition.high + 1e-9)):
+        raise ManifoldgenError(f"home_condition {y.tolist()} is outside the task's condition values "
+                               f"({condition.describe()}); give a home_condition inside them")
+    return condition.check(y)[0]
 
 
 def _numbers(value, what: str) -> np.ndarray:
@@ -219,7 +227,9 @@ def load_task_file(path: str | Path) -> Task:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ManifoldgenError(f"{path}: not valid TOML ({exc}); fix the file") from exc
+        hint = "; a .json file is not a task file: give a .toml task file (a scene goes to --scene)" \
+            if path.suffix.lower() == ".json" else "; fix the file"
+        raise ManifoldgenError(f"{path}: not valid TOML ({exc}){hint}") from exc
 
     def where(key: str) -> str:
         line = _line(text, key)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.io import atomic_write_text, check_output_path
+from manifoldgen.io import GENERATOR_MARK, atomic_write_text, check_output_path
 from manifoldgen.viewer.scene import FPS, build_scene
 from manifoldgen.viewer.server import start_server, stop_server
 from manifoldgen.viewer.source import read_source
@@ -45,6 +45,7 @@ def export_html(file: str | Path, out: str | Path, task: str | None = None, *, t
     finally:
         stop_server(server)
     page = page.replace("<title>Viser</title>", f"<title>{html.escape(source.title)}</title>", 1)
+    page = page.replace("<head>", f"<head>\n    {GENERATOR_MARK}", 1)  # what lets a later export replace it
     atomic_write_text(out, page)
     out.chmod(0o644)  # a page to share (the atomic write leaves it private)
     return {"bytes": len(page.encode()), "frames": len(frames), "seconds": len(frames) * pause, "note": viewer.note}
