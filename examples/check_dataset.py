@@ -116,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--srdf", help="the robot's SRDF (disabled collision pairs)")
     parser.add_argument("--show", type=int, default=5, help="invalid rows to explain per file (default 5)")
     args = parser.parse_args(argv)
+    if args.show < 0:
+        parser.error(f"--show must be 0 or more, got {args.show}")
     return print_reports(check(path, args.urdf, args.srdf, args.show) for path in args.files)
 
 

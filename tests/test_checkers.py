@@ -574,3 +574,9 @@ def test_roadmap_format_identity_arrays_and_edges_are_checked(wall, tmp_path):
     for arrays, edit, named in cases:
         report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", edit, **arrays))
         assert report["status"] == 3 and named in report["line"], (named, report["line"])
+
+
+def test_the_dataset_checker_refuses_a_negative_show(folder, datasets):
+    path, _ = datasets["pose"]
+    result = run(folder, "check_dataset.py", path, "--show", "-1")
+    assert result.returncode == 2 and "--show must be 0 or more, got -1" in result.stderr, result.stderr

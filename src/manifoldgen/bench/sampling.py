@@ -135,6 +135,11 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     default_seen, default_unseen = (default_conditions(task.condition.values) if k == 1
                                     else default_grid_conditions(task.condition.grid))
     seen, unseen = _rows(seen or default_seen, k), _rows(unseen or default_unseen, k)
+    trained = {tuple(np.round(row, 9)) for row in task.condition.grid}
+    known = next((y for y in unseen if tuple(np.round(y, 9)) in trained), None)
+    if known is not None:
+        raise ManifoldgenError(f"--unseen {list(known)} is a training value of the task; give conditions between or "
+                               "beyond its values (or list it under --seen)")
     conditions = [*seen, *unseen]
     check_seed(seed + 1000 + len(conditions), "--seed (+ 1000 + i seeds the reference set of condition i)")
     robot, constraint = task.robot, task.constraint
