@@ -177,3 +177,29 @@ def test_a_file_where_collect_keeps_its_batches_is_named(panda_task, tmp_path):
                                                r"unfinished run \(a folder\); move or delete it"):
         collect(panda_task, 5, 0, tmp_path / "d.npz", conditions=[[0.4]], progress=False)
     assert (tmp_path / "d.npz.partial").read_text() == "mine" and not (tmp_path / "d.npz").exists()
+
+
+def test_a_sample_file_and_a_dataset_never_replace_each_other(inputs, tmp_path):
+    """Both are .npz files of rows: samples never replace a collected dataset, and Dataset.save writes .npz only."""
+    model = load_model(inputs / "model")
+    constraint = task_from_meta(model.meta).constraint
+    shutil.copy(inputs / "data.npz", tmp_path / "data.npz")
+    before = (tmp_path / "data.npz").read_bytes()
+    with pytest.raises(ManifoldgenError, match="holds a dataset file, which this samples file would replace"):
+        sample_to_file(model, constraint, np.array([0.4]), 5, tmp_path / "data.npz")
+    assert (tmp_path / "data.npz").read_bytes() == before
+    with pytest.raises(ManifoldgenError, match=r"must end in .npz, got .*d.txt"):
+        Dataset.load(inputs / "data.npz").save(tmp_path / "d.txt")
+    sample_to_file(model, constraint, np.array([0.4]), 5, tmp_path / "s.npz")
+    sample_to_file(model, constraint, np.array([0.4]), 5, tmp_path / "s.npz")  # samples over samples: as before
+
+
+def test_a_sweep_never_writes_into_a_folder_of_someone_elses_files(inputs, tmp_path):
+    from manifoldgen.model_sweep import sweep
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "training.json").write_text("mine")
+    with pytest.raises(ManifoldgenError, match="mine holds training.json but no model.json nor sweep.json nor "
+                                               "candidates"):
+        sweep(Dataset.load(inputs / "data.npz"), tmp_path / "mine", models=["cvae"], latents=[2], seeds=[0],
+              epochs=1, progress=False)
+    assert [p.name for p in (tmp_path / "mine").iterdir()] == ["training.json"]

@@ -423,7 +423,7 @@ def sample(model_dir: Path = typer.Argument(..., help="Model directory made by `
         raise ManifoldgenError("--robot picks the robot of a built-in --task; give --task too (the model's own "
                                "task and robot are used without both)")
     net = load_model(model_dir)
-    check_output_path(output, [model_dir, _file(task)], suffixes=(".npz",), kind="dataset")
+    check_output_path(output, [model_dir, _file(task)], suffixes=(".npz",), kind="samples")
     task_obj = task_from_meta(net.meta, task=made_for(task, robot), trust_code=trust_code, what=f"model {model_dir}")
     y = net.check_condition([condition], strict=strict)[0]
     info = sample_to_file(net, task_obj.constraint, y, n, output, seed=seed, refine=refine, source=str(model_dir))

@@ -42,7 +42,8 @@ class Dataset:
         """Write the file (atomic); rows with NaN or infinite values are refused (no reader would take them)."""
         if not (np.isfinite(self.q).all() and np.isfinite(self.y).all()):
             raise ManifoldgenError(f"dataset rows hold NaN or infinite values; {path} not written")
-        save_npz(check_output_path(path, kind="dataset"), self.meta, q=self.q, y=self.y)
+        kind = "samples" if "generated_by" in self.meta else "dataset"
+        save_npz(check_output_path(path, suffixes=(".npz",), kind=kind), self.meta, q=self.q, y=self.y)
 
     @classmethod
     @file_reader

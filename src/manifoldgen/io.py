@@ -121,7 +121,8 @@ NPZ_KINDS = ("path", "roadmap")  # the meta "kind" of an .npz that is not a data
 
 def npz_kind(path: Path) -> str | None:
     """What an existing .npz holds when manifoldgen wrote it (its JSON ``meta`` has a ``format_version``): the
-    meta's ``kind`` (``path``, ``roadmap``), else ``dataset`` (a dataset or a sample file); None otherwise."""
+    meta's ``kind`` (``path``, ``roadmap``), else ``samples`` (what ``sample`` writes) or ``dataset``; None
+    otherwise."""
     import numpy as np
     try:
         with np.load(path, allow_pickle=False) as f:
@@ -130,7 +131,7 @@ def npz_kind(path: Path) -> str | None:
         return None
     if not isinstance(meta, dict) or "format_version" not in meta:
         return None
-    return meta["kind"] if meta.get("kind") in NPZ_KINDS else "dataset"
+    return meta["kind"] if meta.get("kind") in NPZ_KINDS else "samples" if "generated_by" in meta else "dataset"
 
 
 def written_by_manifoldgen(path: Path) -> bool:

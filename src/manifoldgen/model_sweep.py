@@ -33,7 +33,7 @@ from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed, set_threads
 from manifoldgen.selection import RECALL_SLACK, score
 from manifoldgen.tasks import Task, code_types
-from manifoldgen.training import DIMENSION_ROWS, VALIDATION, manifold_dimension, split
+from manifoldgen.training import DIMENSION_ROWS, VALIDATION, check_unused, manifold_dimension, split
 
 SWEEP_FILE = "sweep.json"
 MODEL_FILES = ("model.safetensors", "model.json", "training.json", "loss.png")  # what a candidate's folder holds
@@ -153,6 +153,7 @@ def sweep(dataset: Dataset, out: str | Path, *, models: list[str], latents: list
     jobs = candidates(models, latents, seeds)
     _warn_small_latents(task, dataset, sorted({latent for _, latent, _ in jobs if latent is not None}))
     settings = _settings(dataset, jobs, epochs)
+    check_unused(out, ("model.json", SWEEP_FILE, "candidates"))
     done = _finished(out, settings)
     (out / "candidates").mkdir(parents=True, exist_ok=True)
     rows = list(done.values())

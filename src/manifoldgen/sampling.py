@@ -315,7 +315,7 @@ def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out
     seed = check_seed(seed)
     if refine < 0:
         raise ManifoldgenError(f"--refine must be >= 0 projection iterations, got {refine}")
-    out = check_output_path(out, kind="dataset")
+    out = check_output_path(out, kind="samples")
     check_model_for(model, constraint, f"model {source}" if source else "the model")
     y = np.asarray(y, float).reshape(constraint.condition.k)
     raw, refined = generate(model, constraint, y, count, torch.Generator().manual_seed(seed), refine)

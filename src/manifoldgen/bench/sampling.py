@@ -80,6 +80,13 @@ def default_grid_conditions(grid: np.ndarray, count: int = 4) -> tuple[list[tupl
     return seen, unseen + [tuple(round(float(m), 6) for m in mids)]
 
 
+def _trained_values(meta: dict) -> list[list[float]]:
+    """The condition values a model's data was collected at (the keys of its meta's ``coverage.modes``, as
+    :func:`manifoldgen.data.collect` records them; none where it recorded none)."""
+    modes = meta.get("coverage", {}).get("modes", {})
+    return [json.loads(key) for key in modes]
+
+
 def _rows(values, k: int) -> list[tuple]:
     """Conditions as k-tuples (a bare number is one value of a k = 1 condition)."""
     out = []
@@ -135,11 +142,11 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     default_seen, default_unseen = (default_conditions(task.condition.values) if k == 1
                                     else default_grid_conditions(task.condition.grid))
     seen, unseen = _rows(seen or default_seen, k), _rows(unseen or default_unseen, k)
-    trained = {tuple(np.round(row, 9)) for row in task.condition.grid}
+    trained = {tuple(np.round(row, 9)) for model in models.values() for row in _trained_values(model.meta)}
     known = next((y for y in unseen if tuple(np.round(y, 9)) in trained), None)
     if known is not None:
-        raise ManifoldgenError(f"--unseen {list(known)} is a training value of the task; give conditions between or "
-                               "beyond its values (or list it under --seen)")
+        raise ManifoldgenError(f"--unseen {list(known)} is a condition a model was trained at; give conditions between "
+                               "or beyond the training ones (or list it under --seen)")
     conditions = [*seen, *unseen]
     check_seed(seed + 1000 + len(conditions), "--seed (+ 1000 + i seeds the reference set of condition i)")
     robot, constraint = task.robot, task.constraint
