@@ -151,10 +151,10 @@ def sweep(dataset: Dataset, out: str | Path, *, models: list[str], latents: list
     task = dataset_task(dataset)  # a dataset no task can be rebuilt from fails here, before any training
     out = Path(out)
     jobs = candidates(models, latents, seeds)
-    _warn_small_latents(task, dataset, sorted({latent for _, latent, _ in jobs if latent is not None}))
     settings = _settings(dataset, jobs, epochs)
     check_unused(out, ("model.json", SWEEP_FILE, "candidates"))
-    done = _finished(out, settings)
+    done = _finished(out, settings)  # a refusal comes before any warning: one line
+    _warn_small_latents(task, dataset, sorted({latent for _, latent, _ in jobs if latent is not None}))
     (out / "candidates").mkdir(parents=True, exist_ok=True)
     rows = list(done.values())
     todo = [job for job in jobs if candidate_name(*job) not in done]
