@@ -128,6 +128,8 @@ CASES = [
     cli("bench-into-a-users-folder", "bench plan pose --scene wall --time 1 -m rrtconnect@project -o {I}/userdir",
         "-o {I}/userdir holds files this command did not write (notes.txt, results.md; no config.json or runs.jsonl)"),
     cli("bench-sampling-into-a-users-folder", "bench sampling {I}/model -o {I}/userdir", "no results.json"),
+    cli("bench-label-too-long", f"bench plan pose --scene wall -m {'a' * 300}=rrtconnect@project -o {{O}}/b",
+        "is 300 characters long; a name becomes a file name: at most 100"),
     cli("bench-sampling-unseen-is-trained", "bench sampling {I}/model --unseen 0.5 -o {O}/b",
         "--unseen [0.5] is a condition a model was trained at"),
     cli("bench-resume-edited-path", "bench plan pose --scene wall --time 2 --runs 2 -m rrtconnect@project --resume "

@@ -243,12 +243,16 @@ def _check_writable(folder: Path, path: Path) -> None:
     os.unlink(probe)
 
 
-NAME = re.compile(r"[A-Za-z0-9_@+=:,-][A-Za-z0-9_.@+=:,-]{0,99}")
+NAME_LENGTH = 100  # characters a user's name that becomes a file name may have
+NAME = re.compile(rf"[A-Za-z0-9_@+=:,-][A-Za-z0-9_.@+=:,-]{{0,{NAME_LENGTH - 1}}}")
 
 
 def check_name(name: str, what: str, fix: str = "rename it") -> str:
     """Refuse a user's string that becomes part of a file name unless it is a plain name: letters, digits and
     ``_-.@+=:,``, at most 100 characters, no leading ``.`` and no ``..`` (so never a path)."""
+    if len(name) > NAME_LENGTH:
+        raise ManifoldgenError(f"{what} '{name[:40]}...' is {len(name)} characters long; a name becomes a file name: "
+                               f"at most {NAME_LENGTH}; {fix}")
     if not (NAME.fullmatch(name) and ".." not in name):
         raise ManifoldgenError(f"{what} '{name}' is not a plain name (letters, digits and _ - . @ + = : , only; no "
                                f"'/', no '..', no leading '.'): it becomes a file name; {fix}")
