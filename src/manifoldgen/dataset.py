@@ -4,7 +4,6 @@ and task they were made for (see :meth:`manifoldgen.tasks.Task.meta`; :mod:`mani
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 from dataclasses import dataclass
@@ -12,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, file_reader, short
+from manifoldgen.errors import ManifoldgenError, did_you_mean, file_reader, short
 from manifoldgen.io import check_output_path, load_npz, save_npz
 from manifoldgen.runtime import MAX_SEED
 
@@ -132,8 +131,7 @@ def _check_known(data: dict, known: tuple[str, ...], has: str, bad) -> None:
     """Refuse a key of ``data`` not in ``known``, naming the nearest known one (``has``: the message's subject)."""
     unknown = next((key for key in data if key not in known), None)
     if unknown is not None:
-        close = difflib.get_close_matches(str(unknown), known, n=1)
-        raise bad(f"{has} an unknown key '{unknown}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
+        raise bad(f"{has} an unknown key '{unknown}'{did_you_mean(unknown, known)}")
 
 
 def _number(value, low: float = -math.inf, high: float = math.inf) -> bool:

@@ -28,6 +28,12 @@ def unknown_name(kind: str, name: str, known: list[str]) -> ManifoldgenError:
     return ManifoldgenError(f"unknown {kind} '{name}'; {hint}known {kind}s: {', '.join(known)}")
 
 
+def did_you_mean(name, known) -> str:
+    """`` (did you mean 'NAME'?)`` for the one of ``known`` nearest ``name``, or '' when none is near."""
+    close = difflib.get_close_matches(str(name), list(known), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
 def check_keys(data: dict, known, what: str) -> None:
     """Refuse a key of ``data`` that is not in ``known`` (a misspelt key would silently drop what it names)."""
     for key in data:

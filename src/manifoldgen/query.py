@@ -10,7 +10,6 @@ placement and touch links).
 from __future__ import annotations
 
 import contextlib
-import difflib
 import hashlib
 import json
 import math
@@ -19,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, listed, short
+from manifoldgen.errors import ManifoldgenError, did_you_mean, listed, short
 from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
@@ -220,11 +219,9 @@ def _check_contents(path_file: str | Path, meta: dict, arrays: dict) -> None:
                                "holds only 'path' and 'meta': remove it or plan the query again")
     unknown = sorted(key for key in meta if key not in PATH_KEYS)
     if unknown:
-        close = difflib.get_close_matches(unknown[0], PATH_KEYS, n=1)
-        hint = f" (did you mean '{close[0]}'?)" if close else ""
-        raise ManifoldgenError(f"{path_file}: unknown meta key {short(unknown[0])}{hint}; a "
-                               "path file's meta holds only the keys of docs/file-formats.md (Path files): remove "
-                               "it or plan the query again")
+        raise ManifoldgenError(f"{path_file}: unknown meta key {short(unknown[0])}"
+                               f"{did_you_mean(unknown[0], PATH_KEYS)}; a path file's meta holds only the keys of "
+                               "docs/file-formats.md (Path files): remove it or plan the query again")
 
 
 def _check_values(path_file: str | Path, meta: dict) -> None:
@@ -249,9 +246,8 @@ def _check_values(path_file: str | Path, meta: dict) -> None:
         known = planner_settings(planner)
         unknown = next((name for name in meta["planner_settings"] if name not in known), None)
         if unknown is not None:
-            close = difflib.get_close_matches(unknown, list(known), n=1)
-            refuse(f"planner_settings.{unknown}", f"is not a setting of planner {planner}"
-                   + (f" (did you mean '{close[0]}'?)" if close else ""))
+            refuse(f"planner_settings.{unknown}",
+                   f"is not a setting of planner {planner}{did_you_mean(unknown, known)}")
         try:
             check_settings(meta["planner_settings"], known, f"planner {planner}")
         except ManifoldgenError as exc:

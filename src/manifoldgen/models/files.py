@@ -9,7 +9,6 @@ the torch model on first use.
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
 from collections.abc import Callable
@@ -20,7 +19,7 @@ import safetensors.numpy
 
 from manifoldgen.constraints import Condition
 from manifoldgen.dataset import check_meta
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, did_you_mean
 from manifoldgen.io import read_json
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
@@ -179,8 +178,7 @@ def _refuse_unknown_keys(entry: dict, keys: tuple[str, ...], where: str, bad) ->
     of ``keys``, naming the nearest known one."""
     unknown = next((key for key in entry if key not in keys), None)
     if unknown is not None:
-        close = difflib.get_close_matches(str(unknown), keys, n=1)
-        raise bad(f"unknown key '{unknown}'{where}" + (f" (did you mean '{close[0]}'?)" if close else ""))
+        raise bad(f"unknown key '{unknown}'{where}{did_you_mean(unknown, keys)}")
 
 
 def _check_trained_range(norm: dict, meta: dict, bad) -> None:
