@@ -59,3 +59,11 @@ def refusal(case: Case, inputs: Path, out: Path) -> str:
     message = str(info.value)
     assert "\n" not in message, message
     return message
+
+
+def refused_cleanly(case: Case, inputs: Path, out: Path) -> str:
+    """:func:`refusal`, and no file below ``inputs`` changed: the message."""
+    before = digest(inputs)
+    message = refusal(case, inputs, out)
+    assert digest(inputs) == before, "an input file changed"
+    return message

@@ -24,7 +24,7 @@ from manifoldgen.query import run_query
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.specs import parse_spec
 from manifoldgen.tasks import BUILTIN_DIR, get_task, load_task_file, task_from_meta
-from refusals import api, cli, digest, refusal
+from refusals import api, cli, refused_cleanly
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 
@@ -317,13 +317,11 @@ def test_the_table_is_large_enough():
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_bad_input(case, inputs, tmp_path, monkeypatch):
-    before = digest(inputs)
     out = tmp_path / "out"
     out.mkdir()
     if case.patch:
         PATCHES[case.patch](monkeypatch)
-    message = refusal(case, inputs, out)
+    message = refused_cleanly(case, inputs, out)
     assert case.needle in message, message
-    assert digest(inputs) == before, "an input file changed"
     leftovers = [p.name for p in out.rglob("*") if p.name.endswith((".tmp", ".partial"))]
     assert not leftovers, leftovers

@@ -16,7 +16,7 @@ from manifoldgen.io import load_npz, save_npz
 from manifoldgen.models import CVAE
 from manifoldgen.query import PATH_KEYS, read_path_file
 from manifoldgen.tasks import BUILTIN_DIR, get_task
-from refusals import api, cli, digest, refusal
+from refusals import api, cli, refused_cleanly
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 SHORT = 300  # characters a refusal may take at most
@@ -120,12 +120,10 @@ def test_the_table_has_unique_ids():
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_hostile_api_input(case, inputs, tmp_path):
-    before = digest(inputs)
-    message = refusal(case, inputs, tmp_path)
+    message = refused_cleanly(case, inputs, tmp_path)
     assert case.needle in message, message
     assert len(message) <= SHORT + len(str(inputs)), message
     assert "--" not in message or case.args is not None, message  # the API names its arguments
-    assert digest(inputs) == before, "an input file changed"
     assert not list(tmp_path.iterdir()), "a refused command wrote something"
 
 

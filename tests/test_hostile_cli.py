@@ -19,7 +19,7 @@ from manifoldgen.robot import resolve_robot, robots_dir
 from manifoldgen.robot.catalogue import file_sha256
 from manifoldgen.specs import parse_spec
 from manifoldgen.tasks import BUILTIN_DIR
-from refusals import cli, digest, refusal
+from refusals import cli, refused_cleanly
 
 runner = CliRunner()
 UR5_SRDF = robots_dir() / "ur_description" / "srdf" / "ur5.srdf"
@@ -107,13 +107,11 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line_on_stderr(case, inputs, tmp_path):
-    before = digest(inputs)
     out = tmp_path / "out"
     out.mkdir()
-    message = refusal(case, inputs, out)
+    message = refused_cleanly(case, inputs, out)
     assert case.needle.format(I=inputs, O=out) in message, message
     assert len(message.replace(str(inputs), "I").replace(str(out), "O")) < 300, message
-    assert digest(inputs) == before, "an input file changed"
     assert not list(out.rglob("*")), "a refused command wrote files"
 
 

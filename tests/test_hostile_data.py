@@ -3,7 +3,6 @@ and no file already written changes."""
 
 from __future__ import annotations
 
-import hashlib
 import importlib.util
 import json
 import shutil
@@ -22,6 +21,7 @@ from manifoldgen.models import CGAN, CVAE, open_model
 from manifoldgen.models.files import document_checksum
 from manifoldgen.tasks import BUILTIN_DIR, load_task_file
 from manifoldgen.training import check_dataset, check_rows
+from refusals import digest
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -62,11 +62,6 @@ def files(tmp_path_factory, panda_task):
     (root / "tight.toml").write_text(text.replace('position_axes = ["z"]\n',
                                                   'position_axes = ["z"]\nposition_tolerance = 1e-300\n'))
     return root
-
-
-def _digest(root: Path) -> dict[str, str]:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file()}
 
 
 def _train(I, O, name, model=CVAE, seed=0):
@@ -176,7 +171,7 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_hostile(case, files, tmp_path):
-    before = _digest(files)
+    before = digest(files)
     out = tmp_path / "out"
     out.mkdir()
     with pytest.raises(ManifoldgenError) as info:
@@ -184,28 +179,28 @@ def test_hostile(case, files, tmp_path):
     message = str(info.value)
     assert case.needle in message, message
     assert "\n" not in message and len(message) < 400, message
-    assert _digest(files) == before
+    assert digest(files) == before
     assert not (out / "m" / "candidates").exists()
 
 
 def test_a_refused_rerun_leaves_the_finished_output_as_it_was(files, tmp_path):
     shutil.copy(files / "data.npz", tmp_path / "data.npz")
     shutil.copytree(files / "model", tmp_path / "m")
-    before = _digest(tmp_path)
+    before = digest(tmp_path)
     with pytest.raises(ManifoldgenError, match="made with other settings"):
         collect(_panda(), 5, 0, tmp_path / "data.npz", conditions=[[0.4]], progress=False)
     with pytest.raises(ManifoldgenError, match="made with other settings"):
         CGAN(**TINY).fit(Dataset.load(files / "data.npz"), seed=0, progress=False, out=tmp_path / "m")
-    assert _digest(tmp_path) == before
+    assert digest(tmp_path) == before
 
 
 def test_the_same_arguments_again_write_the_same_files(files, tmp_path):
     shutil.copy(files / "data.npz", tmp_path / "data.npz")
     shutil.copytree(files / "model", tmp_path / "m")
-    before = _digest(tmp_path)
+    before = digest(tmp_path)
     collect(_panda(), 12, 0, tmp_path / "data.npz", conditions=[[0.3], [0.5]], progress=False)
     CVAE(**TINY).fit(Dataset.load(files / "data.npz"), seed=0, progress=False, out=tmp_path / "m")
-    after = _digest(tmp_path)
+    after = digest(tmp_path)
     assert {k: v for k, v in after.items() if k.endswith(("npz", "safetensors", "model.json"))} == \
         {k: v for k, v in before.items() if k.endswith(("npz", "safetensors", "model.json"))}
 

@@ -20,7 +20,7 @@ from manifoldgen.physics import PhysicsSettings
 from manifoldgen.query import PATH_FORMAT_VERSION
 from manifoldgen.robot import resolve_robot
 from manifoldgen.tasks import BUILTIN_DIR, get_task
-from refusals import cli, digest, refusal
+from refusals import cli, refused_cleanly
 
 runner = CliRunner()
 PANDA_URDF = resolve_robot("panda")[0]
@@ -170,10 +170,8 @@ def with_model(inputs, tmp_path_factory):
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line(case, with_model, tmp_path):
-    before = digest(with_model)
-    message = refusal(case, with_model, tmp_path)
+    message = refused_cleanly(case, with_model, tmp_path)
     assert case.needle.format(I=with_model, O=tmp_path) in message, message
-    assert digest(with_model) == before, "an input file changed"
 
 
 def test_a_home_condition_outside_is_one_line_without_a_warning(inputs):

@@ -22,7 +22,7 @@ from manifoldgen.models.files import document_checksum
 from manifoldgen.sampling import sample_to_file
 from manifoldgen.tasks import task_from_meta
 from manifoldgen.training import check_dataset
-from refusals import api, cli, digest, refusal
+from refusals import api, cli, refused_cleanly
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 USER_FILES = {"training.json": "{\"mine\": 1}", "loss.png": "my plot", "other.txt": "notes"}
@@ -127,13 +127,11 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_round4_data(case, inputs, tmp_path):
-    before = digest(inputs)
     out = tmp_path / "out"
     out.mkdir()
-    message = refusal(case, inputs, out)
+    message = refused_cleanly(case, inputs, out)
     assert case.needle in message, message
     assert len(message) < 300, message
-    assert digest(inputs) == before, "an input file changed"
     assert not list(out.iterdir()), "a refused run wrote something"
 
 

@@ -18,7 +18,7 @@ from manifoldgen.data import collect
 from manifoldgen.models import CVAE, ConditionalFlowMatching, load_model, open_model, pretrained_model_dir
 from manifoldgen.models.files import document_checksum, read_model_dir
 from manifoldgen.sampling import MAX_SAMPLES
-from refusals import api, cli, digest, refusal
+from refusals import api, cli, refused_cleanly
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 SHORT = 300  # characters a refusal may take at most
@@ -140,13 +140,11 @@ def test_the_table_has_unique_ids():
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_hostile_round4_model_input(case, inputs, tmp_path):
-    before = digest(inputs)
     out = tmp_path / "out"
     out.mkdir()
-    message = refusal(case, inputs, out)
+    message = refused_cleanly(case, inputs, out)
     assert case.needle in message, message
     assert len(message) < SHORT, message
-    assert digest(inputs) == before, "an input file changed"
     assert not list(out.iterdir()), "a refused call wrote a file"
 
 
