@@ -4,14 +4,17 @@ is a command line or an API call that must be refused in one line naming the pro
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import safetensors.numpy
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.models.files import document_checksum
 
 runner = CliRunner()
 
@@ -67,3 +70,19 @@ def refused_cleanly(case: Case, inputs: Path, out: Path) -> str:
     message = refusal(case, inputs, out)
     assert digest(inputs) == before, "an input file changed"
     return message
+
+
+def reseal(folder: Path, edit=None, weights=None) -> None:
+    """Edit the model directory ``folder``'s model.json (``edit(doc)``) and weights (``weights(arrays)``), then
+    recompute both checksums: an edit that passes them (they are not signatures) must meet the field checks."""
+    doc = json.loads((folder / "model.json").read_text())
+    if weights is not None:
+        arrays = safetensors.numpy.load((folder / "model.safetensors").read_bytes())
+        weights(arrays)
+        blob = safetensors.numpy.save(arrays)
+        (folder / "model.safetensors").write_bytes(blob)
+        doc["weights_sha256"] = hashlib.sha256(blob).hexdigest()
+    if edit is not None:
+        edit(doc)
+    doc["sha256"] = document_checksum(doc)
+    (folder / "model.json").write_text(json.dumps(doc))

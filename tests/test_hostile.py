@@ -24,8 +24,8 @@ from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import load_npz, save_npz
 from manifoldgen.models import CVAE, load_model
-from manifoldgen.models.files import document_checksum
 from manifoldgen.tasks import BUILTIN_DIR, get_task, load_task_file
+from refusals import reseal
 
 runner = CliRunner()
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
@@ -42,13 +42,6 @@ class Payload:
 
     def __reduce__(self):
         return (open, (self.target, "w"))
-
-
-def _resign(folder: Path, edit) -> None:
-    doc = json.loads((folder / "model.json").read_text())
-    edit(doc)
-    doc["sha256"] = document_checksum(doc)
-    (folder / "model.json").write_text(json.dumps(doc))
 
 
 def _remeta(source: Path, target: Path, edit=None, **arrays) -> None:
@@ -143,7 +136,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
                        ("model-decoder-noise", lambda d: d["decoder"].update(noise=50)),
                        ("model-decoder-steps", lambda d: d["decoder"].update(steps=10 ** 6))):
         shutil.copytree(root / "model", root / name)
-        _resign(root / name, edit)
+        reseal(root / name, edit)
     shutil.copytree(root / "model", root / "model-deep")
     (root / "model-deep" / "model.json").write_text("[" * 100_000 + "]" * 100_000)
     shutil.copytree(root / "model", root / "model-dup-keys")

@@ -18,10 +18,9 @@ from manifoldgen.data import collect
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import CGAN, CVAE, open_model
-from manifoldgen.models.files import document_checksum
 from manifoldgen.tasks import BUILTIN_DIR, load_task_file
 from manifoldgen.training import check_dataset, check_rows
-from refusals import digest
+from refusals import digest, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -30,15 +29,6 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 def _save(path: Path, meta: dict, q: np.ndarray, y: np.ndarray, **extra) -> Path:
     np.savez(path, meta=json.dumps(meta), q=q, y=y, **extra)
     return path
-
-
-def _resign(source: Path, target: Path, edit) -> Path:
-    shutil.copytree(source, target)
-    doc = json.loads((source / "model.json").read_text())
-    edit(doc)
-    doc["sha256"] = document_checksum(doc)
-    (target / "model.json").write_text(json.dumps(doc))
-    return target
 
 
 @pytest.fixture(scope="module")
@@ -55,9 +45,9 @@ def files(tmp_path_factory, panda_task):
     _save(root / "key.npz", {**meta, "robto": "panda"}, q, y)
     _save(root / "scene.npz", {**meta, "scenes": [{**wall, "obstacles": "x"}]}, q, y)
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
-    _resign(root / "model", root / "pr2", lambda d: d["meta"].__setitem__("robot", "pr2"))
-    _resign(root / "model", root / "top", lambda d: d.__setitem__("mixx", 0.5))
-    _resign(root / "model", root / "foo", lambda d: d["meta"].__setitem__("foo", 1))
+    reseal(shutil.copytree(root / "model", root / "pr2"), lambda d: d["meta"].__setitem__("robot", "pr2"))
+    reseal(shutil.copytree(root / "model", root / "top"), lambda d: d.__setitem__("mixx", 0.5))
+    reseal(shutil.copytree(root / "model", root / "foo"), lambda d: d["meta"].__setitem__("foo", 1))
     text = (BUILTIN_DIR / "pose-panda.toml").read_text()
     (root / "tight.toml").write_text(text.replace('position_axes = ["z"]\n',
                                                   'position_axes = ["z"]\nposition_tolerance = 1e-300\n'))

@@ -18,11 +18,10 @@ from manifoldgen.dataset import TASK_SPEC_KEYS, Dataset
 from manifoldgen.errors import ManifoldgenError, differences
 from manifoldgen.io import save_npz
 from manifoldgen.models import CVAE, load_model
-from manifoldgen.models.files import document_checksum
 from manifoldgen.sampling import sample_to_file
 from manifoldgen.tasks import task_from_meta
 from manifoldgen.training import check_dataset
-from refusals import api, cli, refused_cleanly
+from refusals import api, cli, refused_cleanly, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 USER_FILES = {"training.json": "{\"mine\": 1}", "loss.png": "my plot", "other.txt": "notes"}
@@ -56,11 +55,8 @@ def inputs(tmp_path_factory, panda_task, planned_path):
         _edited(root, name, edit)
     _edited(root, "q-float32", lambda m: None, q=data.q.astype(np.float32))
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
-    shutil.copytree(root / "model", root / "anchor-model")
-    doc = json.loads((root / "model" / "model.json").read_text())
-    doc["meta"]["anchors"] = short_anchor
-    doc["sha256"] = document_checksum(doc)
-    (root / "anchor-model" / "model.json").write_text(json.dumps(doc))
+    reseal(shutil.copytree(root / "model", root / "anchor-model"),
+           lambda d: d["meta"].__setitem__("anchors", short_anchor))
     shutil.copy(planned_path("wall"), root / "path.npz")
     save_npz(root / "rm.npz", {"kind": "roadmap"}, nodes=np.zeros((2, 7)))
     (root / "userdir").mkdir()

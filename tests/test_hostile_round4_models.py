@@ -5,38 +5,20 @@ and the API refuse each alike, in one line, with no input changed; genuine model
 
 from __future__ import annotations
 
-import hashlib
-import json
 import shutil
 
 import numpy as np
 import pytest
-import safetensors.numpy
 
 import manifoldgen as mg
 from manifoldgen.data import collect
 from manifoldgen.models import CVAE, ConditionalFlowMatching, load_model, open_model, pretrained_model_dir
-from manifoldgen.models.files import document_checksum, read_model_dir
+from manifoldgen.models.files import read_model_dir
 from manifoldgen.sampling import MAX_SAMPLES
-from refusals import api, cli, refused_cleanly
+from refusals import api, cli, refused_cleanly, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 SHORT = 300  # characters a refusal may take at most
-
-
-def _reseal(folder, edit=None, weights=None) -> None:
-    """Edit ``folder``'s model.json (``edit(doc)``) and weights (``weights(arrays)``), recomputing both checksums."""
-    doc = json.loads((folder / "model.json").read_text())
-    if weights is not None:
-        arrays = safetensors.numpy.load((folder / "model.safetensors").read_bytes())
-        weights(arrays)
-        blob = safetensors.numpy.save(arrays)
-        (folder / "model.safetensors").write_bytes(blob)
-        doc["weights_sha256"] = hashlib.sha256(blob).hexdigest()
-    if edit is not None:
-        edit(doc)
-    doc["sha256"] = document_checksum(doc)
-    (folder / "model.json").write_text(json.dumps(doc))
 
 
 def _nan(arrays) -> None:
@@ -70,7 +52,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
     for name, change in EDITS.items():
         shutil.copytree(root / "model", root / name)
-        _reseal(root / name, **change)
+        reseal(root / name, **change)
     shutil.copy(planned_path("wall"), root / "path.npz")
     return root
 
