@@ -159,7 +159,7 @@ def test_collect_train_and_a_dataset_sampler(tmp_path, wall):
     (lambda t, s: mg.plan(t, s, seed="0"), "plan: seed must be an integer"),
     (lambda t, s: mg.plan(t, s, seed=-1), "plan: seed must be an integer from 0"),
     (lambda t, s: mg.plan(t, s, time_limit="10"), "plan: time_limit must be a number"),
-    (lambda t, s: mg.plan(t, s, time_limit=0), "plan: time_limit must be a positive"),
+    (lambda t, s: mg.plan(t, s, time_limit=0), "plan: time_limit must be from 0.001 to 86400 seconds, got 0"),
     (lambda t, s: mg.plan(t, s, settings=["range=1"]), "plan: settings must be"),
     (lambda t, s: mg.plan(t, s, settings={"no_such": 1}), "plan: unknown rrtconnect setting"),
     (lambda t, s: mg.sampler(t), "sampler: give the scene"),

@@ -10,7 +10,6 @@ Reference: ``docs/python-api.md``.
 from __future__ import annotations
 
 import copy
-import math
 import numbers
 import os
 from dataclasses import dataclass
@@ -429,8 +428,8 @@ def plan(task: Task | PathLike, scene: Scene | PathLike, sampler: Any = "project
     smooth = _flag("plan", "smooth", smooth)
     seed = _seed("plan", seed)
     time_limit = _number("plan", "time_limit", time_limit)
-    if not math.isfinite(time_limit) or time_limit <= 0:
-        raise ManifoldgenError(f"plan: time_limit must be a positive number of seconds, got {time_limit}")
+    from manifoldgen.planning.base import check_time_limit
+    check_time_limit(time_limit, "plan: time_limit")
     values = _settings(planner, settings)
     if isinstance(sampler, str):  # exactly the command line's query
         result, meta = run_query(task, scene, sampler, planner, seed=seed, time_limit=time_limit, local=local,

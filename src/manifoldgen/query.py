@@ -21,7 +21,7 @@ import numpy as np
 from manifoldgen.errors import ManifoldgenError, did_you_mean, listed, short
 from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
-from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner
+from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner, check_time_limit
 from manifoldgen.planning.local import DEFAULT_LOCAL
 from manifoldgen.planning.result import PlanResult
 from manifoldgen.runtime import MAX_SEED, check_seed
@@ -71,8 +71,7 @@ def run_query(task: Task, scene: Scene, sampler: str, planner: str, *, seed: int
     :func:`manifoldgen.planning.planner_settings`); returns the result (path re-validated, optionally smoothed)
     and the path file's ``meta`` (``meta["validation"]`` holds the check and the resolution it used). ``roadmap``:
     a roadmap file the query is routed through first and that keeps its path (see :func:`plan_query`)."""
-    if not np.isfinite(time_limit) or time_limit <= 0:
-        raise ManifoldgenError(f"--time must be a positive number of seconds, got {time_limit}")
+    check_time_limit(time_limit)  # before the space is built
     seed = check_seed(seed)
     get_planner(planner)  # an unknown planner is refused before the space is built
     y = task.condition.check(scene.condition)[0]

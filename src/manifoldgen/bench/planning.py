@@ -573,8 +573,8 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     if not 0 < pg_rows <= MAX_ROWS:
         raise ManifoldgenError(f"--pg-rows must be from 1 to {MAX_ROWS:,} dataset rows, got {pg_rows}")
     check_seed(experiment.seed)
-    if not np.isfinite(experiment.time_limit) or experiment.time_limit <= 0:
-        raise ManifoldgenError(f"--time must be a positive number of seconds, got {experiment.time_limit}")
+    from manifoldgen.planning.base import check_time_limit
+    check_time_limit(experiment.time_limit, "--time")
     parsed = [Method.parse(m) for m in methods]
     if not parsed:
         raise ManifoldgenError("no methods given; pass --methods (see `manifoldgen bench wall --help`)")

@@ -79,11 +79,11 @@ class PlannerSettings:
                 raise ManifoldgenError(f"planner setting {key} must be true or false, got {getattr(self, key)!r}")
 
 
-def check_time_limit(time_limit: float) -> None:
-    """Refuse a query's time limit outside :data:`TIME_LIMITS` (NaN included), in one line."""
+def check_time_limit(time_limit: float, what: str = "time limit") -> None:
+    """Refuse a query's time limit outside :data:`TIME_LIMITS` (NaN included), in one line naming ``what``."""
     low, high = TIME_LIMITS
     if not low <= time_limit <= high:
-        raise ManifoldgenError(f"time limit must be from {low:g} to {high:g} seconds, got {time_limit!r}")
+        raise ManifoldgenError(f"{what} must be from {low:g} to {high:g} seconds, got {time_limit!r}")
 
 
 class Tree:
