@@ -281,4 +281,7 @@ def test_joint_linear_refuses_a_row_too_short_to_move_its_residual(panda_task):
     collect's batches fail."""
     with pytest.raises(ManifoldgenError, match=r"none all zero \(a norm under 1e-09\); got shape \(1, 7\)"):
         JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-300]], [[0.0]])
-    assert JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-3]], [[0.0]]).coefficients.shape == (1, 7)
+    with pytest.raises(ManifoldgenError, match=r"joint_linear row 0 constrains nothing: over the joint limits its "
+                                               r"A q spans only 5.79e-08, within twice the tolerance 0.01"):
+        JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-8]], [[0.0]])  # every q is within tolerance
+    assert JointLinearConstraint(panda_task.robot, [[0.0] * 6 + [1e-1]], [[0.0]]).coefficients.shape == (1, 7)

@@ -420,7 +420,7 @@ CASES = [
     cli("train-dataset-3d", "train {I}/data-3d.npz -o {O}/m", "data-3d.npz"),
     cli("train-dataset-no-rows", "train {I}/data-empty.npz -o {O}/m", "0 rows"),
     cli("train-dataset-y-nan", "train {I}/data-y-nan.npz -o {O}/m", "NaN"),
-    cli("train-dataset-y-wide", "train {I}/data-y-wide.npz -o {O}/m", "condition columns"),
+    cli("train-dataset-y-wide", "train {I}/data-y-wide.npz -o {O}/m", "must hold a number per condition column (2)"),
     cli("train-dataset-meta-list", "train {I}/data-meta-list.npz -o {O}/m", "meta"),
     cli("train-dataset-meta-nan", "train {I}/data-meta-nan.npz -o {O}/m", "format"),
     cli("train-dataset-meta-bytes", "train {I}/data-meta-bytes.npz -o {O}/m", "meta"),

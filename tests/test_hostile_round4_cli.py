@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from manifoldgen.bench.planning import BENCH_MARKERS
 from manifoldgen.cli import _warn_same_pace, app
-from manifoldgen.io import GENERATOR_MARK, check_output_path, load_npz, save_npz
+from manifoldgen.io import GENERATOR_MARK, check_output_path, load_npz, save_npz, written_by_manifoldgen
 from manifoldgen.physics import PhysicsSettings
 from manifoldgen.query import PATH_FORMAT_VERSION
 from manifoldgen.robot import resolve_robot
@@ -69,11 +69,18 @@ def inputs(tmp_path_factory, planned_path):
                        ("extra", _set("validation", "extra", value=1))):
         _edited_path(path, root / f"pv-{name}.npz", edit)
     (root / "mine.html").write_text("<html><body>my notes</body></html>")
+    (root / "mine.png").write_bytes(b"\x89PNG\r\n\x1a\n my picture")
+    (root / "mine.json").write_text('{"generator": "me", "notes": 1}')
+    (root / "mine.csv").write_text("time_s,x\n0,1\n")
+    (root / "picdir").mkdir()
+    (root / "picdir" / "p.png").write_bytes(b"\x89PNG\r\n\x1a\n my picture")
     np.savez(root / "mine.npz", x=np.arange(3))
     for folder in ("userdir", "pdir.png", "tdir.json"):
         (root / folder).mkdir()
     (root / "userdir" / "notes.txt").write_text("notes")
     (root / "userdir" / "results.md").write_text("my results")
+    (root / "cfgdir").mkdir()
+    (root / "cfgdir" / "config.json").write_text('{"mine": 1}')
     os.symlink(root / "loop2.npz", root / "loop1.npz")
     os.symlink(root / "loop1.npz", root / "loop2.npz")
     bench = runner.invoke(app, ["bench", "plan", "pose", "--scene", "wall", "--time", "2", "--runs", "1",
@@ -81,6 +88,10 @@ def inputs(tmp_path_factory, planned_path):
     assert bench.exit_code == 0, bench.output
     record = json.loads((root / "bench" / "runs.jsonl").read_text())
     assert record["valid"], record
+    for name, change in (("length", {"length": record["length"] * 0.5}), ("seed", {"seed": 7}),
+                         ("solved", {"planner_solved": False})):
+        shutil.copytree(root / "bench", root / f"bench-{name}")
+        (root / f"bench-{name}" / "runs.jsonl").write_text(json.dumps({**record, **change}) + "\n")
     record["path"][len(record["path"]) // 2][0] += 0.3  # off the manifold, the record still saying valid
     (root / "bench" / "runs.jsonl").write_text(json.dumps(record) + "\n")
     task = get_task("balance", "centauro")
@@ -123,6 +134,14 @@ CASES = [
     # an output replaces only a file manifoldgen wrote; a bench folder must be empty or a bench's own
     cli("export-over-a-users-page", "view {I}/path.npz --export {I}/mine.html",
         "--export {I}/mine.html exists and was not written by manifoldgen; give another name, or delete it"),
+    cli("plan-picture-over-a-users-png", "plan pose --scene wall -o {I}/picdir/p.npz",
+        "-o's picture {I}/picdir/p.png exists and was not written by manifoldgen"),
+    cli("snapshots-over-a-users-png", "view {I}/path.npz --snapshots {I}/mine.png",
+        "--snapshots {I}/mine.png exists and was not written by manifoldgen"),
+    cli("trajectory-over-a-users-json", "trajectory {I}/path.npz -o {I}/mine.json",
+        "-o {I}/mine.json exists and was not written by manifoldgen"),
+    cli("trajectory-over-a-users-csv", "trajectory {I}/path.npz -o {I}/mine.csv",
+        "-o {I}/mine.csv exists and was not written by manifoldgen"),
     cli("plan-over-a-users-npz", "plan pose --scene wall --no-picture -o {I}/mine.npz",
         "-o {I}/mine.npz exists and was not written by manifoldgen"),
     cli("bench-into-a-users-folder", "bench plan pose --scene wall --time 1 -m rrtconnect@project -o {I}/userdir",
@@ -134,6 +153,14 @@ CASES = [
         "--unseen [0.5] is a condition a model was trained at"),
     cli("bench-resume-edited-path", "bench plan pose --scene wall --time 2 --runs 2 -m rrtconnect@project --resume "
         "-o {I}/bench", "run 0 of 'rrtconnect@project' is recorded valid, but its path rechecks invalid"),
+    cli("bench-over-a-users-config", "bench plan pose --scene wall --time 1 -m rrtconnect@project -o {I}/cfgdir",
+        "config.json is not a config bench wrote (damaged, or someone else's); move or delete it"),
+    cli("bench-resume-edited-length", "bench plan pose --scene wall --time 2 --runs 2 -m rrtconnect@project "
+        "--resume -o {I}/bench-length", "but its path has"),
+    cli("bench-resume-edited-seed", "bench plan pose --scene wall --time 2 --runs 2 -m rrtconnect@project "
+        "--resume -o {I}/bench-seed", "run 0 of 'rrtconnect@project' has seed 7 where its run gives 0"),
+    cli("bench-resume-solved-unsolved", "bench plan pose --scene wall --time 2 --runs 2 -m rrtconnect@project "
+        "--resume -o {I}/bench-solved", "has solved true where its run gives false"),
     # a name that is only a suffix, a folder where a file is meant: the fix names what to give
     cli("collect-bare-suffix", "collect pose -o {O}/.npz",
         "-o {O}/.npz is only a suffix, not a file name; give a name such as out.npz"),
@@ -185,6 +212,20 @@ def test_an_exported_page_carries_the_mark_and_may_be_exported_again(inputs, tmp
         result = runner.invoke(app, ["view", str(inputs / "path.npz"), "--export", str(page)])
         assert result.exit_code == 0, result.output
     assert GENERATOR_MARK in page.read_text()[:4096]
+
+
+def test_pictures_trajectories_and_reports_carry_the_mark_and_may_be_written_again(inputs, tmp_path):
+    """A .png, .json or .csv manifoldgen wrote is its own: the same command replaces it (a user's is refused)."""
+    commands = [["plan", "pose", "--scene", "wall", "--time", "2", "-o", str(tmp_path / "p.npz")],
+                ["view", str(inputs / "path.npz"), "--snapshots", str(tmp_path / "s.png")],
+                ["trajectory", str(inputs / "path.npz"), "-o", str(tmp_path / "t.json")],
+                ["trajectory", str(inputs / "path.npz"), "-o", str(tmp_path / "t.csv")]]
+    for command in commands:
+        for _ in range(2):
+            result = runner.invoke(app, command)
+            assert result.exit_code == 0, result.output
+    for name in ("p.png", "s.png", "t.json", "t.csv"):
+        assert written_by_manifoldgen(tmp_path / name), name
 
 
 def test_an_empty_folder_or_a_benchs_own_takes_a_bench(tmp_path):

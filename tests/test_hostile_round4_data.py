@@ -51,7 +51,11 @@ def inputs(tmp_path_factory, panda_task, planned_path):
                        ("rate-above-one", lambda m: m.update(raw_valid_rate=1.5)),
                        ("task-extra-key", lambda m: m["task"].update(foo=1)),
                        ("task-misspelt-key", lambda m: m["task"].update(hom=m["task"].pop("home"))),
-                       ("values-extra", lambda m: m["condition"]["values"].append([0.95]))):
+                       ("values-extra", lambda m: m["condition"]["values"].append([0.95])),
+                       ("task-home-short", lambda m: m["task"].update(home=[0.1, 0.2])),
+                       ("task-home-off", lambda m: m["task"]["home"].__setitem__(1, m["task"]["home"][1] + 0.3)),
+                       ("task-floating-text", lambda m: m["task"].update(floating_base="no")),
+                       ("task-group-text", lambda m: m["task"].update(group="panda_joint1"))):
         _edited(root, name, edit)
     _edited(root, "q-float32", lambda m: None, q=data.q.astype(np.float32))
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
@@ -95,6 +99,17 @@ CASES = [
         "meta 'task' has an unknown key 'foo'; the file was edited or is damaged"),
     api("dataset-task-misspelt-key", lambda I, O: Dataset.load(I / "task-misspelt-key.npz"),
         "meta 'task' has an unknown key 'hom' (did you mean 'home'?)"),
+    api("dataset-task-home-short", lambda I, O: Dataset.load(I / "task-home-short.npz"),
+        "meta task 'home' [0.1, 0.2] must hold a number per joint (7)"),
+    api("dataset-task-floating-text", lambda I, O: Dataset.load(I / "task-floating-text.npz"),
+        "meta task 'floating_base' \"no\" must be true or false"),
+    api("dataset-task-group-text", lambda I, O: Dataset.load(I / "task-group-text.npz"),
+        "meta task 'group' \"panda_joint1\" must be a list of joint names"),
+    cli("export-dataset-per-condition-text", "view {I}/rows-text.npz --export {O}/x.html",
+        "meta 'per_condition' \"many\" must be a positive whole number"),
+    cli("export-dataset-q-float32", "view {I}/q-float32.npz --export {O}/x.html", "q is float32"),
+    cli("train-task-home-off", "train {I}/task-home-off.npz --model cvae -o {O}/m",
+        "its task's home is off its constraint (projecting it moves a joint"),
     cli("train-on-a-path", "train {I}/path.npz -o {O}/m",
         "path.npz is a path file, not a dataset: give a dataset written by `manifoldgen collect`"),
     cli("train-on-a-roadmap", "train {I}/rm.npz -o {O}/m",

@@ -1,6 +1,7 @@
 """Robot: batched FK, Jacobians and CoM against pinocchio and finite differences; every
 example-robot-data robot by name; URDF + SRDF paths and content identity; bad input."""
 
+import shutil
 import subprocess
 import sys
 
@@ -78,6 +79,13 @@ def test_planning_group_limits_and_locked_joints():
 
 def test_srdf_group_state_is_the_default_reference():
     robot = Robot.load("panda", ["panda_joint1"])
+    assert robot.locked["panda_joint4"] == pytest.approx(-2.35619)
+
+
+def test_an_srdf_suffix_in_capitals_is_an_srdf(tmp_path):
+    """P.SRDF reads as P.srdf does: the same group state becomes the reference."""
+    shutil.copy(resolve_robot("panda")[1], tmp_path / "P.SRDF")
+    robot = Robot.load("panda", ["panda_joint1"], srdf=tmp_path / "P.SRDF")
     assert robot.locked["panda_joint4"] == pytest.approx(-2.35619)
 
 

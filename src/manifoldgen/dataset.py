@@ -106,6 +106,7 @@ def check_meta(meta: dict, k: int, where: str) -> None:
     task = meta.get("task")
     if task is not None:
         _check_known(task, TASK_SPEC_KEYS, "'task' has", bad)
+        _check_task_spec(task, meta.get("joints"), k, bad)
         identity = task.get("robot")
         copies = {"robot": identity.get("name") if isinstance(identity, dict) else identity,
                   "locked": task.get("locked"), "floating_base": task.get("floating_base"),
@@ -125,6 +126,20 @@ def check_meta(meta: dict, k: int, where: str) -> None:
             and all(_numbers(row, k) for row in condition["values"])):
         raise bad(f"'condition' must hold names, units and value rows for y's {k} condition columns")
     _check_scenes(meta, k, bad)
+
+
+def _check_task_spec(task: dict, joints, k: int, bad) -> None:
+    """Refuse a task spec value of the wrong kind (:data:`TASK_SPEC_KINDS`), or a ``home`` without a number per
+    joint (``joints``: the file's) or a ``home_condition`` without one per condition column (``k``)."""
+    for key, (fits, what) in TASK_SPEC_KINDS.items():
+        if key in task and not fits(task[key]):
+            raise bad(f"task '{key}' {short(task[key])} must be {what}")
+    n = len(joints) if isinstance(joints, list) else None
+    if "home" in task and not _numbers(task["home"], n):
+        raise bad(f"task 'home' {short(task['home'])} must hold a number per joint ({n})")
+    if "home_condition" in task and not _numbers(task["home_condition"], k):
+        raise bad(f"task 'home_condition' {short(task['home_condition'])} must hold a number per condition column "
+                  f"({k})")
 
 
 def _check_known(data: dict, known: tuple[str, ...], has: str, bad) -> None:
@@ -177,6 +192,33 @@ KINDS = {  # meta key -> (whether its value fits, what it must be); the task's c
         isinstance(x, str) for x in v.values()), 'an object {"model": name, "source": path}'),
     "raw_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
     "refined_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
+}
+
+
+def _text(value) -> bool:
+    return isinstance(value, str)
+
+
+def _texts(value) -> bool:
+    return isinstance(value, list) and all(isinstance(v, str) for v in value)
+
+
+TASK_SPEC_KINDS = {  # meta["task"] key -> (whether its value fits, what it must be); home and its condition: apart
+    "name": (_text, "a string"),
+    "description": (_text, "a string"),
+    "robot": (lambda v: isinstance(v, (str, dict)), "a robot name or its identity object"),
+    "robot_source": (lambda v: v is None or _text(v), "null or a string"),
+    "srdf_source": (lambda v: v is None or _text(v), "null or a path"),
+    "group": (lambda v: _texts(v) and len(v) > 0, "a list of joint names"),
+    "floating_base": (lambda v: isinstance(v, bool), "true or false"),
+    "base_bounds": (lambda v: v == [] or (isinstance(v, list) and len(v) == 2 and all(_numbers(b, 3) for b in v)),
+                    "[[x, y, z low], [x, y, z high]]"),
+    "locked": (lambda v: isinstance(v, dict) and all(_number(x) and math.isfinite(x) for x in v.values()),
+               "an object joint -> value"),
+    "constraint": (lambda v: isinstance(v, dict) and isinstance(v.get("type"), str), "an object with a 'type'"),
+    "task_file": (lambda v: v is None or _text(v), "null or a path"),
+    "attached": (lambda v: isinstance(v, dict), "an object (the held object)"),
+    "planner": (lambda v: isinstance(v, dict), "an object (planner settings)"),
 }
 
 

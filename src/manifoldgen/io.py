@@ -108,12 +108,15 @@ def save_figure(fig, path: str | Path) -> None:
     import matplotlib.pyplot as plt
 
     buffer = bytes_io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
+    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight", metadata=PNG_METADATA)
     plt.close(fig)
     atomic_write_bytes(Path(path), buffer.getvalue())
 
 
-GENERATOR_MARK = '<meta name="generator" content="manifoldgen">'  # in the head of every page view --export writes
+GENERATOR = "manifoldgen"
+GENERATOR_MARK = f'<meta name="generator" content="{GENERATOR}">'  # in the head of every page view --export writes
+PNG_METADATA = {"Software": GENERATOR}  # a text chunk of every picture, before its image data
+CSV_HEADER = "time_from_start,"  # how every CSV file manifoldgen writes (a trajectory) begins
 
 
 NPZ_KINDS = ("path", "roadmap")  # the meta "kind" of an .npz that is not a dataset
@@ -136,14 +139,26 @@ def npz_kind(path: Path) -> str | None:
 
 def written_by_manifoldgen(path: Path) -> bool:
     """Whether the existing file ``path`` is of a kind manifoldgen writes and was written by it: an .npz holding
-    its JSON ``meta`` (:func:`npz_kind`), an .html page carrying :data:`GENERATOR_MARK`. A file of another kind
-    (a .png, .json or .csv) cannot be told apart and counts as written by it."""
+    its JSON ``meta`` (:func:`npz_kind`), an .html page carrying :data:`GENERATOR_MARK`, a .png with its
+    :data:`PNG_METADATA`, a .json object whose ``generator`` is :data:`GENERATOR`, a .csv beginning with
+    :data:`CSV_HEADER`. A file of another kind counts as written by it."""
     suffix = path.suffix.lower()
     if suffix == ".npz":
         return npz_kind(path) is not None
+    if suffix == ".json":
+        try:
+            doc = json.loads(path.read_text())
+        except (ValueError, UnicodeDecodeError):
+            return False
+        return isinstance(doc, dict) and doc.get("generator") == GENERATOR
+    with open(path, "rb") as f:
+        head = f.read(8192)
     if suffix == ".html":
-        with open(path, "rb") as f:
-            return GENERATOR_MARK.encode() in f.read(8192)
+        return GENERATOR_MARK.encode() in head
+    if suffix == ".png":
+        return b"Software\x00" + GENERATOR.encode() in head
+    if suffix == ".csv":
+        return head.startswith(CSV_HEADER.encode())
     return True
 
 

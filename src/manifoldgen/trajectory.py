@@ -12,7 +12,8 @@ constrained space: limits, the constraint's tolerance and collisions with the sc
 records.
 
 The file follows ROS ``trajectory_msgs/JointTrajectory``: ``joint_names`` and ``points`` with
-``positions``, ``velocities``, ``accelerations`` and ``time_from_start`` (``sec``, ``nanosec``).
+``positions``, ``velocities``, ``accelerations`` and ``time_from_start`` (``sec``, ``nanosec``), besides
+``generator`` ("manifoldgen") and ``manifoldgen`` (how it was made).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, file_reader, require
-from manifoldgen.io import atomic_write_text, check_output_path
+from manifoldgen.io import CSV_HEADER, GENERATOR, atomic_write_text, check_output_path
 from manifoldgen.robot import BASE_JOINTS, Robot
 from manifoldgen.space import ConstrainedSpace, ValidationSettings, densify
 
@@ -61,7 +62,7 @@ class Trajectory:
         points = [{"positions": p.tolist(), "velocities": v.tolist(), "accelerations": a.tolist(),
                    "time_from_start": {"sec": int(s), "nanosec": int(ns)}}
                   for p, v, a, s, ns in zip(self.positions, self.velocities, self.accelerations, sec, nanosec)]
-        return {"joint_names": self.joint_names, "points": points, "manifoldgen": self.info}
+        return {"generator": GENERATOR, "joint_names": self.joint_names, "points": points, "manifoldgen": self.info}
 
     def save(self, out: str | Path) -> None:
         """Write ``.json`` (:meth:`to_ros`) or ``.csv`` (time, then each joint's position, velocity,
@@ -72,7 +73,7 @@ class Trajectory:
             return
         buffer = io.StringIO()
         writer = csv.writer(buffer)
-        writer.writerow(["time_from_start"] + [f"{j}.{kind}" for kind in ("position", "velocity", "acceleration")
+        writer.writerow([CSV_HEADER.rstrip(",")] + [f"{j}.{kind}" for kind in ("position", "velocity", "acceleration")
                                                for j in self.joint_names])
         for row in np.column_stack([self.time, self.positions, self.velocities, self.accelerations]):
             writer.writerow([repr(float(x)) for x in row])

@@ -37,6 +37,7 @@ records as they arrive. Inputs (models, datasets, scene and task files) must be 
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import os
 import time
@@ -51,7 +52,7 @@ import numpy as np
 from manifoldgen.bench.report import MethodSummary, write_report
 from manifoldgen.cluster import Cluster, connect
 from manifoldgen.data import MAX_ROWS
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, short
 from manifoldgen.io import atomic_write_text, check_name, check_own_folder, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.runtime import check_seed
@@ -433,10 +434,22 @@ def record_problem(record) -> str:
 
 
 def recheck_records(experiment: Experiment, records: list[dict], runs_path: Path) -> None:
-    """Refuse a kept record whose path the dense check of its method's space (the check a fresh run gives its
-    path) judges otherwise than the record's ``valid`` says: an edited or damaged record."""
+    """Refuse a kept record that its run could not have written: a seed, scene or time limit not the experiment's,
+    ``solved`` not what its planner's answer, validity and lateness give, a path whose waypoints or length are not
+    the record's, or one the dense check of its method's space (the check a fresh run gives its path) judges
+    otherwise than the record's ``valid`` says. (Times and counts are the run's own word.)"""
+    from manifoldgen.planning.result import path_length
+
     spaces = {}
     for record in records:
+        made = {"seed": experiment.seed + record["run"], "scene": experiment.scene,
+                "time_limit": experiment.time_limit,
+                "solved": record["planner_solved"] and record["valid"] and not record.get("late", False)}
+        wrong = next((key for key, value in made.items() if record[key] != value), None)
+        if wrong is not None:
+            raise ManifoldgenError(f"{runs_path}: run {record['run']} of '{record['method']}' has {wrong} "
+                                   f"{short(record[wrong])} where its run gives {short(made[wrong])}: the record was "
+                                   "edited; remove that line to rerun it, or use another folder")
         if "path" not in record:
             continue
         sampler = Method.parse(record["spec"]).sampler
@@ -452,6 +465,13 @@ def recheck_records(experiment: Experiment, records: list[dict], runs_path: Path
             raise ManifoldgenError(f"{runs_path}: run {record['run']} of '{record['method']}' is recorded "
                                    f"{'valid' if record['valid'] else 'invalid'}, but its path rechecks {found}: "
                                    "the record was edited; remove that line to rerun it, or use another folder")
+        path = np.asarray(record["path"], dtype=float)
+        if record["waypoints"] != len(path) or not math.isclose(record["length"], path_length(path), rel_tol=1e-9,
+                                                                  abs_tol=1e-9):
+            raise ManifoldgenError(f"{runs_path}: run {record['run']} of '{record['method']}' records "
+                                   f"{record['waypoints']} waypoints of length {record['length']:.6g}, but its path "
+                                   f"has {len(path)} of length {path_length(path):.6g}: the record was edited; remove "
+                                   "that line to rerun it, or use another folder")
 
 
 def drop_truncated_line(path: Path) -> None:
@@ -494,13 +514,14 @@ def _folder_config(out_dir: Path, experiment: dict, methods: list[Method], resum
         raise ManifoldgenError(f"{out_dir} already holds {done} runs; pass --resume to continue them or choose "
                                "another output folder")
     held: dict[str, str] = {}
-    if resume and path.is_file():
+    if path.is_file():  # read before it is replaced: a config.json bench did not write is not replaced
         try:
             old = json.loads(path.read_text())
             old_experiment, old_specs = dict(old["experiment"]), [str(spec) for spec in old["methods"]]
         except (ValueError, KeyError, TypeError):
-            raise ManifoldgenError(f"{path} is damaged; delete it (the runs in {RUNS_FILE} are kept) or use "
-                                   "another folder") from None
+            raise ManifoldgenError(f"{path} is not a config bench wrote (damaged, or someone else's); move or delete "
+                                   f"it (the runs in {RUNS_FILE} are kept) or use another folder") from None
+    if resume and path.is_file():
         changed = [f"{key} {old_experiment.get(key)!r}, not {value!r}" for key, value in experiment.items()
                    if old_experiment.get(key) != value]
         if changed:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.io import atomic_write_bytes, atomic_write_text
+from manifoldgen.io import PNG_METADATA, atomic_write_bytes, atomic_write_text
 from manifoldgen.planning.result import engine
 from manifoldgen.space import ValidationSettings
 
@@ -173,7 +173,7 @@ def box_plot(records: list[dict], key: str, methods: list[str], title: str, ylab
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
+    fig.savefig(buffer, format="png", dpi=120, metadata=PNG_METADATA)
     plt.close(fig)
     return buffer.getvalue()
 

@@ -29,6 +29,13 @@ class JointLinearConstraint(Constraint):
         self.condition = Condition(tuple(f"joint_linear{i}" for i in range(len(A))), ("",) * len(A),
                                    np.asarray(values, float))
         self.tolerance = np.full(len(A), float(tolerance))
+        span = np.abs(A) @ (robot.upper - robot.lower)  # (r,) the range of each row's A q over the joint limits
+        flat = np.flatnonzero(span <= 2 * self.tolerance)
+        if len(flat):
+            i = int(flat[0])
+            raise ManifoldgenError(f"joint_linear row {i} constrains nothing: over the joint limits its A q spans "
+                                   f"only {span[i]:.3g}, within twice the tolerance {float(tolerance):g}; scale the "
+                                   "row's coefficients up or lower the tolerance")
 
     def core_terms(self, y):
         return [{"type": "linear", "A": self.coefficients.tolist(), "y": np.asarray(y, float).tolist()}]

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import GENERATOR
 
 
 GAP = 0.005  # m: a foot further above the ground at the start is reported as not touching it
@@ -104,4 +105,4 @@ def summary(result: PhysicsResult) -> str:
 
 
 def to_json(result: PhysicsResult) -> str:
-    return json.dumps(result.to_dict(), indent=2)
+    return json.dumps({"generator": GENERATOR, **result.to_dict()}, indent=2)

@@ -546,7 +546,7 @@ def _set_joint(model: pin.Model, q: np.ndarray, name: str, value: float) -> None
 def _read_srdf(srdf: Path) -> ET.Element:
     """The root of an SRDF file: a ``.srdf`` file whose root is ``<robot>`` holding SRDF elements, not a URDF's
     links and joints."""
-    if srdf.suffix != ".srdf":
+    if srdf.suffix.lower() != ".srdf":
         raise ManifoldgenError(f"SRDF {srdf} must be a .srdf file (an SRDF's XML), got a '{srdf.suffix}' file; "
                                "give the robot's .srdf")
     try:

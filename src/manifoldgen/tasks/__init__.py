@@ -46,6 +46,7 @@ TASK_TYPES = {"name": str, "description": str, "default": bool, "robot": str, "s
               "constraints": list, "scenes": dict, "attached": dict, "planner": dict}  # what each key's value is
 TYPE_WORDS = {str: "a string", bool: "true or false", list: "a list [...]", dict: "a table"}
 HOME_SEEDS = 256  # uniform seeds projected when a task gives no home
+HOME_MOVED = 1e-6  # the most a stored (projected) home may move when projected again
 
 
 @dataclass
@@ -125,6 +126,11 @@ def task_from_spec(spec: dict, robot_hint: str | None = None, *, trust_code: boo
     constraint = build_constraint(robot, spec["constraint"])
     task = _finish(spec["name"], robot, constraint, spec.get("home"), spec.get("home_condition"),
                    spec.get("description", ""), {})
+    if spec.get("home") is not None:  # written projected: a home the projection moves was edited
+        moved = float(np.abs(task.home - _numbers(spec["home"], "home")).max())
+        if moved > HOME_MOVED:
+            raise ManifoldgenError(f"{what}: its task's home is off its constraint (projecting it moves a joint "
+                                   f"{moved:.3g}); the file was edited: make it again")
     task.file = Path(spec["task_file"]) if spec.get("task_file") else None
     task.attached = spec.get("attached")
     task.planner = dict(spec.get("planner") or {})

@@ -15,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file
 from manifoldgen.io import load_npz
+from manifoldgen.provenance import check_task_copies
 from manifoldgen.query import read_path_file
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
@@ -66,8 +68,10 @@ def _read_npz(file: Path, task: Task | None, trust_code: bool) -> ViewSource:
         return ViewSource("path", file, meta, t, path, y, scene,
                           f"{t.robot.name} {t.name}, scene {scene.name or '?'}: {len(path)} waypoints")
     if "q" in arrays and "y" in arrays:
-        t = task_from_meta(meta, task=task, trust_code=trust_code, what=str(file))
-        q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
+        data = Dataset.load(file)  # the dataset checks: arrays, meta kinds, its task's copies below
+        t = task_from_meta(data.meta, task=task, trust_code=trust_code, what=str(file))
+        check_task_copies(data.meta, t.constraint, str(file))
+        q, y = data.q, data.y
         _check_width(q, t, file)
         what = "samples" if "generated_by" in meta else "dataset"
         return ViewSource("dataset", file, meta, t, q, y, Scene("", [], None, q[:0], q[:0], y[:0]),
