@@ -212,3 +212,13 @@ def test_a_sweep_never_writes_into_a_folder_of_someone_elses_files(inputs, tmp_p
         sweep(Dataset.load(inputs / "data.npz"), tmp_path / "mine", models=["cvae"], latents=[2], seeds=[0],
               epochs=1, progress=False)
     assert [p.name for p in (tmp_path / "mine").iterdir()] == ["training.json"]
+
+
+@pytest.mark.parametrize("task, robot", [("pose", "panda"), ("balance", "centauro"), ("dualarm", "pr2")])
+def test_every_shipped_kind_of_task_spec_passes_the_meta_checks(task, robot):
+    """The task spec checks take what Task.spec writes: six base bounds of a floating base, locked joints."""
+    from manifoldgen.dataset import check_meta
+    from manifoldgen.tasks import get_task
+
+    t = get_task(task, robot)
+    check_meta({"format_version": 2, **t.meta()}, t.condition.k, "dataset")

@@ -211,8 +211,9 @@ TASK_SPEC_KINDS = {  # meta["task"] key -> (whether its value fits, what it must
     "srdf_source": (lambda v: v is None or _text(v), "null or a path"),
     "group": (lambda v: _texts(v) and len(v) > 0, "a list of joint names"),
     "floating_base": (lambda v: isinstance(v, bool), "true or false"),
-    "base_bounds": (lambda v: v == [] or (isinstance(v, list) and len(v) == 2 and all(_numbers(b, 3) for b in v)),
-                    "[[x, y, z low], [x, y, z high]]"),
+    "base_bounds": (lambda v: isinstance(v, list) and len(v) == 2 and any(all(_numbers(b, n) for b in v)
+                                                                          for n in (3, 6)),
+                    "[[x, y, z (yaw, pitch, roll) low], [the same high]]"),
     "locked": (lambda v: isinstance(v, dict) and all(_number(x) and math.isfinite(x) for x in v.values()),
                "an object joint -> value"),
     "constraint": (lambda v: isinstance(v, dict) and isinstance(v.get("type"), str), "an object with a 'type'"),
