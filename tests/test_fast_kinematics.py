@@ -103,3 +103,32 @@ def test_torch_gradients_equal_the_analytic_jacobians(case):
             continue
         (out * torch.as_tensor(w)).sum().backward()
         np.testing.assert_allclose(qt.grad.numpy(), np.einsum("bi,bin->bn", w, J), rtol=0, atol=1e-10)
+
+
+def test_a_penalty_computes_shared_frames_once_with_the_same_value_and_gradient():
+    """Within one penalty the residual and the inequality read the feet and the centre of mass once; the value and
+    gradient are those of separate evaluations, and a second penalty of the same tensor builds its own graph."""
+    from manifoldgen.constraints.base import INEQUALITY_SCALE, as_like
+    from manifoldgen.tasks import get_task
+
+    task = get_task("balance", "centauro")
+    c, robot = task.constraint, task.robot
+    rng = np.random.default_rng(0)
+    q = torch.tensor(task.home + 0.05 * rng.standard_normal((8, robot.n)), requires_grad=True)
+    y = torch.tensor(np.repeat(task.home_condition[None], 8, axis=0))
+    calls = []
+    compute = robot.torch_kinematics._frame_pose
+    robot.torch_kinematics._frame_pose = lambda q, frame: calls.append(frame) or compute(q, frame)
+    try:
+        shared = c.penalty(q, y)
+        once = len(calls)
+        F = c.residual(q, y) / as_like(c.tolerance, q)
+        separate = (F * F).sum(dim=1) + (c.inequality(q, y).clamp(min=0) / INEQUALITY_SCALE).pow(2).sum(dim=1)
+    finally:
+        robot.torch_kinematics._frame_pose = compute
+    assert once == len(set(calls[:once])) and len(calls) - once > once  # shared: each frame once; apart: some twice
+    (g_shared,) = torch.autograd.grad(shared.sum(), q)
+    (g_separate,) = torch.autograd.grad(separate.sum(), q)
+    assert torch.allclose(shared, separate, rtol=1e-12) and torch.allclose(g_shared, g_separate, rtol=1e-9)
+    for _ in range(2):  # the same leaf again: a graph of its own each time
+        c.penalty(q, y).sum().backward()

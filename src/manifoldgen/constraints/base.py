@@ -214,8 +214,9 @@ class Constraint(ABC):
         """(B,) differentiable ``sum_i (F_i / tol_i)^2 + sum_j (max(G_j, 0) / INEQUALITY_SCALE)^2`` for
         torch ``q (B, n)``, ``y (B, k)``: the models' training penalty, for every constraint alike."""
         q, y = self.batch(q, y)
-        F = self.residual(q, y) / as_like(self.tolerance, q)
-        G = self.inequality(q, y)
+        with self.robot.torch_kinematics.shared():  # the frames residual and inequality share: computed once
+            F = self.residual(q, y) / as_like(self.tolerance, q)
+            G = self.inequality(q, y)
         return (F * F).sum(dim=1) + (G.clamp(min=0) / INEQUALITY_SCALE).pow(2).sum(dim=1)
 
 

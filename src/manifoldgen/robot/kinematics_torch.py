@@ -11,6 +11,8 @@ per joint), which keeps the penalty's forward and backward passes cheap on robot
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import torch
 
@@ -29,6 +31,25 @@ class TorchKinematics:
     def __init__(self, robot):
         self.robot = robot
         self._tensors: dict[tuple, tuple] = {}  # (frame or "com", dtype) -> its constants as tensors
+        self._shared: dict | None = None  # inside shared(): (frame or "com", id(q)) -> (q, its value)
+
+    @contextmanager
+    def shared(self):
+        """Within it, a frame or the centre of mass asked for twice at the same tensor is computed once (one
+        graph): a constraint's residual and inequality read the same frames in one penalty."""
+        self._shared = {}
+        try:
+            yield
+        finally:
+            self._shared = None
+
+    def _remembered(self, q: torch.Tensor, key: str, compute):
+        if self._shared is None:
+            return compute(q)
+        mark = (key, id(q), q._version)
+        if mark not in self._shared:
+            self._shared[mark] = (q, compute(q))  # q kept: its id is not reused while shared
+        return self._shared[mark][1]
 
     def _chain(self, frame: str, dtype: torch.dtype) -> tuple:
         key = (frame, dtype)
@@ -43,6 +64,13 @@ class TorchKinematics:
 
     def frame_pose(self, q: torch.Tensor, frame: str) -> tuple[torch.Tensor, torch.Tensor]:
         """World position (B, 3) and rotation (B, 3, 3) of ``frame``."""
+        return self._remembered(q, frame, lambda q: self._frame_pose(q, frame))
+
+    def com(self, q: torch.Tensor) -> torch.Tensor:
+        """Centre of mass (B, 3)."""
+        return self._remembered(q, "com", self._com)
+
+    def _frame_pose(self, q: torch.Tensor, frame: str) -> tuple[torch.Tensor, torch.Tensor]:
         chain = self._chain(frame, q.dtype)
         if len(chain) == 1:
             T = chain[0].expand(len(q), 4, 4)
@@ -53,8 +81,7 @@ class TorchKinematics:
             T = M[:, 0]
         return T[:, :3, 3], T[:, :3, :3]
 
-    def com(self, q: torch.Tensor) -> torch.Tensor:
-        """Centre of mass (B, 3)."""
+    def _com(self, q: torch.Tensor) -> torch.Tensor:
         key = ("com", q.dtype)
         if key not in self._tensors:
             tree = self.robot._tree
