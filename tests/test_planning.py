@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -207,6 +208,20 @@ def test_reuse_routes_later_queries_through_the_paths_found():
     _check(third, space, far, goal)
     assert third.extras["roadmap"]["routed"] is False and third.iterations > 0
     assert third.extras["roadmap"]["nodes"] == len(first.path) + 2 + len(third.path)
+
+
+def test_a_route_found_past_the_time_limit_is_no_answer():
+    """A route through the roadmap counts against the query's time limit: one checked past it is refused with the
+    reason, and nothing else is tried."""
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, reuse=True)
+    planner.solve(start, goal, 20.0)
+    route = planner.roadmap.route
+    planner.roadmap.route = lambda a, b: (time.sleep(0.003), route(a, b))[1]  # a route checked slowly
+    late = planner.solve(start, goal, 0.001)
+    assert not late.solved and late.iterations == 0 and late.time_s > 0.001
+    assert late.extras["failure"] == "the time limit (0.001 s) passed while the roadmap's route was checked"
+    planner.roadmap.route = route
+    assert planner.solve(start, goal, 20.0).extras["roadmap"]["routed"] is True
 
 
 @pytest.mark.slow

@@ -180,13 +180,15 @@ class Planner(ABC):
         self.found_length, self.shortcuts = np.nan, 0
         checks = self.roadmap.checks if self.roadmap is not None else 0
         path = self.roadmap.route(start, goal) if self.roadmap is not None else None
+        if path is not None and time.perf_counter() > began + time_limit:  # a route answers only within the limit
+            path, failure = None, f"the time limit ({time_limit:g} s) passed while the roadmap's route was checked"
         routed = path is not None
         begin_query = getattr(self.sampler, "begin_query", None)  # a model sampler measures its gaps at the ends
-        note = begin_query(start, goal) if begin_query and not routed else ""
+        note = begin_query(start, goal) if begin_query and not routed and not failure else ""
         try:
-            if path is None:
+            if path is None and not failure:
                 path = self._direct(start, goal)
-            if path is None:
+            if path is None and not failure:
                 path = self._solve(start, goal, began + time_limit)
                 if path is not None:
                     path = self._shorten(path, began + time_limit)
