@@ -515,7 +515,7 @@ CASES = [
     cli("tasks-home-short", "tasks {I}/task-home-short.toml", "home"),
     cli("tasks-home-nan", "tasks {I}/task-home-nan.toml", "home must be finite numbers"),
     cli("tasks-home-limits", "tasks {I}/task-home-limits.toml", "pose", code=0),  # home is projected
-    cli("tasks-home-condition-nan", "tasks {I}/task-home-condition-nan.toml", "line 8", "nan"),
+    cli("tasks-home-condition-nan", "tasks {I}/task-home-condition-nan.toml", "line 9", "nan"),
     cli("tasks-home-condition-long", "tasks {I}/task-home-condition-long.toml", "line 8", "got 2"),
     cli("tasks-locked-str", "tasks {I}/task-locked-str.toml", "locked", "open"),
     cli("tasks-locked-unknown", "tasks {I}/task-locked-unknown.toml", "nosuchjoint"),

@@ -41,7 +41,7 @@ def inputs(tmp_path_factory, panda_task, planned_path):
              "tolerance-long": {"tolerance": [1e9] * 500}}
     for name, change in edits.items():
         save_npz(root / f"{name}.npz", {**meta, **change}, path=path)
-    save_npz(root / "extra-array.npz", meta, path=path, notes=np.zeros(3))
+    save_npz(root / "extra-array.npz", meta, path=path, nodes=np.zeros(3))  # an array of another kind of file
     return root
 
 
@@ -77,7 +77,7 @@ CASES = [
     api("load-tolerance-long", lambda I, O: read_path_file(I / "tolerance-long.npz"),
         "meta 'tolerance' [1000000000.0, 1000000000.0, 10000000... is not its task's [0.01, "),
     cli("trajectory-extra-array", "trajectory {I}/extra-array.npz -o {O}/t.json",
-        'unknown array "notes"; a path file holds only \'path\' and \'meta\''),
+        'unknown array "nodes"; a path file holds only \'path\' and \'meta\''),
     cli("trajectory-unknown-meta-key", "trajectory {I}/unknown-key.npz -o {O}/t.json",
         'unknown meta key "sceen" (did you mean \'scene\'?)'),
     # sampler options: the same ranges whether given as arguments or in the spec string

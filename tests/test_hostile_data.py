@@ -41,7 +41,7 @@ def files(tmp_path_factory, panda_task):
     _save(root / "tolerance.npz", {**meta, "tolerance": [1e9] * 4}, q, y)
     _save(root / "robot.npz", {**meta, "robot": "pr2"}, q, y)
     _save(root / "names.npz", {**meta, "condition": {**meta["condition"], "names": ["banana"]}}, q, y)
-    _save(root / "array.npz", meta, q, y, extra=np.zeros(3))
+    _save(root / "array.npz", meta, q, y, nodes=np.zeros(3))  # an array of another kind of file
     _save(root / "key.npz", {**meta, "robto": "panda"}, q, y)
     _save(root / "scene.npz", {**meta, "scenes": [{**wall, "obstacles": "x"}]}, q, y)
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
@@ -130,7 +130,7 @@ CASES = [
          "meta 'robot' \"pr2\" contradicts its task's \"panda\""),
     Case("dataset-condition-names-lie", lambda I, O: _train(I, O, "names.npz"),
          'condition.names: ["banana"] in the file, ["panda_hand_tcp.z"] by its task'),
-    Case("dataset-extra-array", lambda I, O: Dataset.load(I / "array.npz"), "unknown array 'extra' beside q and y"),
+    Case("dataset-extra-array", lambda I, O: Dataset.load(I / "array.npz"), "unknown array 'nodes' beside q and y"),
     Case("dataset-unknown-meta-key", lambda I, O: Dataset.load(I / "key.npz"),
          "unknown key 'robto' (did you mean 'robot'?)"),
     Case("dataset-scene-obstacles-not-a-list", lambda I, O: _select(Dataset.load(I / "scene.npz"), O / "m"),

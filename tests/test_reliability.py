@@ -96,7 +96,8 @@ def test_written_files_respect_the_umask(tmp_path, umask, mode, panda_task):
     old = os.umask(umask)
     try:
         atomic_write_text(tmp_path / "a.txt", "x")
-        Dataset(np.zeros((1, 7)), np.zeros((1, 1)), {"a": 1}).save(tmp_path / "d.npz")
+        Dataset(panda_task.home[None], panda_task.home_condition[None], {"format_version": 2, **panda_task.meta()}
+                ).save(tmp_path / "d.npz")
     finally:
         os.umask(old)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == mode

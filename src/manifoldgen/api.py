@@ -169,13 +169,6 @@ def collect(task: Task | PathLike, per_condition: int = 1000, seed: int = 0, out
         raise ManifoldgenError(f"collect: per_condition must be a positive number of rows, got {per_condition}")
     seed = _seed("collect", seed)
     near_home = _number("collect", "near_home", near_home)
-    if conditions is not None:
-        import numpy as np
-
-        try:
-            conditions = np.asarray(conditions, dtype=float)
-        except (TypeError, ValueError):
-            raise _wrong("collect", "conditions", "None or condition values (V, k) as numbers", conditions) from None
     anchors, progress = _flag("collect", "anchors", anchors), _flag("collect", "progress", progress)
     out = _optional_path("collect", "out", out)
     if out is not None:

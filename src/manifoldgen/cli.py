@@ -253,6 +253,9 @@ def plan(task: str = typer.Argument(..., help=TASK_HELP),
         if out is not None:
             check_output_path(out, inputs, what=what, suffixes=(suffix,), kind=kind)
     values = parse_settings(settings, config, planner_settings(planner), f"{planner} planner")
+    if smooth and values.get("shortcut") == 0:
+        raise ManifoldgenError("--smooth asks for shortcut attempts, but shortcut=0 (from --set or --config) allows "
+                               "none; leave out one of them")
     task_obj = load_task(task, robot)
     scene_obj = get_scene(task_obj, scene)
     result, meta = run_query(task_obj, scene_obj, sampler, planner, seed=seed, time_limit=time_limit,
@@ -612,6 +615,7 @@ def sweep(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
     from manifoldgen.dataset import Dataset
     from manifoldgen.model_sweep import MODEL_FILES, SWEEP_FILE, sweep as run_sweep
     on = parse_cluster(cluster)
+    _bounded("--epochs", epochs)
     check_output_path(output, [dataset], directory=True, writes=MODEL_FILES + (SWEEP_FILE, "candidates"))
     set_threads()
     rows = run_sweep(Dataset.load(dataset), output, models=model or list(CANDIDATES), latents=latent or [],

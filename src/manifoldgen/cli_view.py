@@ -64,8 +64,9 @@ def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, 
 @app.command()
 @friendly
 def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `manifoldgen plan`"),
-               vel_scale: float = typer.Option(1.0, help="Fraction (0, 1] of the URDF joint velocity limits"),
-               acc_scale: float = typer.Option(1.0, help="Fraction (0, 1] of the reference acceleration limits "
+               vel_scale: float = typer.Option(1.0, help="Fraction (0.001 to 1) of the URDF joint velocity "
+                                               "limits"),
+               acc_scale: float = typer.Option(1.0, help="Fraction (0.001 to 1) of the reference acceleration limits "
                                                "(2 x the velocity limit per second)"),
                dt: float = typer.Option(0.01, help="Seconds between samples"),
                output: Path = typer.Option(..., "-o", "--output", help="traj.json (ROS JointTrajectory layout) "

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -32,7 +33,7 @@ import numpy as np
 from manifoldgen.cluster import Cluster, Pool, connect
 from manifoldgen.coverage import ANCHOR_SPREAD, Anchors, anchor_seeds, gaps, missed, modes, rows_at, spacing
 from manifoldgen.dataset import FORMAT_VERSION, MAX_NEAR_HOME, Dataset
-from manifoldgen.errors import ManifoldgenError, differences
+from manifoldgen.errors import ManifoldgenError, differences, listed, short
 from manifoldgen.io import atomic_write_text, check_output_path, load_npz, locks_output, save_npz
 from manifoldgen.native import fast_space
 from manifoldgen.progress import progress_bar
@@ -320,6 +321,18 @@ def _prepare_partial(partial: Path, settings: dict) -> None:
     """Resume a previous run's batches only if it ran with the same ``settings``; refuse otherwise."""
     stamp = partial / "meta.json"
     settings = json.loads(json.dumps(settings))
+    others = sorted(f.name for f in partial.iterdir() if not _collects_own(f.name)) if partial.exists() else []
+    if others:
+        raise ManifoldgenError(f"{partial} holds files collect did not write ({listed(others[:3], ', ')}); it keeps "
+                               "the batches of an unfinished run there: move or delete that folder")
+    if stamp.exists() and not any(partial.glob("c*-b*.npz")):  # a run stopped before its first batch, or not ours
+        try:
+            ours = set(json.loads(stamp.read_text())) == set(settings)
+        except (OSError, ValueError, TypeError):
+            ours = False
+        if not ours:
+            raise ManifoldgenError(f"{stamp} is not the record of an unfinished collection; move or delete "
+                                   f"{partial}")
     if partial.exists() and any(partial.glob("c*-b*.npz")):
         try:
             old = json.loads(stamp.read_text())
@@ -335,12 +348,27 @@ def _prepare_partial(partial: Path, settings: dict) -> None:
     atomic_write_text(stamp, json.dumps(settings))
 
 
+def _collects_own(name: str) -> bool:
+    """Whether a file named ``name`` in a partial folder is one collect writes: its meta.json, a batch, or a
+    temporary file of an interrupted atomic write."""
+    return name == "meta.json" or re.fullmatch(r"c\d+-b\d+\.npz", name) is not None or (
+        name.startswith(".") and name.endswith(".tmp"))
+
+
 def _condition_values(task: Task, conditions) -> np.ndarray:
     """The condition values to collect at, (V, k): ``conditions`` (default: the task's), each given once."""
     k = task.condition.k
     if conditions is None or not k:
         return task.condition.grid
-    values = np.asarray(conditions, float)
+    values = None
+    try:
+        odd = next((v for v in np.asarray(conditions, dtype=object).ravel()
+                    if isinstance(v, (bool, np.bool_, str, bytes))), None)
+        values = np.asarray(conditions, float) if odd is None else None
+    except (TypeError, ValueError):
+        odd = conditions
+    if values is None or odd is not None:
+        raise ManifoldgenError(f"conditions must be condition values (V, {k}) as numbers, got {short(odd)}")
     if values.ndim == 1:  # one value per row (k = 1), or a single row
         values = values[:, None] if k == 1 else values[None]
     if values.ndim != 2 or values.shape[1] != k or not len(values):
@@ -349,8 +377,8 @@ def _condition_values(task: Task, conditions) -> np.ndarray:
                                f"{values.shape}")
     if not np.isfinite(values).all():
         raise ManifoldgenError(f"condition values must be finite numbers, got {values[~np.isfinite(values)][0]}")
-    rows = [tuple(row) for row in values.tolist()]
-    twice = next((row for row in rows if rows.count(row) > 1), None)
+    seen: set[tuple] = set()
+    twice = next((row for row in map(tuple, values.tolist()) if row in seen or seen.add(row)), None)
     if twice is not None:
         raise ManifoldgenError(f"condition value {list(twice)} is given twice; give each value once (rows per "
                                "value: --per-condition)")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError, did_you_mean, file_reader, short
+from manifoldgen.errors import ManifoldgenError, did_you_mean, differences, file_reader, short
 from manifoldgen.io import check_output_path, load_npz, save_npz
 from manifoldgen.runtime import MAX_SEED
 
@@ -38,9 +38,9 @@ class Dataset:
         return len(self.q)
 
     def save(self, path: str | Path) -> None:
-        """Write the file (atomic); rows with NaN or infinite values are refused (no reader would take them)."""
-        if not (np.isfinite(self.q).all() and np.isfinite(self.y).all()):
-            raise ManifoldgenError(f"dataset rows hold NaN or infinite values; {path} not written")
+        """Write the file (atomic); what :meth:`load` would refuse (rows with NaN, q and y of different lengths,
+        a meta without its task) is refused instead, and nothing written."""
+        _check(np.asarray(self.q), np.asarray(self.y), self.meta, f"{path} (not written)")
         kind = "samples" if "generated_by" in self.meta else "dataset"
         save_npz(check_output_path(path, suffixes=(".npz",), kind=kind), self.meta, q=self.q, y=self.y)
 
@@ -54,40 +54,53 @@ class Dataset:
             kind = meta.get("kind") if meta.get("kind") in ("path", "roadmap") else None
             what = f"a {kind} file, not a dataset" if kind else f"not a dataset (no {' or '.join(missing)} array)"
             raise ManifoldgenError(f"{path} is {what}: give a dataset written by `manifoldgen collect`")
-        if any(arrays[k].dtype.kind not in "fiu" for k in ("q", "y")):
-            raise ManifoldgenError(f"{path}: q and y must be arrays of numbers, got {arrays['q'].dtype} and "
-                                   f"{arrays['y'].dtype}; regenerate the file")
-        narrow = next((k for k in ("q", "y") if arrays[k].dtype.kind == "f" and arrays[k].dtype.itemsize < 8), None)
-        if narrow is not None:
-            raise ManifoldgenError(f"{path}: {narrow} is {arrays[narrow].dtype}, which rounds rows off the constraint "
-                                   "and past the joint limits; store q and y as float64 (what collect writes)")
-        q, y = np.asarray(arrays["q"], float), np.asarray(arrays["y"], float)
-        for key in ("format_version", "robot", "joints", "constraint"):
-            if key not in meta:
-                raise ManifoldgenError(f"{path}: meta lacks '{key}'; not a manifoldgen dataset")
-        if meta["format_version"] != FORMAT_VERSION:
-            raise ManifoldgenError(f"{path}: dataset format {meta['format_version']!r} is not the one this version "
-                                   f"reads ({FORMAT_VERSION}); collect it again")
-        if not isinstance(meta["robot"], str) or not isinstance(meta["joints"], list) \
-                or not all(isinstance(j, str) for j in meta["joints"]):
-            raise ManifoldgenError(f"{path}: meta 'robot' must be a name and 'joints' a list of joint names; the file "
-                                   "was edited or is damaged: collect it again")
-        if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
-            raise ManifoldgenError(f"{path}: inconsistent shapes q {q.shape}, y {y.shape} for "
-                                   f"{len(meta['joints'])} joints")
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(y))):
-            raise ManifoldgenError(f"{path}: contains NaN or infinite values; recollect it")
         extra = sorted(set(arrays) - {"q", "y"})
         if extra:
             raise ManifoldgenError(f"{path}: unknown array '{extra[0]}' beside q and y; the file was edited: "
                                    "collect it again")
-        check_meta(meta, y.shape[1], str(path))
-        return cls(q, y, meta)
+        _check(arrays["q"], arrays["y"], meta, str(path))
+        return cls(np.asarray(arrays["q"], float), np.asarray(arrays["y"], float), meta)
 
     def summary(self) -> dict:
         values, counts = np.unique(self.y, axis=0, return_counts=True)
         return {"rows": len(self), "robot": self.meta["robot"], "joints": len(self.meta["joints"]),
                 "conditions": {json.dumps(v.tolist()): int(c) for v, c in zip(values, counts)}}
+
+
+def _check(q: np.ndarray, y: np.ndarray, meta: dict, where: str) -> None:
+    """Refuse rows ``q (N, n)`` and ``y (N, k)`` with ``meta`` that no reader takes: arrays not of float64 numbers,
+    shapes that disagree, NaN, a meta without what a dataset's holds (:func:`check_meta`). ``where``: the file."""
+    if any(a.dtype.kind not in "fiu" for a in (q, y)):
+        raise ManifoldgenError(f"{where}: q and y must be arrays of numbers, got {q.dtype} and {y.dtype}; "
+                               "regenerate the file")
+    narrow = next((name for name, a in (("q", q), ("y", y)) if a.dtype.kind == "f" and a.dtype.itemsize < 8), None)
+    if narrow is not None:
+        raise ManifoldgenError(f"{where}: {narrow} is {(q if narrow == 'q' else y).dtype}, which rounds rows off the "
+                               "constraint and past the joint limits; store q and y as float64 (what collect writes)")
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(y))):
+        raise ManifoldgenError(f"{where}: contains NaN or infinite values; recollect it")
+    if not isinstance(meta, dict):
+        raise ManifoldgenError(f"{where}: meta must be a JSON object; not a manifoldgen dataset")
+    for key in ("format_version", "robot", "joints", "constraint"):
+        if key not in meta:
+            raise ManifoldgenError(f"{where}: meta lacks '{key}'; not a manifoldgen dataset")
+    if meta["format_version"] != FORMAT_VERSION:
+        raise ManifoldgenError(f"{where}: dataset format {meta['format_version']!r} is not the one this version "
+                               f"reads ({FORMAT_VERSION}); collect it again")
+    if not isinstance(meta["robot"], str) or not isinstance(meta["joints"], list) \
+            or not all(isinstance(j, str) for j in meta["joints"]):
+        raise ManifoldgenError(f"{where}: meta 'robot' must be a name and 'joints' a list of joint names; the file "
+                               "was edited or is damaged: collect it again")
+    if q.ndim != 2 or y.ndim != 2 or len(q) != len(y) or q.shape[1] != len(meta["joints"]):
+        raise ManifoldgenError(f"{where}: inconsistent shapes q {q.shape}, y {y.shape} for "
+                               f"{len(meta['joints'])} joints")
+    check_meta(meta, y.shape[1], where)
+    if "per_condition" in meta and "generated_by" not in meta:  # collect keeps that many rows at every value
+        values, counts = np.unique(y, axis=0, return_counts=True)
+        off = next((i for i, c in enumerate(counts) if c != meta["per_condition"]), None)
+        if off is not None:
+            raise ManifoldgenError(f"{where}: meta 'per_condition' {meta['per_condition']} but {counts[off]} rows at "
+                                   f"condition {values[off].tolist()}; the file was edited: collect it again")
 
 
 def check_meta(meta: dict, k: int, where: str) -> None:
@@ -107,13 +120,7 @@ def check_meta(meta: dict, k: int, where: str) -> None:
     if task is not None:
         _check_known(task, TASK_SPEC_KEYS, "'task' has", bad)
         _check_task_spec(task, meta.get("joints"), k, bad)
-        identity = task.get("robot")
-        copies = {"robot": identity.get("name") if isinstance(identity, dict) else identity,
-                  "locked": task.get("locked"), "floating_base": task.get("floating_base"),
-                  "constraint": task.get("constraint")}
-        for key, value in copies.items():
-            if key in meta and meta[key] != value:
-                raise bad(f"'{key}' {short(meta[key])} contradicts its task's {short(value)}")
+        check_copies(meta, bad)
     tolerance = meta.get("tolerance", [1.0])
     if not (isinstance(tolerance, list) and tolerance and all(
             isinstance(t, (int, float)) and not isinstance(t, bool) and 0 < t < float("inf") for t in tolerance)):
@@ -126,6 +133,24 @@ def check_meta(meta: dict, k: int, where: str) -> None:
             and all(_numbers(row, k) for row in condition["values"])):
         raise bad(f"'condition' must hold names, units and value rows for y's {k} condition columns")
     _check_scenes(meta, k, bad)
+
+
+def check_copies(meta: dict, bad) -> None:
+    """Refuse (``bad(why)``: the error to raise) a top-level copy of the task's ``robot``, ``locked``,
+    ``floating_base`` or ``constraint`` in ``meta`` (a dataset's, model's or path file's) that contradicts
+    ``meta["task"]``."""
+    task = meta.get("task")
+    if not isinstance(task, dict):
+        return
+    identity = task.get("robot")
+    copies = {"robot": identity.get("name") if isinstance(identity, dict) else identity,
+              "locked": task.get("locked"), "floating_base": task.get("floating_base"),
+              "constraint": task.get("constraint")}
+    for key, value in copies.items():
+        if key in meta and meta[key] != value:
+            shown = (f"contradicts its task ({differences(meta[key], value, key, ('in the file', 'in the task'))})"
+                     if isinstance(value, dict) else f"{short(meta[key])} contradicts its task's {short(value)}")
+            raise bad(f"'{key}' {shown}")
 
 
 def _check_task_spec(task: dict, joints, k: int, bad) -> None:

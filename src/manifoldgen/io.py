@@ -17,7 +17,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from manifoldgen.errors import ManifoldgenError, not_a_file
+from manifoldgen.errors import ManifoldgenError, not_a_file, short
 
 if TYPE_CHECKING:
     import numpy as np
@@ -279,7 +279,8 @@ def output_lock(path: str | Path, what: str = "-o"):
     """Hold ``<path>.lock`` while writing the output ``path`` (a file or a folder): one writer per output. The
     lock is an exclusive ``flock`` on that file, which holds the writer's process id; a second writer is
     refused, naming the lock and that process. The kernel drops the lock of a process that is gone, so a lock
-    file left by a killed writer is taken over. The file is removed when the writer finishes."""
+    file left by a killed writer is taken over. The file is removed when the writer finishes. A lock path that is a
+    symbolic link, or a file that holds anything but a process id (not a lock of ours), is refused untouched."""
     import fcntl
 
     path = Path(path)
@@ -288,8 +289,11 @@ def output_lock(path: str | Path, what: str = "-o"):
         raise ManifoldgenError(f"output directory {lock.parent} does not exist; create it or choose another path")
     while True:
         try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666)
         except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise ManifoldgenError(f"{lock}, where {what} {path} keeps its lock, is a symbolic link; remove it "
+                                       "(a lock is never written through a link)") from None
             raise write_error(lock, exc) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -303,6 +307,11 @@ def output_lock(path: str | Path, what: str = "-o"):
         except FileNotFoundError:
             current = None
         if current == os.fstat(fd).st_ino:
+            held = os.pread(fd, 64, 0)
+            if held.strip() and not held.strip().isdigit():
+                os.close(fd)
+                raise ManifoldgenError(f"{lock}, where {what} {path} keeps its lock, is a file manifoldgen did not "
+                                       "write; move or delete it")
             break
         os.close(fd)  # its writer finished and removed it between our open and flock: lock the next one
     try:
@@ -349,6 +358,24 @@ def save_npz(file: str | Path, meta: dict, /, **arrays: np.ndarray) -> None:
     _atomic(Path(file), lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
 
 
+NPZ_ARRAYS = ("meta", "q", "y", "path", "nodes", "edges", "lengths", "joint", "center", "radius", "geometry",
+              "unfitted", "solid_volume", "union_volume")  # every array name a file manifoldgen writes holds
+MAX_NPZ_BYTES = 8 << 30  # the most an .npz may hold uncompressed (a dataset of MAX_ROWS rows of 50 joints: 4 GB)
+
+
+def _check_members(path: Path, members: list[zipfile.ZipInfo]) -> None:
+    """Refuse, from the archive's directory alone (nothing decompressed), an array no manifoldgen file holds and
+    an archive that would take more than MAX_NPZ_BYTES once read."""
+    unknown = next((m.filename for m in members if m.filename.removesuffix(".npy") not in NPZ_ARRAYS), None)
+    if unknown is not None:
+        raise ManifoldgenError(f"{path} is not a manifoldgen file: it holds an array {short(unknown.removesuffix('.npy'))}, "
+                               "which none holds (read without loading it); give a file manifoldgen wrote")
+    size = sum(m.file_size for m in members)
+    if size > MAX_NPZ_BYTES:
+        raise ManifoldgenError(f"{path} would take {size / 2**30:.1f} GiB once read, over the "
+                               f"{MAX_NPZ_BYTES >> 30} GiB any manifoldgen file holds; regenerate it")
+
+
 def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[str, np.ndarray]]:
     """Read an .npz written by :func:`save_npz`; clear errors for missing, truncated or foreign files."""
     import numpy as np
@@ -361,7 +388,10 @@ def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[st
         if not isinstance(loaded, np.lib.npyio.NpzFile):
             raise ValueError("a single .npy array, not an .npz archive")
         with loaded as f:
+            _check_members(path, f.zip.infolist())
             arrays = {k: f[k] for k in f.files}
+    except ManifoldgenError:
+        raise
     except Exception as exc:  # zipfile/np raise many types for damaged files
         if "pickle" in str(exc) and zipfile.is_zipfile(path):
             raise ManifoldgenError(f"{path} holds an object array (a pickle), which is never loaded: it could run "

@@ -25,7 +25,7 @@ import torch
 
 from manifoldgen.cluster import Cluster, connect
 from manifoldgen.dataset import Dataset
-from manifoldgen.errors import ManifoldgenError, differences
+from manifoldgen.errors import ManifoldgenError, differences, short
 from manifoldgen.io import atomic_write_bytes, atomic_write_text, check_name
 from manifoldgen.models import MODELS, get_model_class, load_model
 from manifoldgen.models.base import dataset_task
@@ -116,6 +116,11 @@ def _finished(out: Path, settings: dict) -> dict[str, dict]:
         changed = differences(old.get("settings"), settings)
         raise ManifoldgenError(f"{out} holds a sweep made with other settings ({changed}); rerun the same command to "
                                "resume it, or choose another folder")
+    names = {candidate_name(*job) for job in settings["candidates"]}
+    foreign = next((name for name in rows if name not in names), None)
+    if foreign is not None:
+        raise ManifoldgenError(f"{path} holds a row named {short(foreign)}, not a candidate of its settings (the file "
+                               "was edited); delete it to start the sweep over")
     return {name: row for name, row in rows.items()
             if all((out / "candidates" / name / file).is_file() for file in MODEL_FILES)}
 

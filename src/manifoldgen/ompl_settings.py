@@ -4,7 +4,7 @@ extra) and the C++ baseline (:mod:`manifoldgen.ompl_native`, which does not)."""
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 
 from manifoldgen.errors import ManifoldgenError
 
@@ -40,21 +40,30 @@ class OmplSettings:
     exploration: float = 0.75
     separated: bool = True
 
-    def check(self) -> None:
-        if (self.max_iterations < 1 or self.lambda_ <= 1 or self.range < 0 or self.sample_attempts < 1
-                or self.shortcut < 0 or not self.epsilon > 0 or self.rho < 0 or not 0 < self.alpha < math.pi / 2
-                or not 0 <= self.exploration < 1):
-            raise ManifoldgenError(f"invalid OMPL settings {asdict(self)}: need max_iterations >= 1, lambda_ > 1, "
-                                   "range >= 0, sample_attempts >= 1, shortcut >= 0, epsilon > 0, rho >= 0, "
-                                   "0 < alpha < pi/2, 0 <= exploration < 1")
+    def check(self, prefix: str = "") -> None:
+        """Refuse the first setting outside its range, named as given (``prefix``: a benchmark's ``ompl_``)."""
+        for name, (rule, ok) in _RULES.items():
+            value = getattr(self, name)
+            if not ok(value):
+                key = name if name == "shortcut" else prefix + name.rstrip("_")
+                raise ManifoldgenError(f"invalid OMPL settings: {key} is {value!r}; need {rule.format(key)}")
 
     @classmethod
     def from_benchmark(cls, values: dict) -> OmplSettings:
         """The settings a benchmark gives OMPL: its ``ompl_KEY`` values (``ompl_lambda`` for ``lambda_``) and the
         ``shortcut`` budget both sides share; the rest of ``values`` are our planners'."""
         known = {PREFIX + f.name.rstrip("_"): f.name for f in fields(cls) if f.name != "shortcut"}
-        return cls(shortcut=int(values.get("shortcut", 0)),
-                   **{known[k]: v for k, v in values.items() if k in known})
+        settings = cls(shortcut=int(values.get("shortcut", 0)),
+                       **{known[k]: v for k, v in values.items() if k in known})
+        settings.check(PREFIX)
+        return settings
+
+
+_RULES = {"max_iterations": ("{} >= 1", lambda v: v >= 1), "lambda_": ("{} > 1", lambda v: v > 1),
+          "range": ("{} >= 0", lambda v: v >= 0), "sample_attempts": ("{} >= 1", lambda v: v >= 1),
+          "shortcut": ("{} >= 0", lambda v: v >= 0), "epsilon": ("{} > 0", lambda v: v > 0),
+          "rho": ("{} >= 0", lambda v: v >= 0), "alpha": ("0 < {} < pi/2", lambda v: 0 < v < math.pi / 2),
+          "exploration": ("0 <= {} < 1", lambda v: 0 <= v < 1)}  # each setting's range: NaN is outside every one
 
 
 def benchmark_keys() -> dict:

@@ -18,16 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
+from manifoldgen.dataset import check_copies
 from manifoldgen.errors import ManifoldgenError, did_you_mean, listed, short
 from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner, check_time_limit
-from manifoldgen.planning.local import DEFAULT_LOCAL
+from manifoldgen.planning.local import DEFAULT_LOCAL, LOCAL_PLANNERS
 from manifoldgen.planning.result import PlanResult
 from manifoldgen.runtime import MAX_SEED, check_seed
 from manifoldgen.scene import Scene
 from manifoldgen.settings import check_settings
-from manifoldgen.space import ConstrainedSpace
+from manifoldgen.space import RESOLUTION_RANGE, ConstrainedSpace
 from manifoldgen.specs import make_sampler
 from manifoldgen.tasks import Task
 
@@ -41,22 +42,26 @@ ENDPOINT_TOLERANCE = 1e-6  # rad: how far path[0] and path[-1] may lie from the 
 # the kinds of a path file's meta values besides the task's and the query's, as plan_query writes them
 TEXT, FLAG, COUNT, SEED = "a string", "true or false", "a whole number >= 0", f"a whole number from 0 to {MAX_SEED}"
 POSITIVE, AMOUNT, SEGMENT, OBJECT = "a finite number > 0", "a finite number >= 0", "a whole number >= -1", "an object"
-VALUE_KINDS = {"scene_name": TEXT, "planner": TEXT, "sampler": TEXT, "local": TEXT, "seed": SEED,
+TRUE, LOCAL = "true (plan writes only solved, checked paths)", f"a local planner ({', '.join(LOCAL_PLANNERS)})"
+RESOLUTION = "a number from {:g} to {:g} (rad)".format(*RESOLUTION_RANGE)
+VALUE_KINDS = {"scene_name": TEXT, "planner": TEXT, "sampler": TEXT, "local": LOCAL, "seed": SEED,
                "time_limit": POSITIVE, "smoothed": FLAG, "planner_settings": OBJECT, "result": OBJECT,
                "validation": OBJECT}
-NESTED_KINDS = {"result": {"solved": FLAG, "time_s": AMOUNT, "iterations": COUNT, "samples_drawn": COUNT,
+NESTED_KINDS = {"result": {"solved": TRUE, "time_s": AMOUNT, "iterations": COUNT, "samples_drawn": COUNT,
                            "projections": COUNT, "planner": TEXT, "length": AMOUNT, "waypoints": COUNT,
                            "extras": OBJECT},
-                "validation": {"valid": FLAG, "worst_violation": AMOUNT, "reason": TEXT, "segment": SEGMENT,
-                               "states_checked": COUNT, "resolution": POSITIVE}}
+                "validation": {"valid": TRUE, "worst_violation": AMOUNT, "reason": TEXT, "segment": SEGMENT,
+                               "states_checked": COUNT, "resolution": RESOLUTION}}
 
 
 def _is_kind(value, kind: str) -> bool:
     whole = isinstance(value, int) and not isinstance(value, bool)
+    low, high = RESOLUTION_RANGE
     real = whole or (isinstance(value, float) and math.isfinite(value))
     return {TEXT: isinstance(value, str), FLAG: isinstance(value, bool), OBJECT: isinstance(value, dict),
             COUNT: whole and value >= 0, SEED: whole and 0 <= value <= MAX_SEED, SEGMENT: whole and value >= -1,
-            POSITIVE: real and value > 0, AMOUNT: real and value >= 0}[kind]
+            POSITIVE: real and value > 0, AMOUNT: real and value >= 0, TRUE: value is True,
+            LOCAL: isinstance(value, str) and value in LOCAL_PLANNERS, RESOLUTION: real and low <= value <= high}[kind]
 
 
 def get_planner(name: str) -> type[Planner]:
@@ -224,10 +229,17 @@ def _check_contents(path_file: str | Path, meta: dict, arrays: dict) -> None:
 
 
 def _check_values(path_file: str | Path, meta: dict) -> None:
-    """Refuse a planner's meta value (:data:`VALUE_KINDS`, :data:`NESTED_KINDS`, the planner's settings) of the
-    wrong kind or range, or an unknown key inside ``result``, ``validation`` or ``planner_settings``, naming it."""
+    """Refuse a missing ``kind``, top-level copies of the task that contradict ``meta["task"]``
+    (:func:`~manifoldgen.dataset.check_copies`), a planner's meta value (:data:`VALUE_KINDS`, :data:`NESTED_KINDS`,
+    the planner's settings) of the wrong kind or range, or an unknown key inside ``result``, ``validation`` or
+    ``planner_settings``, naming it."""
     def refuse(key: str, why: str):
         raise ManifoldgenError(f"{path_file}: meta '{key}' {why}; the file was edited: plan the query again")
+
+    if "kind" not in meta:
+        refuse("kind", 'is missing (plan writes "path")')
+    check_copies(meta, lambda why: ManifoldgenError(f"{path_file}: meta {why}; the file was edited: plan the query "
+                                                    "again"))
 
     for key, kind in VALUE_KINDS.items():
         if key in meta and not _is_kind(meta[key], kind):

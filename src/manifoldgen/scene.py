@@ -109,6 +109,12 @@ class Scene:
         if not isinstance(data["obstacles"], list):
             raise ManifoldgenError(f"{source}: 'obstacles' must be a list")
         obstacles = [Obstacle.from_dict(o, i) for i, o in enumerate(data["obstacles"])]
+        seen = set()
+        for obstacle in obstacles:
+            if obstacle.name in seen:
+                raise ManifoldgenError(f"{source}: obstacle name {obstacle.name!r} is given twice; give each obstacle "
+                                       "a name of its own (a collision report names the obstacle hit)")
+            seen.add(obstacle.name)
         attached = Attached.from_dict(data["attached"]) if data.get("attached") else None
         start, goal = (parse_target(data[k], f"{source} {k}") if isinstance(data[k], dict)
                        else float_list(data[k], f"{source} {k}") for k in ("start", "goal"))
@@ -153,7 +159,8 @@ def _checked(scene: Scene, task: Task, name: str) -> Scene:
     """The scene, checked against the task, with end-effector targets turned into configurations."""
     n, k = task.robot.n, task.condition.k
     if scene.robot and scene.robot != task.robot.name:
-        raise ManifoldgenError(f"scene {name} is for robot '{scene.robot}', not {task.robot.name}")
+        raise ManifoldgenError(f"scene {name} is for robot '{scene.robot}', not {task.robot.name}; give a scene for "
+                               f"{task.robot.name}, or the task for {scene.robot}")
     for end in ("start", "goal"):
         value = getattr(scene, end)
         if not isinstance(value, dict) and value.shape != (n,):

@@ -22,6 +22,7 @@ copied to ``OUT`` with its ``mix``; ``OUT/selection.json`` holds both tables. Wi
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import os
 import shutil
@@ -104,7 +105,7 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     table, models = [], {}
     for name, folder in folders.items():
         models[name] = load_model(folder)
-        log = json.loads((folder / "training.json").read_text())
+        log = _training_log(folder)
         table.append({"model": name, **score(models[name], task, dataset.q[held_out], dataset.y[held_out], seed),
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1),
                       **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]}
@@ -192,6 +193,21 @@ def check_recorded_scenes(dataset: Dataset) -> list[dict]:
         except ManifoldgenError as exc:
             raise ManifoldgenError(f"{exc}; the dataset was edited or is damaged: collect it again") from None
     return recorded
+
+
+def _training_log(folder: Path) -> dict:
+    """A candidate's training.json, refused in one line unless it holds what training writes (its epochs, seconds
+    and, when it diverged, where)."""
+    try:
+        log = json.loads((folder / "training.json").read_text())
+        ok = (isinstance(log["history"], list) and isinstance(log["seconds"], (int, float))
+              and not isinstance(log["seconds"], bool) and math.isfinite(log["seconds"]) and log["seconds"] >= 0)
+    except (OSError, ValueError, KeyError, TypeError):
+        ok = False
+    if not ok:
+        raise ManifoldgenError(f"{folder / 'training.json'} is damaged (not the log training writes); delete the "
+                               f"folder {folder} to train that candidate again")
+    return log
 
 
 def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None) -> None:

@@ -25,16 +25,22 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
             values.update(tomllib.loads(Path(config).read_text()))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
             raise ManifoldgenError(f"{config}: not valid TOML ({type(exc).__name__}: {exc}); fix the file") from None
+    given: set[str] = set()
     for pair in pairs or []:
         key, eq, text = pair.partition("=")
-        if not eq or not key.strip():
+        key = key.strip()
+        if not eq or not key:
             raise ManifoldgenError(f"--set '{pair}' is not KEY=VALUE; write e.g. --set {next(iter(known), 'key')}=1")
+        if key in given:
+            raise ManifoldgenError(f"--set {key} is given twice (which one counts is ambiguous); give each setting "
+                                   "once")
+        given.add(key)
         try:
-            values[key.strip()] = json.loads(text)
+            values[key] = json.loads(text)
         except ValueError:
-            values[key.strip()] = _number(text)
+            values[key] = _number(text)
         except RecursionError:
-            raise ManifoldgenError(f"--set '{key.strip()}' is nested too deeply; give a plain value") from None
+            raise ManifoldgenError(f"--set '{key}' is nested too deeply; give a plain value") from None
     return check_settings(values, known, what)
 
 

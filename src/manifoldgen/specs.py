@@ -43,6 +43,8 @@ def parse_spec(spec: str) -> tuple[str, str, dict[str, int]]:
             raise ManifoldgenError(f"bad sampler option '{option}' in '{spec}'; options: "
                                    f"{', '.join(f'{k}=N' for k in OPTIONS)} (commas separate them; a path with a "
                                    "comma is read whole when it exists)")
+        if key in parsed:
+            raise ManifoldgenError(f"sampler option {key} is given twice in '{spec}'; give each option once")
         try:
             parsed[key] = OPTIONS[key](value)
         except ValueError as exc:
@@ -59,7 +61,10 @@ def make_sampler(spec: str, space: ConstrainedSpace, seed: int) -> Sampler:
     name, arg, options = parse_spec(spec)
     batch = options.get("batch")
     common = {"seed": seed, **({"batch": batch} if batch else {})}
-    if name in ("uniform", "project") and not arg:
+    if name in ("uniform", "project") and arg:
+        raise ManifoldgenError(f"the {name} sampler takes no path (got '{name}:{arg}'); give {name} alone, or "
+                               "MODEL:DIR for a trained model")
+    if name in ("uniform", "project"):
         if "refine" in options:
             raise ManifoldgenError(f"the {name} sampler takes no refine option")
         return (UniformSampler if name == "uniform" else ProjectionSampler)(space, **common)

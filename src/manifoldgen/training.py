@@ -28,7 +28,7 @@ import safetensors.torch
 import torch
 
 from manifoldgen.dataset import Dataset, check_meta
-from manifoldgen.errors import ManifoldgenError, differences, listed
+from manifoldgen.errors import ManifoldgenError, differences, listed, short
 from manifoldgen.io import atomic_write_bytes, atomic_write_text, locks_output
 from manifoldgen.progress import progress_bar
 from manifoldgen.provenance import check_task_copies
@@ -405,16 +405,20 @@ def _load_checkpoint(out: Path, identity: dict, model: Trainable, optimizers: li
     if changed:
         raise ManifoldgenError(f"the checkpoint in {out} was made with another dataset, model, seed or settings "
                                f"({changed}); resume with the same command, or choose another directory")
-    model.nets.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
-    best = {k[5:]: v for k, v in tensors.items() if k.startswith("best.")}
-    for j, (opt, od) in enumerate(zip(optimizers, doc["optimizers"])):
-        state = {}
-        for pid, keys in od["tensor_keys"].items():
-            state[int(pid)] = {key: tensors[f"opt{j}.{pid}.{key}"] for key in keys}
-            state[int(pid)].update(od["scalars"].get(pid, {}))
-        opt.load_state_dict({"state": state, "param_groups": od["param_groups"]})
-    gen.set_state(tensors["rng"])
-    saved = doc["log"]
-    log.history, log.best_epoch, log.best_val = saved["history"], saved["best_epoch"], saved["best_val"]
+    try:  # the identity matched: the contents must be what _save_checkpoint writes
+        model.nets.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
+        best = {k[5:]: v for k, v in tensors.items() if k.startswith("best.")}
+        for j, (opt, od) in enumerate(zip(optimizers, doc["optimizers"], strict=True)):
+            state = {}
+            for pid, keys in od["tensor_keys"].items():
+                state[int(pid)] = {key: tensors[f"opt{j}.{pid}.{key}"] for key in keys}
+                state[int(pid)].update(od["scalars"].get(pid, {}))
+            opt.load_state_dict({"state": state, "param_groups": od["param_groups"]})
+        gen.set_state(tensors["rng"])
+        saved = doc["log"]
+        log.history, log.best_epoch, log.best_val = list(saved["history"]), saved["best_epoch"], saved["best_val"]
+        bad = int(doc["bad"])
+    except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
+        raise ManifoldgenError(damaged.format(f"{type(exc).__name__}: {short(str(exc), 60)}")) from None
     log.resumed_at = len(log.history)
-    return best, int(doc["bad"])
+    return best, bad

@@ -4,12 +4,12 @@ The path's straight segments are densified every ``resolution`` rad (the validat
 C2 cubic spline is fitted through those states: it strays at most 6e-4 rad from the validated
 segments on the panda, pr2 and centauro paths tried. TOPP-RA (the ``toppra`` package) finds the
 fastest timing within the velocity limits (the URDF's, times ``vel_scale``) and the acceleration
-limits (``ACC_PER_VELOCITY`` x the velocity limit, times ``acc_scale``: URDFs give none). TOPP-RA
-enforces its limits at grid points only, so the time is then stretched uniformly until every
-written sample is within them. Where the spline bulges past a joint limit at a corner of the path,
-the sample is clipped to the limit (the amount is reported). Every written state is rechecked by the
-constrained space: limits, the constraint's tolerance and collisions with the scene the path file
-records.
+limits (``ACC_PER_VELOCITY`` x the velocity limit, times ``acc_scale``: URDFs give none); both scales
+range from ``MIN_SCALE`` to 1. TOPP-RA enforces its limits at grid points only, so the time is then
+stretched uniformly until every written sample is within them. Where the spline bulges past a joint
+limit at a corner of the path, the sample is clipped to the limit (the amount is reported). Every
+written state is rechecked by the constrained space: limits, the constraint's tolerance and collisions
+with the scene the path file records.
 
 The file follows ROS ``trajectory_msgs/JointTrajectory``: ``joint_names`` and ``points`` with
 ``positions``, ``velocities``, ``accelerations`` and ``time_from_start`` (``sec``, ``nanosec``), besides
@@ -40,6 +40,7 @@ BASE_VELOCITY = 0.5  # m/s or rad/s for floating-base coordinates (no URDF joint
 GRID_PER_STATE = 2  # TOPP-RA grid points per densified state
 STRETCH_STEPS = 20
 DT_RANGE = (1e-4, 10.0)  # seconds between trajectory samples (inclusive)
+MIN_SCALE = 1e-3  # the smallest --vel-scale and --acc-scale (smaller ones leave TOPP-RA without a timing)
 MAX_STATES = 10_000_000  # trajectory samples one file may hold (refused before they are allocated)
 
 
@@ -96,8 +97,11 @@ def velocity_limits(robot: Robot) -> np.ndarray:
 
 
 def check_scale(value: float, what: str) -> float:
-    if not (np.isfinite(value) and 0 < value <= 1):
-        raise ManifoldgenError(f"{what} must be in (0, 1] (a fraction of the robot's limits), got {value}")
+    """``value`` of ``what`` (--vel-scale, --acc-scale) when a fraction of the robot's limits from :data:`MIN_SCALE`
+    to 1 (below it TOPP-RA may find no timing, or the trajectory too many states)."""
+    if not (np.isfinite(value) and MIN_SCALE <= value <= 1):
+        raise ManifoldgenError(f"{what} must be in (0, 1], at least {MIN_SCALE:g} (a fraction of the robot's limits), "
+                               f"got {value}")
     return float(value)
 
 
@@ -121,7 +125,8 @@ def time_parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.n
                                      geometric, gridpoints=grid, parametrizer="ParametrizeConstAccel")
     timed = solver.compute_trajectory()
     if timed is None:
-        raise ManifoldgenError("TOPP-RA found no timing for this path (infeasible limits); check the limits")
+        raise ManifoldgenError("TOPP-RA found no timing for this path (infeasible limits); check the limits (the "
+                               "URDF's velocities, --vel-scale, --acc-scale)")
     stretch = 1.0
     for _ in range(STRETCH_STEPS):
         duration = timed.duration * stretch

@@ -142,7 +142,7 @@ def _default_label(planner: str, local: str, sampler: str | None) -> str:
 def default_methods(models: list[str | Path] | None = None) -> list[str]:
     """Each learned model (default: the shipped one, when present) with each local planner, PG,
     CBiRRT, OMPL's three constrained spaces with RRTConnect, and uniform rejection sampling."""
-    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.models import open_model, pretrained_model_dir
     from manifoldgen.planning import PLANNERS
     if models is None:
         try:
@@ -151,10 +151,9 @@ def default_methods(models: list[str | Path] | None = None) -> list[str]:
             models = []
     methods = []
     for model in models:
-        doc = Path(model) / "model.json"
-        if not doc.is_file():
+        if not (Path(model) / "model.json").is_file():
             raise ManifoldgenError(f"no trained model at '{model}' (model.json missing); fix the path")
-        kind = json.loads(doc.read_text())["model"]
+        kind = open_model(model).name
         name = kind if len(models) == 1 else f"{kind}-{Path(model).name}"
         methods += [f"{name}=rrtconnect:interpolate@{kind}:{model}",
                     f"{name}-project=rrtconnect:project@{kind}:{model}"]
@@ -607,6 +606,12 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
         raise ManifoldgenError(f"--baseline '{baseline}' is not one of the method labels {labels}")
     out_dir = Path(out_dir)
     check_own_folder(out_dir, BENCH_MARKERS)
+    linked = next((out_dir / name for name in (RUNS_FILE, CONFIG_FILE) if (out_dir / name).is_symlink()), None)
+    if linked is not None:
+        raise ManifoldgenError(f"{linked} is a symbolic link; bench writes its own {linked.name} in the folder, never "
+                               "through a link: remove the link or use another folder")
+    for method in parsed:  # fail fast, before anything is written, on a bad model path, dataset or planner option
+        build(experiment, method.resolved("uniform") if method.sampler == "pg" else method, experiment.seed)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
     records = read_records(runs_path)
@@ -621,8 +626,6 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     atomic_write_text(out_dir / PROBLEM_FILE, json.dumps(problem_meta(experiment), indent=1))
     drop_truncated_line(runs_path)
     parsed = _prepare_pg(experiment, parsed, out_dir, pg_rows)
-    for method in parsed:  # fail fast on a bad model path, dataset or planner option
-        build(experiment, method, experiment.seed)
     done = {(r["method"], r["run"]) for r in records}
     todo = [(m, r) for r in range(runs) for m in parsed if (m.label, r) not in done]
     with progress_bar(f"{experiment.scene}: runs", total=len(todo), enabled=progress) as bar:

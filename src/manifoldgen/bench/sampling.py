@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from manifoldgen.data import collect
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, short
 from manifoldgen.io import atomic_write_text, check_own_folder, locks_output
 from manifoldgen.metrics import accuracy, coverage_metrics
 from manifoldgen.models import ConditionalSampler, load_model
@@ -135,18 +135,25 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     task = task_from_meta(first.meta, task=task, trust_code=trust_code, what=f"model {next(iter(models))}")
     for path, model in models.items():
         check_model_for(model, task.constraint, f"model {path}")
-    out.mkdir(parents=True, exist_ok=True)
     k = task.condition.k
     if k == 0:
         raise ManifoldgenError("the sampling benchmark needs a conditioned task (its condition has no values)")
     default_seen, default_unseen = (default_conditions(task.condition.values) if k == 1
                                     else default_grid_conditions(task.condition.grid))
+    trained = {path: {tuple(np.round(row, 9)) for row in _trained_values(model.meta)} for path, model in models.items()}
+    if seen:  # the user's: each a condition every model (that records its own) was trained at
+        never = next(((y, path) for y in _rows(seen, k) for path, values in trained.items()
+                      if values and tuple(np.round(y, 9)) not in values), None)
+        if never is not None:
+            raise ManifoldgenError(f"--seen {list(never[0])} is not a condition model {never[1]} was trained at (it "
+                                   f"was at {short(_plain(sorted(trained[never[1]])), 60)}); give training values "
+                                   "(or list it under --unseen)")
     seen, unseen = _rows(seen or default_seen, k), _rows(unseen or default_unseen, k)
-    trained = {tuple(np.round(row, 9)) for model in models.values() for row in _trained_values(model.meta)}
-    known = next((y for y in unseen if tuple(np.round(y, 9)) in trained), None)
+    known = next((y for y in unseen if any(tuple(np.round(y, 9)) in values for values in trained.values())), None)
     if known is not None:
         raise ManifoldgenError(f"--unseen {list(known)} is a condition a model was trained at; give conditions between "
                                "or beyond the training ones (or list it under --seen)")
+    out.mkdir(parents=True, exist_ok=True)
     conditions = [*seen, *unseen]
     check_seed(seed + 1000 + len(conditions), "--seed (+ 1000 + i seeds the reference set of condition i)")
     robot, constraint = task.robot, task.constraint

@@ -38,6 +38,7 @@ def array_namespace(*arrays):
 
 MIN_TOLERANCE = 1e-5  # m or rad: ten times the residual at which projection stops (constraints/projection.py)
 INEQUALITY_SCALE = 0.01  # G (metres or radians) per unit of the training penalty, like a tolerance
+MAX_CONDITION_VALUES = 100_000  # condition values one task may train at (a set's: the product of its parts')
 
 
 @dataclass(frozen=True)
@@ -54,16 +55,23 @@ class Condition:
 
     def __post_init__(self):
         try:
+            width = np.shape(self.values)[1:]
             grid = self.grid
         except (TypeError, ValueError):
             raise ManifoldgenError(f"condition values must be numbers, got {self.values!r}") from None
+        if self.k and width not in ((), (self.k,)):
+            raise ManifoldgenError(f"values rows must hold {self.k} number(s) ({', '.join(self.names)}), got "
+                                   f"{' x '.join(map(str, width))}")
         if not np.isfinite(grid).all():
             raise ManifoldgenError(f"condition values must be finite numbers, got {grid.tolist()}")
         if self.k and not len(grid):
             raise ManifoldgenError(f"condition values must hold at least one value of {', '.join(self.names)}, got "
                                    "none; give values = [[v1], [v2], ...]")
-        rows = [tuple(row) for row in grid.tolist()]
-        twice = next((row for row in rows if rows.count(row) > 1), None)
+        if len(grid) > MAX_CONDITION_VALUES:
+            raise ManifoldgenError(f"{len(grid):,} condition values of {', '.join(self.names)}: at most "
+                                   f"{MAX_CONDITION_VALUES:,} (a model trains on rows at each); give fewer values")
+        seen: set[tuple] = set()
+        twice = next((row for row in map(tuple, grid.tolist()) if row in seen or seen.add(row)), None)
         if self.k and twice is not None:
             raise ManifoldgenError(f"condition value {list(twice)} is given twice in values; give each once")
 
@@ -299,6 +307,11 @@ class ConstraintSet(Constraint):
             raise ManifoldgenError("a constraint set needs at least one constraint")
         self.parts = list(parts)
         self.robot = parts[0].robot
+        combinations = math.prod(len(c.condition.grid) for c in parts)
+        if combinations > MAX_CONDITION_VALUES:
+            raise ManifoldgenError(f"the parts' condition values make {combinations:,} combinations (the product of "
+                                   f"{' x '.join(str(len(c.condition.grid)) for c in parts)}), over "
+                                   f"{MAX_CONDITION_VALUES:,}; give the parts fewer values")
         self.condition = Condition(
             sum((c.condition.names for c in parts), ()), sum((c.condition.units for c in parts), ()),
             np.array([np.concatenate(rows) for rows in itertools.product(*[c.condition.grid for c in parts])]))

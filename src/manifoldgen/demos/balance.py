@@ -34,6 +34,8 @@ NEAR_HOME = 1.0  # rad: seeds normal around the stance (uniform seeds rarely con
 EPOCHS = 40
 CVAE = {"latent": 8, "hidden": [256, 256]}  # as the benchmark's: a latent of 3 covers too little of the 39 joints
 SAMPLES = 2000
+# what the demo writes in its output folder (folders end in /)
+OUTPUTS = ("balance.npz", "cvae/", "reach-path.npz", "reach-path.png", "reach-snapshots.png")
 HAND = "arm1_8"  # centauro's left hand
 PLANNER = {"pool": 32, "pool_batch": 64}  # few stepping stones: the learned samples are dear (39 joints, projected)
 

@@ -25,6 +25,8 @@ from manifoldgen.viz.snapshots import draw_snapshots
 
 SAMPLES = 2000
 TIME_LIMIT = 60.0
+# what the demo writes in its output folder (folders end in /)
+OUTPUTS = ("dualarm.npz", "model/", "tray-over.npz", "tray-over.png", "tray-over-snapshots.png")
 
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:

@@ -21,6 +21,8 @@ from manifoldgen.viz.path import plot_path
 from manifoldgen.viz.snapshots import draw_snapshots
 
 SAMPLES = 4000
+# what the demo writes in its output folder (folders end in /)
+OUTPUTS = ("pose.npz", "model/", "wall-path.npz", "wall-path.png", "wall-snapshots.png")
 
 
 def run_demo(output: Path, seed: int, console: Console) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -19,7 +20,7 @@ import safetensors.numpy
 
 from manifoldgen.constraints import Condition
 from manifoldgen.dataset import check_meta
-from manifoldgen.errors import ManifoldgenError, did_you_mean
+from manifoldgen.errors import ManifoldgenError, did_you_mean, short
 from manifoldgen.io import read_json
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
@@ -122,6 +123,14 @@ def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndar
                                    "restore or retrain the model")
 
 
+def _hyper_value(value) -> bool:
+    """Whether ``value`` can be a hyper-parameter in a model.json: a finite number, or a list of positive whole
+    numbers (layer widths)."""
+    if isinstance(value, list):
+        return all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def _validate_doc(path: Path, doc: object) -> None:
     def bad(why: str) -> ManifoldgenError:
         return ManifoldgenError(f"{path}/{CONFIG_FILE}: {why}; the file was edited or is damaged: "
@@ -140,6 +149,9 @@ def _validate_doc(path: Path, doc: object) -> None:
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
             raise bad(f"field '{key}' is missing or not a {kind.__name__}")
+    odd = next((key for key, value in doc["config"].items() if not _hyper_value(value)), None)
+    if odd is not None:  # every model's hyper-parameters are numbers or lists of layer widths
+        raise bad(f"config {short(odd)} is {short(doc['config'][odd])}, not a finite number or a list of widths")
     _refuse_unknown_keys(doc["dims"], ("d", "k"), " in 'dims'", bad)
     d, k = doc["dims"].get("d"), doc["dims"].get("k")
     if not (isinstance(d, int) and isinstance(k, int) and d > 0 and k > 0):

@@ -32,6 +32,7 @@ IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joi
             "constraint": "constraint", "tolerance": "tolerance", "condition": "condition", "scene_name": "scene",
             "scene_sha256": "scene objects (sha256)", "resolution": "check resolution"}
 SAVED_KEYS = {"format_version", "kind", "reach"}  # what Roadmap.save adds to its caller's meta
+ROADMAP_ARRAYS = ("nodes", "edges", "lengths")  # the arrays of a roadmap file, besides its meta
 LENGTH_TOLERANCE = 1e-9  # rad: a recorded edge length against its nodes' distance
 
 
@@ -118,6 +119,10 @@ class Roadmap:
         if meta.get("format_version") != FORMAT_VERSION:
             raise ManifoldgenError(f"{path}: roadmap format {meta.get('format_version')!r} is not the one this version "
                                    f"reads ({FORMAT_VERSION}); delete it (the next query starts a new roadmap)")
+        recorded = meta.get("reach")
+        if isinstance(recorded, bool) or not isinstance(recorded, (int, float)) or not 0 < recorded < math.inf:
+            raise ManifoldgenError(f"{path}: meta 'reach' {short(recorded)} must be a finite number > 0 (rad); the "
+                                   "file was edited: delete it (the next query starts a new roadmap)")
         if expect is not None:
             _check_identity(path, meta, expect)
         nodes, edges, lengths = _arrays(path, meta, arrays)
@@ -267,11 +272,16 @@ def _show(value) -> str:
 
 def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The file's ``nodes (N, n)`` float64, ``edges (E, 2)`` int and ``lengths (E,)`` float64, checked: finite float64
-    nodes as wide as the meta's ``joints``, edges between distinct nodes, lengths their nodes' distances."""
+    nodes as wide as the meta's ``joints``, edges between distinct nodes, lengths their nodes' distances; no other
+    array."""
     fix = "the file is damaged or was edited: delete it (the next query starts a new roadmap)"
-    missing = [k for k in ("nodes", "edges", "lengths") if k not in arrays]
+    missing = [k for k in ROADMAP_ARRAYS if k not in arrays]
     if missing:
         raise ManifoldgenError(f"{path}: no {', '.join(missing)} array; {fix}")
+    extra = sorted(set(arrays) - set(ROADMAP_ARRAYS))
+    if extra:
+        raise ManifoldgenError(f"{path}: unknown array {short(extra[0])} (a roadmap file holds only 'nodes', 'edges' "
+                               f"and 'lengths'); {fix}")
     nodes, edges, lengths = arrays["nodes"], arrays["edges"], arrays["lengths"]
     n = len(meta["joints"]) if isinstance(meta.get("joints"), list) else -1
     if nodes.dtype != np.float64 or nodes.ndim != 2 or nodes.shape[1] != n or not np.isfinite(nodes).all():
@@ -281,6 +291,9 @@ def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tupl
             or lengths.dtype.kind != "f":
         raise ManifoldgenError(f"{path}: 'edges' must be (E, 2) integers and 'lengths' (E,) numbers, got "
                                f"{edges.dtype} {edges.shape} and {lengths.dtype} {lengths.shape}; {fix}")
+    if lengths.dtype != np.float64:
+        raise ManifoldgenError(f"{path}: 'lengths' must be float64 (what Roadmap.save writes), got {lengths.dtype}; "
+                               f"{fix}")
     if len(edges) and (edges.min() < 0 or edges.max() >= len(nodes) or np.any(edges[:, 0] == edges[:, 1])):
         raise ManifoldgenError(f"{path}: 'edges' must join two distinct nodes of the {len(nodes)}; {fix}")
     nodes = np.asarray(nodes, float)

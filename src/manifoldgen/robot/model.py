@@ -100,6 +100,7 @@ class Robot:
                 detail = " ".join(said().split()) or str(exc).splitlines()[0]
                 raise ManifoldgenError(f"cannot parse URDF {urdf}: {detail}; check that the file is a valid "
                                        "URDF") from exc
+        _check_limits(model, urdf)
         joints = _planning_group(model, mimics, name, joints, floating_base)
         q_ref = pin.neutral(model)
         if srdf is not None:
@@ -429,6 +430,16 @@ class Robot:
                 J += mass * self._point_jacobian(c, {k: met[k] for k in ancestors}, len(q), False)
         com, J = com / self.mass, J / self.mass
         return (com, J) if jacobian else com
+
+
+def _check_limits(model: pin.Model, urdf: Path) -> None:
+    """Refuse a one-coordinate joint of ``urdf`` whose lower limit lies above its upper one."""
+    for jid in range(1, model.njoints):
+        jm = model.joints[jid]
+        low, high = model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q]
+        if jm.nq == 1 and low > high:
+            raise ManifoldgenError(f"joint {model.names[jid]} of {urdf} has lower limit {low:g} above upper {high:g}; "
+                                   "fix the URDF")
 
 
 def _planning_group(model: pin.Model, mimics: dict[str, str], robot: str, joints: list[str] | None,

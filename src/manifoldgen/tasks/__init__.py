@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
-from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file, unknown_name
+from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file, short, unknown_name
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.provenance import check_made_for
 from manifoldgen.robot import Robot, find_robot, resolve_robot
@@ -199,14 +199,25 @@ def _home_condition(condition: Condition, value) -> np.ndarray:
 
 
 def _numbers(value, what: str) -> np.ndarray:
-    """``value`` as a flat float array, or a clear error."""
+    """``value`` (numbers, no strings or booleans) as a flat float array, or a clear error."""
     try:
+        if not _only_numbers(value):
+            raise TypeError
         numbers = np.asarray(value, float).reshape(-1)
     except (TypeError, ValueError):
-        raise ManifoldgenError(f"{what} must be a list of numbers, got {value!r}") from None
+        raise ManifoldgenError(f"{what} must be a list of numbers (no strings or booleans), got {short(value, 80)}"
+                               ) from None
     if not np.isfinite(numbers).all():
         raise ManifoldgenError(f"{what} must be finite numbers, got {numbers.tolist()}")
     return numbers
+
+
+def _only_numbers(value) -> bool:
+    """Whether ``value`` is a number or a (nested) list of numbers: no strings, no booleans."""
+    value = value.tolist() if isinstance(value, np.ndarray) else value
+    if isinstance(value, (list, tuple)):
+        return all(_only_numbers(v) for v in value)
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
 # ---------------------------------------------------------------------- task files
@@ -253,6 +264,9 @@ def load_task_file(path: str | Path) -> Task:
         if key not in data:
             raise ManifoldgenError(f"{path}: missing '{key}' ({TASK_KEYS[key]}); every task file needs name, robot "
                                    "and at least one [[constraints]] table")
+    if not data["name"].strip():
+        raise ManifoldgenError(f"{where('name')}: 'name' ({TASK_KEYS['name']}) is empty; give the task a name, e.g. "
+                               "name = \"pose\"")
     if "base_bounds" in data and not data.get("floating_base", False):
         raise ManifoldgenError(f"{where('base_bounds')}: 'base_bounds' bounds a floating base; this task's robot has "
                                "a fixed base: drop it, or set floating_base = true")
@@ -289,7 +303,8 @@ def load_task_file(path: str | Path) -> Task:
         task = _finish(str(data["name"]), robot_obj, constraint, data.get("home"), data.get("home_condition"),
                        str(data.get("description", "")), scenes)
     except ManifoldgenError as exc:
-        raise ManifoldgenError(f"{where('home')}: {exc}") from None
+        raise ManifoldgenError(f"{where('home_condition' if str(exc).startswith('home_condition') else 'home')}: "
+                               f"{exc}") from None
     task.file = path.resolve()
     if "attached" in data:
         try:

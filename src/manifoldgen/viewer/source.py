@@ -89,8 +89,8 @@ def _read_scene(file: Path, task: str | None) -> ViewSource:
     scene = Scene.from_json(file.read_text(), str(file))
     if not scene.robot and task is None:
         raise ManifoldgenError(f"scene {file} names no robot; add \"robot\": \"<name>\" or pass --task")
-    try:
-        t = get_task(task or _task_listing(file) or "pose", scene.robot or None)
+    try:  # a task given is taken as plan takes it (its default robot): get_scene refuses a scene for another robot
+        t = get_task(task, None) if task else get_task(_task_listing(file) or "pose", scene.robot or None)
     except ManifoldgenError as exc:
         raise ManifoldgenError(f"{exc}; for a scene of another task pass --task TASK.toml" if task is None
                                else str(exc)) from exc
