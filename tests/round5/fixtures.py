@@ -1,7 +1,5 @@
 #!/usr/bin/env python3
 """Make the inputs of the hostile round's table (tests/test_hostile_round5_table.py) in $IN with the manifoldgen of
-$CLONE (the repository, with its .venv):  CLONE=REPO IN=FOLDER REPO/.venv/bin/python fixtures.py"""Make the inputs the hostile round-5 cases need, in $IN (default /tmp/round5/work/in), from a fresh clone's venv.
-Run with the clone's python:  CLONE=/path/to/clone IN=/tmp/round5/work/in $CLONE/.venv/bin/python fixtures.py"""Make the inputs of the hostile round's table (tests/test_hostile_round5_table.py) in $IN with the manifoldgen of
 $CLONE (the repository, with its .venv):  CLONE=REPO IN=FOLDER REPO/.venv/bin/python fixtures.py"""
 import hashlib, json, os, shutil, subprocess, sys
 from pathlib import Path
