@@ -24,6 +24,7 @@ from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import load_npz, save_npz
 from manifoldgen.models import CVAE, load_model
+from manifoldgen.planning.result import path_length
 from manifoldgen.tasks import BUILTIN_DIR, get_task, load_task_file
 from refusals import reseal
 
@@ -155,9 +156,10 @@ def inputs(tmp_path_factory, panda_task, planned_path):
     path = arrays["path"]
     for name, edited in (("one", path[:1]), ("still", np.repeat(path[:1], 2, axis=0)),
                          ("outside-limits", path + np.r_[0, 0, 0, 0, 0, 0, 5.0]), ("offmanifold", path + 0.3),
-                         ("int", np.round(path).astype(np.int64))):  # its meta's start and goal are its ends
-        save_npz(root / f"path-{name}.npz", {**meta, "start": edited[0].tolist(), "goal": edited[-1].tolist()},
-                 path=edited)
+                         ("int", np.round(path).astype(np.int64))):  # its meta's start, goal and result: its own
+        result = {**meta["result"], "waypoints": len(edited), "length": path_length(np.asarray(edited, float))}
+        save_npz(root / f"path-{name}.npz", {**meta, "start": edited[0].tolist(), "goal": edited[-1].tolist(),
+                                             "result": result}, path=edited)
     save_npz(root / "path-3d.npz", meta, path=path[None])
     save_npz(root / "path-condition-nan.npz", {**meta, "condition": [float("nan")]}, path=path)
     save_npz(root / "path-condition-str.npz", {**meta, "condition": "0.5"}, path=path)
@@ -537,7 +539,7 @@ CASES = [
     cli("tasks-robot-pipe", "tasks {I}/task-robot-pipe.toml", "pipe", proc=True),
     cli("tasks-srdf-pipe", "tasks {I}/task-srdf-pipe.toml", "pipe", proc=True),
     cli("tasks-axes-unknown", "tasks {I}/task-axes-unknown.toml", "position_axes"),
-    cli("tasks-axes-empty", "tasks {I}/task-axes-empty.toml", "condition needs 0"),
+    cli("tasks-axes-empty", "tasks {I}/task-axes-empty.toml", "pose needs at least one of position_axes"),
     cli("tasks-deep", "tasks {I}/task-deep.toml", "task-deep.toml"),
     cli("tasks-base-bounds-fixed", "tasks {I}/task-base-bounds-fixed.toml", "base_bounds"),
     cli("tasks-floating-panda", "tasks {I}/task-floating-panda.toml", "13 joints"),

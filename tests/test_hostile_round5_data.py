@@ -20,6 +20,7 @@ from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
 from manifoldgen.models import CVAE
+from manifoldgen.tasks import BUILTIN_DIR
 from refusals import api, cli, refused_cleanly, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
@@ -69,6 +70,12 @@ def inputs(tmp_path_factory):
     _checkpoint(root, "ck-bad-text", lambda a, s: s.update(bad="x"))
     _checkpoint(root, "ck-no-optimizers", lambda a, s: s.pop("optimizers"))
     CVAE(**TINY).fit(data, seed=0, progress=False, out=root / "model")
+    (root / "userdir").mkdir()
+    (root / "userdir" / "keep.txt").write_text("mine")
+    (root / "linked-auto").mkdir()
+    os.symlink(root / "userdir", root / "linked-auto" / "candidates")
+    (root / "homec-nested.toml").write_text((BUILTIN_DIR / "pose-panda.toml").read_text().replace(
+        "home_condition = [0.45]", "home_condition = [[0.45]]").replace('"scenes/', f'"{BUILTIN_DIR}/scenes/'))
     reseal(shutil.copytree(root / "model", root / "lr-text"), lambda d: d["config"].__setitem__("lr", "fast"))
     return root
 
@@ -92,6 +99,14 @@ CASES = [
     api("dataset-save-rows-mismatch",
         lambda I, O: Dataset(np.zeros((3, 7)), np.zeros((2, 1)), Dataset.load(I / "data.npz").meta).save(O / "d.npz"),
         "d.npz (not written): inconsistent shapes q (3, 7), y (2, 1) for 7 joints"),
+    cli("auto-candidates-a-link", "train {I}/data.npz --epochs 1 -o {I}/linked-auto",
+        "linked-auto/candidates is a symbolic link; train writes its candidates into folders of its own"),
+    cli("pg-with-refine", "plan pose --scene wall --sampler pg:{I}/data.npz,refine=3 --no-picture -o {O}/p.npz",
+        "the pg sampler takes no refine option"),
+    cli("bench-model-beside-methods", "bench plan pose --scene wall --runs 1 -m rrtconnect@project --model {I}/model "
+        "-o {O}/b", "with -m, name the model in a method"),
+    cli("home-condition-nested", "tasks {I}/homec-nested.toml",
+        "home_condition must be a flat list of numbers (no strings or booleans), got [[0.45]]"),
     api("collect-condition-a-bool",
         lambda I, O: collect(__import__("manifoldgen.tasks", fromlist=["get_task"]).get_task("pose"), 3, 0,
                              conditions=[[True], [0.3]], progress=False),
@@ -152,3 +167,57 @@ def test_an_archive_larger_than_any_file_is_refused_from_its_directory(inputs, m
     monkeypatch.setattr(io, "MAX_NPZ_BYTES", 1000)
     with pytest.raises(ManifoldgenError, match=r"data.npz would take 0.0 GiB once read, over the 0 GiB"):
         Dataset.load(inputs / "data.npz")
+
+
+def test_a_path_whose_meta_miscounts_its_waypoints_is_refused(planned_path, tmp_path):
+    from manifoldgen.io import load_npz
+    from manifoldgen.query import read_path_file
+
+    meta, arrays = load_npz(planned_path("wall"), ())
+    meta["result"]["waypoints"] = 999
+    save_npz(tmp_path / "p.npz", meta, **arrays)
+    with pytest.raises(ManifoldgenError, match=r"meta 'result' gives 999 waypoints of length .*, but the path has"):
+        read_path_file(tmp_path / "p.npz")
+
+
+def test_a_bench_record_with_a_key_bench_does_not_write_is_refused():
+    from manifoldgen.bench.planning import record_problem
+
+    record = {"method": "m", "spec": "rrtconnect@project", "run": 0, "seed": 0, "scene": "wall", "time_limit": 1.0,
+              "solved": False, "planner_solved": False, "valid": False, "time_s": 1.0, "length": 0.0,
+              "iterations": 0, "samples_drawn": 0, "projections": 0, "waypoints": 0}
+    assert record_problem(record) == ""
+    assert record_problem({**record, "vaild": True}) == 'an unknown key "vaild"'
+
+
+def test_roadmap_edges_are_listed_once_lower_node_first(tmp_path):
+    from manifoldgen.planning.roadmap import _arrays
+
+    meta = {"joints": ["a", "b"]}
+    nodes = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    for edges in ([[1, 0]], [[0, 1], [0, 1]]):
+        edges = np.array(edges, np.int64)
+        lengths = np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
+        with pytest.raises(ManifoldgenError, match="must list each edge once, its lower node first"):
+            _arrays(tmp_path / "rm.npz", meta, {"nodes": nodes, "edges": edges, "lengths": lengths})
+    assert len(_arrays(tmp_path / "rm.npz", meta, {"nodes": nodes, "edges": np.array([[0, 1], [1, 2]]),
+                                                   "lengths": np.array([1.0, 1.0])})[1]) == 2
+
+
+def test_a_pose_without_position_axes_and_condition_rows_of_the_wrong_width_say_so(panda_task):
+    from manifoldgen.constraints.base import Condition
+    from manifoldgen.constraints.pose import PoseConstraint
+
+    with pytest.raises(ManifoldgenError, match=r"pose needs at least one of position_axes"):
+        PoseConstraint(panda_task.robot, "panda_hand_tcp", np.eye(3), [[0.3]], position_axes=[])
+    with pytest.raises(ManifoldgenError, match=r"values rows must hold 2 number\(s\) \(x, y\), got 1$"):
+        Condition(("x", "y"), ("m", "m"), [[0.3], [0.4], [0.5]])
+    with pytest.raises(ManifoldgenError, match=r"must be 2 number\(s\) per row \(x, y\), got \[0.3, 0.4, 0.5\]$"):
+        Condition(("x", "y"), ("m", "m"), [0.3, 0.4, 0.5])
+
+
+def test_a_mesh_that_is_a_device_is_named_as_one():
+    from manifoldgen.shapes import Obstacle
+
+    with pytest.raises(ManifoldgenError, match=r"mesh file '/dev/zero' is not a regular file"):
+        Obstacle.from_dict({"name": "m", "type": "mesh", "mesh": "/dev/zero", "pose": {"position": [0, 0, 0]}})

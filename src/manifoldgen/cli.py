@@ -486,6 +486,9 @@ def _bench_planning(scene: str, runs: int | None, workers: int | None, time_limi
     from manifoldgen.cluster import parse_cluster
     from manifoldgen.scene import get_scene
     from manifoldgen.specs import parse_spec
+    if methods and models:
+        raise ManifoldgenError("--model gives the default methods their model and -m names the methods: with -m, "
+                               "name the model in a method (e.g. -m cvae=rrtconnect@cvae:DIR) and leave --model out")
     from manifoldgen.tasks import BUILTIN_DIR
     on = parse_cluster(cluster, workers)
     _bounded("--runs", runs)

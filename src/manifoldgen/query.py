@@ -24,7 +24,7 @@ from manifoldgen.io import check_output_path, output_lock, save_npz
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner, check_time_limit
 from manifoldgen.planning.local import DEFAULT_LOCAL, LOCAL_PLANNERS
-from manifoldgen.planning.result import PlanResult
+from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.runtime import MAX_SEED, check_seed
 from manifoldgen.scene import Scene
 from manifoldgen.settings import check_settings
@@ -212,6 +212,12 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
         raise ManifoldgenError(f"{path_file}: meta 'condition' must be {task.condition.k} finite numbers, got "
                                f"{short(meta.get('condition'))}")
     _check_ends(path_file, meta, path)
+    said = meta.get("result", {})
+    if said.get("waypoints", len(path)) != len(path) or not math.isclose(
+            said.get("length", path_length(path)), path_length(path), rel_tol=1e-9, abs_tol=1e-9):
+        raise ManifoldgenError(f"{path_file}: meta 'result' gives {said.get('waypoints')} waypoints of length "
+                               f"{said.get('length')}, but the path has {len(path)} of length {path_length(path):.6g}; "
+                               "the file was edited: plan the query again")
     return meta, path, task
 
 

@@ -84,6 +84,10 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     (out / "candidates").mkdir(parents=True, exist_ok=True)
     held_out = split(len(dataset), VALIDATION, torch.Generator().manual_seed(seed))[0].numpy()
     folders = {name: out / "candidates" / name for name in CANDIDATES}
+    linked = next((f for f in (out / "candidates", *folders.values()) if f.is_symlink()), None)
+    if linked is not None:
+        raise ManifoldgenError(f"{linked} is a symbolic link; train writes its candidates into folders of its own: "
+                               "remove the link or choose another directory (-o)")
     todo = [name for name, folder in folders.items()
             if not (folder / CONFIG_FILE).exists() or (folder / CHECKPOINT).exists()]
     for name in set(folders) - set(todo):

@@ -39,10 +39,10 @@ def _vector(value, size: int, what: str) -> np.ndarray:
             kind = "a string" if isinstance(item, str) else "true/false"
             raise ManifoldgenError(f"{what} must be {size} numbers, not {kind} ({item!r}), got {value!r}")
     try:
-        out = np.asarray(value, dtype=float).reshape(-1)
+        out = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ManifoldgenError(f"{what} must be {size} numbers, got {value!r}") from exc
-    if out.shape != (size,) or not np.all(np.isfinite(out)):
+    if out.shape != (size,) or not np.all(np.isfinite(out)):  # a flat list: [[0.5]] is not one number
         raise ManifoldgenError(f"{what} must be {size} finite numbers, got {value!r}")
     return out
 
@@ -123,7 +123,9 @@ class Obstacle:
             self.length = _positive(self.length, f"{what} length")
         if self.type == "mesh":
             if not isinstance(self.mesh, str) or not self.mesh or not Path(self.mesh).is_file():
-                raise ManifoldgenError(f"{what}: mesh file {self.mesh!r} not found; give the path of an "
+                why = "is not a regular file" if isinstance(self.mesh, str) and self.mesh and Path(
+                    self.mesh).exists() else "not found"
+                raise ManifoldgenError(f"{what}: mesh file {self.mesh!r} {why}; give the path of an "
                                        ".stl, .obj or .dae file")
             scale = 1.0 if self.scale is None else self.scale
             self.scale = _vector(np.broadcast_to(scale, 3) if np.ndim(scale) == 0 else scale, 3, f"{what} scale")

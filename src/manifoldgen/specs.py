@@ -64,9 +64,10 @@ def make_sampler(spec: str, space: ConstrainedSpace, seed: int) -> Sampler:
     if name in ("uniform", "project") and arg:
         raise ManifoldgenError(f"the {name} sampler takes no path (got '{name}:{arg}'); give {name} alone, or "
                                "MODEL:DIR for a trained model")
+    if name in ("uniform", "project", "pg") and "refine" in options:  # their samples are on the manifold or raw
+        raise ManifoldgenError(f"the {name} sampler takes no refine option (only a trained model's samples are "
+                               "refined); leave refine out")
     if name in ("uniform", "project"):
-        if "refine" in options:
-            raise ManifoldgenError(f"the {name} sampler takes no refine option")
         return (UniformSampler if name == "uniform" else ProjectionSampler)(space, **common)
     if not arg:
         raise ManifoldgenError(f"unknown sampler '{spec}'; give one of: {SPEC_HELP}")

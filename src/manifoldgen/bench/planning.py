@@ -409,11 +409,19 @@ _RECORD_FIELDS = {"method": str, "spec": str, "run": int, "seed": int, "scene": 
                   "iterations": int, "samples_drawn": int, "projections": int, "waypoints": int}
 
 
+_RECORD_EXTRAS = ("build_s", "harness_cpu_s", "cpu_s", "ops", "late", "planner", "worst_violation", "reason", "why",
+                  "extras", "stability", "physics", "path", "error",
+                  "host", "node")  # what run_once writes besides _RECORD_FIELDS; a cluster run adds where it ran
+
+
 def record_problem(record) -> str:
     """What is wrong with a run record read back from a ``runs.jsonl`` ('' when nothing): a missing field, a wrong
     type, a negative or non-finite number, a solved run without its path."""
     if not isinstance(record, dict):
         return "not an object"
+    unknown = next((key for key in record if key not in _RECORD_FIELDS and key not in _RECORD_EXTRAS), None)
+    if unknown is not None:
+        return f"an unknown key {short(unknown)}"
     for key, kind in _RECORD_FIELDS.items():
         value = record.get(key)
         if kind is float:

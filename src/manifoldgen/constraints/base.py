@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import array_api_compat
 import numpy as np
 
-from manifoldgen.errors import ManifoldgenError
+from manifoldgen.errors import ManifoldgenError, short
 from manifoldgen.registry import Registry
 from manifoldgen.constraints import trace
 from manifoldgen.robot import Robot, as_batch, is_tensor, is_traced
@@ -56,12 +56,15 @@ class Condition:
     def __post_init__(self):
         try:
             width = np.shape(self.values)[1:]
+            if self.k and width not in ((), (self.k,)):
+                raise IndexError
             grid = self.grid
-        except (TypeError, ValueError):
-            raise ManifoldgenError(f"condition values must be numbers, got {self.values!r}") from None
-        if self.k and width not in ((), (self.k,)):
+        except IndexError:
             raise ManifoldgenError(f"values rows must hold {self.k} number(s) ({', '.join(self.names)}), got "
-                                   f"{' x '.join(map(str, width))}")
+                                   f"{' x '.join(map(str, width))}") from None
+        except (TypeError, ValueError):
+            raise ManifoldgenError(f"condition values must be {self.k} number(s) per row ({', '.join(self.names)}), "
+                                   f"got {short(np.asarray(self.values, dtype=object).tolist(), 60)}") from None
         if not np.isfinite(grid).all():
             raise ManifoldgenError(f"condition values must be finite numbers, got {grid.tolist()}")
         if self.k and not len(grid):

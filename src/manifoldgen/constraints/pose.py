@@ -46,6 +46,9 @@ class PoseConstraint(Constraint):
         self.robot, self.frame, self.rotation = robot, frame, rotation_matrix(rotation, "pose rotation")
         self._idx = axis_indices(position_axes, "pose position_axes")
         self._oidx = axis_indices(orientation_axes, "pose orientation_axes")
+        if not len(self._idx):
+            raise ManifoldgenError("pose needs at least one of position_axes (its condition, e.g. [\"z\"]); for an "
+                                   "orientation alone use the orientation constraint")
         self.condition = Condition(tuple(f"{frame}.{a}" for a in position_axes), ("m",) * len(self._idx),
                                    np.asarray(values, float))
         self.tolerance = np.array([position_tolerance] * len(self._idx) + [orientation_tolerance] * len(self._oidx))

@@ -296,6 +296,9 @@ def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tupl
                                f"{fix}")
     if len(edges) and (edges.min() < 0 or edges.max() >= len(nodes) or np.any(edges[:, 0] == edges[:, 1])):
         raise ManifoldgenError(f"{path}: 'edges' must join two distinct nodes of the {len(nodes)}; {fix}")
+    if np.any(edges[:, 0] > edges[:, 1]) or len(np.unique(edges, axis=0)) != len(edges):
+        raise ManifoldgenError(f"{path}: 'edges' must list each edge once, its lower node first (as Roadmap.save "
+                               f"writes them); {fix}")
     nodes = np.asarray(nodes, float)
     distance = np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
     if not np.all(np.abs(lengths - distance) <= LENGTH_TOLERANCE):

@@ -201,11 +201,11 @@ def _home_condition(condition: Condition, value) -> np.ndarray:
 def _numbers(value, what: str) -> np.ndarray:
     """``value`` (numbers, no strings or booleans) as a flat float array, or a clear error."""
     try:
-        if not _only_numbers(value):
+        if not _only_numbers(value) or np.ndim(value) > 1:  # a flat list: [[0.45]] is not a condition
             raise TypeError
         numbers = np.asarray(value, float).reshape(-1)
     except (TypeError, ValueError):
-        raise ManifoldgenError(f"{what} must be a list of numbers (no strings or booleans), got {short(value, 80)}"
+        raise ManifoldgenError(f"{what} must be a flat list of numbers (no strings or booleans), got {short(value, 80)}"
                                ) from None
     if not np.isfinite(numbers).all():
         raise ManifoldgenError(f"{what} must be finite numbers, got {numbers.tolist()}")
