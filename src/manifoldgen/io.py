@@ -368,8 +368,9 @@ def _check_members(path: Path, members: list[zipfile.ZipInfo]) -> None:
     an archive that would take more than MAX_NPZ_BYTES once read."""
     unknown = next((m.filename for m in members if m.filename.removesuffix(".npy") not in NPZ_ARRAYS), None)
     if unknown is not None:
-        raise ManifoldgenError(f"{path} is not a manifoldgen file: it holds an array {short(unknown.removesuffix('.npy'))}, "
-                               "which none holds (read without loading it); give a file manifoldgen wrote")
+        name = short(unknown.removesuffix(".npy"))
+        raise ManifoldgenError(f"{path} is not a manifoldgen file: it holds an array {name}, which none holds (read "
+                               "without loading it); give a file manifoldgen wrote")
     size = sum(m.file_size for m in members)
     if size > MAX_NPZ_BYTES:
         raise ManifoldgenError(f"{path} would take {size / 2**30:.1f} GiB once read, over the "

@@ -1,6 +1,5 @@
 """The edited and hand-made inputs of the round-5 cases (called by fixtures.py with its helpers as ``f``)."""
 import json, shutil, subprocess, zipfile
-from pathlib import Path
 
 import numpy as np
 
