@@ -221,3 +221,30 @@ def test_a_mesh_that_is_a_device_is_named_as_one():
 
     with pytest.raises(ManifoldgenError, match=r"mesh file '/dev/zero' is not a regular file"):
         Obstacle.from_dict({"name": "m", "type": "mesh", "mesh": "/dev/zero", "pose": {"position": [0, 0, 0]}})
+
+
+def test_a_path_whose_planner_settings_leave_their_ranges_is_refused(planned_path, tmp_path):
+    from manifoldgen.io import load_npz
+    from manifoldgen.query import read_path_file
+
+    meta, arrays = load_npz(planned_path("wall"), ())
+    meta["planner_settings"]["range"] = -1.0
+    save_npz(tmp_path / "p.npz", meta, **arrays)
+    with pytest.raises(ManifoldgenError, match=r"planner setting range must be a number in \[0.0001, 100\], got -1.0"):
+        read_path_file(tmp_path / "p.npz")
+
+
+def test_a_user_constraints_own_tolerance_is_held_to_the_built_in_range(tmp_path):
+    from manifoldgen.tasks import load_task_file
+
+    (tmp_path / "wide_tool.py").write_text(
+        "import numpy as np\nfrom manifoldgen.constraints.base import Condition, Constraint\n\n\n"
+        "class WideTool(Constraint):\n    def __init__(self, robot, values):\n        self.robot = robot\n"
+        "        self.condition = Condition(('z',), ('m',), np.asarray(values, float))\n"
+        "        self.tolerance = np.array([1e6])\n\n    def residual(self, q, y):\n        q, y = self.batch(q, y)\n"
+        "        return self.robot.frame_pose(q, 'panda_hand_tcp')[0][:, 2:3] - y\n")
+    (tmp_path / "wide.toml").write_text(
+        'name = "wide"\nrobot = "panda"\ngroup = [' + ", ".join(f'"panda_joint{i}"' for i in range(1, 8)) + "]\n\n"
+        '[[constraints]]\ntype = "wide_tool:WideTool"\nvalues = [[0.3], [0.5]]\n')
+    with pytest.raises(ManifoldgenError, match=r"its tolerances must be positive and finite, from 1e-05 to 1 .*got \[1000000.0\]"):
+        load_task_file(tmp_path / "wide.toml")

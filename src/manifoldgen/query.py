@@ -265,8 +265,9 @@ def _check_values(path_file: str | Path, meta: dict) -> None:
         if unknown is not None:
             refuse(f"planner_settings.{unknown}",
                    f"is not a setting of planner {planner}{did_you_mean(unknown, known)}")
-        try:
-            check_settings(meta["planner_settings"], known, f"planner {planner}")
+        try:  # the kinds, then the ranges the planner itself takes
+            settings = check_settings(meta["planner_settings"], known, f"planner {planner}")
+            PLANNERS.get(planner).settings_type(**settings).check()
         except ManifoldgenError as exc:
             refuse("planner_settings", f"holds a wrong value ({exc})")
 

@@ -243,10 +243,19 @@ def build_constraint(robot: Robot, spec: dict) -> Constraint:
     arguments = {k: v for k, v in spec.items() if k != "type"}
     check_arguments(cls, arguments, str(spec["type"]))
     try:
-        return cls.from_spec(robot, arguments)
+        constraint = cls.from_spec(robot, arguments)
     except TypeError as exc:
         params = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "robot")]
         raise ManifoldgenError(f"constraint '{spec['type']}': {exc}; its parameters are {', '.join(params)}") from exc
+    try:
+        tolerance = np.asarray(getattr(constraint, "tolerance", []), dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        tolerance = np.array([np.nan])
+    if not np.all((tolerance >= MIN_TOLERANCE) & (tolerance <= 1)):  # NaN fails too
+        raise ManifoldgenError(f"constraint '{spec['type']}': its tolerances must be positive and finite, from "
+                               f"{MIN_TOLERANCE:g} to 1 (m or rad: a wider one accepts almost any configuration, a "
+                               f"tighter one none), got {short(tolerance.tolist(), 60)}")
+    return constraint
 
 
 def check_arguments(cls: type, arguments: dict, name: str) -> None:
