@@ -88,40 +88,41 @@ class Method:
     def parse(cls, text: str) -> Method:
         text = text.strip()
         label, _, body = text.partition("=") if "=" in text.split("@")[0] else ("", "", text)
+        shown = text if len(text) <= 60 else text[:57] + "..."  # how messages name the method
         head, at, sampler = body.partition("@")
         planner, colon, local = head.partition(":")
         if (at and not sampler) or (colon and not local):
             missing = "sampler after @" if at and not sampler else "local planner after :"
-            raise ManifoldgenError(f"method '{text}' names no {missing}; write [LABEL=]PLANNER[:LOCAL][@SAMPLER] or "
+            raise ManifoldgenError(f"method '{shown}' names no {missing}; write [LABEL=]PLANNER[:LOCAL][@SAMPLER] or "
                                    "leave out the mark")
         if not planner:
-            raise ManifoldgenError(f"method '{text}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
+            raise ManifoldgenError(f"method '{shown}' names no planner; write [LABEL=]PLANNER[:LOCAL][@SAMPLER], "
                                    "e.g. rrtconnect:interpolate@cvae:models/cvae or ompl-projected-rrtconnect")
         if planner.startswith(NATIVE_PREFIX):
             from manifoldgen.ompl_native import SPACES as NATIVE_SPACES
             if planner[len(NATIVE_PREFIX):] not in NATIVE_SPACES or local or sampler:
-                raise ManifoldgenError(f"method '{text}': the C++ OMPL methods are ompl-native-SPACE with SPACE in "
+                raise ManifoldgenError(f"method '{shown}': the C++ OMPL methods are ompl-native-SPACE with SPACE in "
                                        f"{', '.join(NATIVE_SPACES)}, without a local planner or sampler")
         elif planner.startswith(OMPL_PREFIX):
             from manifoldgen.ompl_bridge import PLANNERS as OMPL_PLANNERS, SPACES
             parts = planner[len(OMPL_PREFIX):].split("-")
             if len(parts) != 2 or parts[0] not in SPACES or parts[1] not in OMPL_PLANNERS:
-                raise ManifoldgenError(f"method '{text}': OMPL methods are ompl-SPACE-PLANNER with SPACE in "
+                raise ManifoldgenError(f"method '{shown}': OMPL methods are ompl-SPACE-PLANNER with SPACE in "
                                        f"{', '.join(SPACES)} and PLANNER in {', '.join(OMPL_PLANNERS)}")
             if local:
-                raise ManifoldgenError(f"method '{text}': OMPL methods take no local planner (drop ':{local}')")
+                raise ManifoldgenError(f"method '{shown}': OMPL methods take no local planner (drop ':{local}')")
             local = ""
         else:
             from manifoldgen.planning import DEFAULT_LOCAL, LOCAL_PLANNERS, PLANNERS
             if planner not in PLANNERS.names():
-                raise ManifoldgenError(f"method '{text}': unknown planner '{planner}'; known: "
+                raise ManifoldgenError(f"method '{shown}': unknown planner '{planner}'; known: "
                                        f"{', '.join(PLANNERS.names())}, or ompl-SPACE-PLANNER")
             local = local or DEFAULT_LOCAL
             if local not in LOCAL_PLANNERS:
-                raise ManifoldgenError(f"method '{text}': unknown local planner '{local}'; known: "
+                raise ManifoldgenError(f"method '{shown}': unknown local planner '{local}'; known: "
                                        f"{', '.join(LOCAL_PLANNERS)}")
             sampler = sampler or "uniform"
-        label = check_name(label or _default_label(planner, local, sampler or None), f"method '{text}': label",
+        label = check_name(label or _default_label(planner, local, sampler or None), f"method '{shown}': label",
                            "name the method LABEL=... with a plain LABEL")
         return cls(label, planner, local, sampler or None, text)
 
