@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from manifoldgen.cli import app
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.io import load_npz, save_npz
 from manifoldgen.models.files import document_checksum
 
 runner = CliRunner()
@@ -64,6 +65,20 @@ def refusal(case: Case, inputs: Path, out: Path) -> str:
     return message
 
 
+SHORT = 300  # characters a refusal may take at most
+
+
+def refused_as_told(case: Case, inputs: Path, out: Path) -> str:
+    """:func:`refused_cleanly` with the empty output folder ``out``: the message holds the case's needle (``{I}`` and
+    ``{O}`` in it: the two folders), is under :data:`SHORT` characters (each folder counted as one: a temporary
+    folder's length is the machine's), and nothing was written into ``out``."""
+    message = refused_cleanly(case, inputs, out)
+    assert case.needle.replace("{I}", str(inputs)).replace("{O}", str(out)) in message, message
+    assert len(message.replace(str(inputs), "I").replace(str(out), "O")) < SHORT, message
+    assert not list(out.rglob("*")), "a refused command wrote something"
+    return message
+
+
 def refused_cleanly(case: Case, inputs: Path, out: Path) -> str:
     """:func:`refusal`, and no file below ``inputs`` changed: the message."""
     before = digest(inputs)
@@ -86,3 +101,22 @@ def reseal(folder: Path, edit=None, weights=None) -> None:
         edit(doc)
     doc["sha256"] = document_checksum(doc)
     (folder / "model.json").write_text(json.dumps(doc))
+
+
+def edited_npz(source: Path, target: Path, edit=None, arrays=None) -> None:
+    """``target``: the .npz ``source`` with its meta changed by ``edit(meta)`` and its arrays by ``arrays(dict)``."""
+    meta, found = load_npz(source, ())
+    if edit is not None:
+        edit(meta)
+    if arrays is not None:
+        arrays(found)
+    save_npz(target, meta, **found)
+
+
+def set_key(*keys, value):
+    """An edit of a meta: ``meta[keys[0]]...[keys[-1]] = value``."""
+    def edit(meta):
+        for key in keys[:-1]:
+            meta = meta[key]
+        meta[keys[-1]] = value
+    return edit

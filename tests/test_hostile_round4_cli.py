@@ -20,24 +20,10 @@ from manifoldgen.physics import PhysicsSettings
 from manifoldgen.query import PATH_FORMAT_VERSION
 from manifoldgen.robot import resolve_robot
 from manifoldgen.tasks import BUILTIN_DIR, get_task
-from refusals import cli, refused_cleanly
+from refusals import cli, edited_npz, refused_as_told, set_key
 
 runner = CliRunner()
 PANDA_URDF = resolve_robot("panda")[0]
-
-
-def _edited_path(source, target, edit):
-    meta, arrays = load_npz(source, ())
-    edit(meta)
-    save_npz(target, meta, **arrays)
-
-
-def _set(*keys, value):
-    def edit(meta):
-        for key in keys[:-1]:
-            meta = meta[key]
-        meta[keys[-1]] = value
-    return edit
 
 
 @pytest.fixture(scope="module")
@@ -61,13 +47,13 @@ def inputs(tmp_path_factory, planned_path):
     (root / "held-size.json").write_text(json.dumps({**wall, "attached": held}))
     path = planned_path("wall")
     shutil.copy(path, root / "path.npz")
-    for name, edit in (("names", _set("condition_names", value=["x"])), ("seed", _set("seed", value=-1)),
-                       ("time", _set("result", "time_s", value=-3)), ("smoothed", _set("smoothed", value="yes")),
-                       ("limit", _set("time_limit", value=float("inf"))),
-                       ("bogus", _set("planner_settings", "bogus", value=1)),
-                       ("range", _set("planner_settings", "range", value="abc")),
-                       ("extra", _set("validation", "extra", value=1))):
-        _edited_path(path, root / f"pv-{name}.npz", edit)
+    for name, edit in (("names", set_key("condition_names", value=["x"])), ("seed", set_key("seed", value=-1)),
+                       ("time", set_key("result", "time_s", value=-3)), ("smoothed", set_key("smoothed", value="yes")),
+                       ("limit", set_key("time_limit", value=float("inf"))),
+                       ("bogus", set_key("planner_settings", "bogus", value=1)),
+                       ("range", set_key("planner_settings", "range", value="abc")),
+                       ("extra", set_key("validation", "extra", value=1))):
+        edited_npz(path, root / f"pv-{name}.npz", edit)
     (root / "mine.html").write_text("<html><body>my notes</body></html>")
     (root / "mine.png").write_bytes(b"\x89PNG\r\n\x1a\n my picture")
     (root / "mine.json").write_text('{"generator": "me", "notes": 1}')
@@ -197,8 +183,7 @@ def with_model(inputs, tmp_path_factory):
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line(case, with_model, tmp_path):
-    message = refused_cleanly(case, with_model, tmp_path)
-    assert case.needle.format(I=with_model, O=tmp_path) in message, message
+    refused_as_told(case, with_model, tmp_path)
 
 
 def test_a_home_condition_outside_is_one_line_without_a_warning(inputs):

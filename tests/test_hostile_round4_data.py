@@ -21,7 +21,7 @@ from manifoldgen.models import CVAE, load_model
 from manifoldgen.sampling import sample_to_file
 from manifoldgen.tasks import task_from_meta
 from manifoldgen.training import check_dataset
-from refusals import api, cli, refused_cleanly, reseal
+from refusals import api, cli, refused_as_told, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 USER_FILES = {"training.json": "{\"mine\": 1}", "loss.png": "my plot", "other.txt": "notes"}
@@ -140,10 +140,7 @@ CASES = [
 def test_round4_data(case, inputs, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    message = refused_cleanly(case, inputs, out)
-    assert case.needle in message, message
-    assert len(message) < 300, message
-    assert not list(out.iterdir()), "a refused run wrote something"
+    refused_as_told(case, inputs, out)
 
 
 def test_a_sample_file_reads_back_as_a_dataset(inputs, tmp_path):

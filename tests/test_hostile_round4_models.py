@@ -15,10 +15,9 @@ from manifoldgen.data import collect
 from manifoldgen.models import CVAE, ConditionalFlowMatching, load_model, open_model, pretrained_model_dir
 from manifoldgen.models.files import read_model_dir
 from manifoldgen.sampling import MAX_SAMPLES
-from refusals import api, cli, refused_cleanly, reseal
+from refusals import api, cli, refused_as_told, reseal
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
-SHORT = 300  # characters a refusal may take at most
 
 
 def _nan(arrays) -> None:
@@ -124,10 +123,7 @@ def test_the_table_has_unique_ids():
 def test_hostile_round4_model_input(case, inputs, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    message = refused_cleanly(case, inputs, out)
-    assert case.needle in message, message
-    assert len(message) < SHORT, message
-    assert not list(out.iterdir()), "a refused call wrote a file"
+    refused_as_told(case, inputs, out)
 
 
 def test_genuine_models_pass_every_check(inputs, tmp_path, panda_task):

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from manifoldgen.cli import app
 from manifoldgen.ompl_settings import OmplSettings
 from manifoldgen.tasks import get_task
-from refusals import cli, refused_cleanly
+from refusals import cli, refused_as_told
 
 runner = CliRunner()
 BENCH = "bench plan pose --scene wall --runs 1 --time 2"
@@ -102,10 +102,7 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line_with_nothing_written(case, inputs, tmp_path):
-    message = refused_cleanly(case, inputs, tmp_path)
-    assert case.needle.format(I=inputs, O=tmp_path) in message, message
-    assert len(message) < 300, message
-    assert list(tmp_path.iterdir()) == [], "the refused command wrote into its output folder"
+    refused_as_told(case, inputs, tmp_path)
 
 
 def test_the_linked_users_file_is_untouched(inputs):

@@ -21,7 +21,7 @@ from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import save_npz
 from manifoldgen.models import CVAE
 from manifoldgen.tasks import BUILTIN_DIR
-from refusals import api, cli, refused_cleanly, reseal
+from refusals import api, cli, edited_npz, refused_as_told, refused_cleanly, reseal, set_key
 
 TINY = {"hidden": [8], "batch": 8, "epochs": 1, "patience": 5}
 
@@ -118,10 +118,7 @@ CASES = [
 def test_round5_data(case, inputs, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    message = refused_cleanly(case, inputs, out)
-    assert case.needle.format(I=inputs, O=out) in message, message
-    assert len(message) < 300, message
-    assert not list(out.iterdir()), "a refused run wrote something"
+    refused_as_told(case, inputs, out)
 
 
 @pytest.mark.parametrize("name, why", [("ck-no-rng", "KeyError"), ("ck-bad-text", "ValueError"),
@@ -170,12 +167,9 @@ def test_an_archive_larger_than_any_file_is_refused_from_its_directory(inputs, m
 
 
 def test_a_path_whose_meta_miscounts_its_waypoints_is_refused(planned_path, tmp_path):
-    from manifoldgen.io import load_npz
     from manifoldgen.query import read_path_file
 
-    meta, arrays = load_npz(planned_path("wall"), ())
-    meta["result"]["waypoints"] = 999
-    save_npz(tmp_path / "p.npz", meta, **arrays)
+    edited_npz(planned_path("wall"), tmp_path / "p.npz", set_key("result", "waypoints", value=999))
     with pytest.raises(ManifoldgenError, match=r"meta 'result' gives 999 waypoints of length .*, but the path has"):
         read_path_file(tmp_path / "p.npz")
 
@@ -224,12 +218,9 @@ def test_a_mesh_that_is_a_device_is_named_as_one():
 
 
 def test_a_path_whose_planner_settings_leave_their_ranges_is_refused(planned_path, tmp_path):
-    from manifoldgen.io import load_npz
     from manifoldgen.query import read_path_file
 
-    meta, arrays = load_npz(planned_path("wall"), ())
-    meta["planner_settings"]["range"] = -1.0
-    save_npz(tmp_path / "p.npz", meta, **arrays)
+    edited_npz(planned_path("wall"), tmp_path / "p.npz", set_key("planner_settings", "range", value=-1.0))
     with pytest.raises(ManifoldgenError, match=r"planner setting range must be a number in \[0.0001, 100\], got -1.0"):
         read_path_file(tmp_path / "p.npz")
 

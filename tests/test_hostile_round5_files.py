@@ -15,10 +15,9 @@ import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
-from manifoldgen.io import load_npz, save_npz
 from manifoldgen.query import read_path_file
 from manifoldgen.tasks import BUILTIN_DIR
-from refusals import cli, refused_cleanly
+from refusals import cli, edited_npz, refused_as_told, set_key
 
 runner = CliRunner()
 REPO = Path(__file__).resolve().parents[1]
@@ -31,45 +30,29 @@ INVERTED_URDF = (
     '<axis xyz="0 0 1"/><limit lower="-2.0" upper="2.0" effort="1" velocity="1"/></joint></robot>\n')
 
 
-def _edited(source: Path, target: Path, edit=None, arrays=None) -> None:
-    """``target``: the .npz ``source`` with its meta changed by ``edit(meta)`` and its arrays by ``arrays(dict)``."""
-    meta, found = load_npz(source, ())
-    if edit is not None:
-        edit(meta)
-    if arrays is not None:
-        arrays(found)
-    save_npz(target, meta, **found)
-
-
-def _set(*keys, value):
-    def edit(meta):
-        for key in keys[:-1]:
-            meta = meta[key]
-        meta[keys[-1]] = value
-    return edit
-
-
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory, planned_path):
     """Edited copies of a planned path file and of a roadmap, edited task files, a scene naming an obstacle twice,
     a URDF with reversed limits and its task, made once."""
     root = tmp_path_factory.mktemp("round5_files")
     path = planned_path("wall")
-    for name, edit in (("solved-false", _set("result", "solved", value=False)),
+    for name, edit in (("solved-false", set_key("result", "solved", value=False)),
                        ("kind-missing", lambda m: m.pop("kind")),
-                       ("resolution-tiny", _set("validation", "resolution", value=1e-300)),
-                       ("local-unknown", _set("local", value="zigzag")),
-                       ("floating-base-text", _set("floating_base", value="no")),
-                       ("locked-copy", _set("locked", value={"panda_finger_joint1": 0.5, "panda_finger_joint2": 0.0})),
-                       ("constraint-copy", _set("constraint", "rotation",
+                       ("resolution-tiny", set_key("validation", "resolution", value=1e-300)),
+                       ("local-unknown", set_key("local", value="zigzag")),
+                       ("floating-base-text", set_key("floating_base", value="no")),
+                       ("locked-copy", set_key("locked", value={"panda_finger_joint1": 0.5,
+                                                                "panda_finger_joint2": 0.0})),
+                       ("constraint-copy", set_key("constraint", "rotation",
                                                 value=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))):
-        _edited(path, root / f"pv-{name}.npz", edit)
+        edited_npz(path, root / f"pv-{name}.npz", edit)
     result = runner.invoke(app, ["plan", "pose", "--scene", "wall", "--time", "10", "--no-picture", "--roadmap",
                                  str(root / "rm.npz"), "-o", str(root / "p.npz")])
     assert result.exit_code == 0, result.output
-    _edited(root / "rm.npz", root / "rm-extra.npz", arrays=lambda a: a.update(q=np.zeros((2, 7))))
-    _edited(root / "rm.npz", root / "rm-reach-text.npz", _set("reach", value="far"))
-    _edited(root / "rm.npz", root / "rm-len32.npz", arrays=lambda a: a.update(lengths=a["lengths"].astype(np.float32)))
+    edited_npz(root / "rm.npz", root / "rm-extra.npz", arrays=lambda a: a.update(q=np.zeros((2, 7))))
+    edited_npz(root / "rm.npz", root / "rm-reach-text.npz", set_key("reach", value="far"))
+    edited_npz(root / "rm.npz", root / "rm-len32.npz",
+               arrays=lambda a: a.update(lengths=a["lengths"].astype(np.float32)))
     text = (BUILTIN_DIR / "pose-panda.toml").read_text().replace('"scenes/', f'"{BUILTIN_DIR}/scenes/')
     for name, old, new in (
             ("home-str", HOME, 'home = ["0.0", "-0.785398", "0.0", "-2.35619", "0.0", "1.5707", "0.785398"]'),
@@ -133,10 +116,7 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_refused_in_one_line(case, inputs, tmp_path):
-    message = refused_cleanly(case, inputs, tmp_path)
-    assert case.needle.format(I=inputs, O=tmp_path) in message, message
-    assert len(message) < 300, message
-    assert not any(tmp_path.iterdir()), "a refusal wrote a file"
+    refused_as_told(case, inputs, tmp_path)
 
 
 def test_written_path_and_roadmap_files_still_read(inputs, planned_path, tmp_path):
