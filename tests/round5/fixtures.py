@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
 """Make the inputs of the hostile round's table (tests/test_hostile_round5_table.py) in $IN with the manifoldgen of
 $CLONE (the repository, with its .venv):  CLONE=REPO IN=FOLDER REPO/.venv/bin/python fixtures.py"""
-import hashlib, json, os, shutil, subprocess, sys
+import json, os, shutil, subprocess, sys
 from pathlib import Path
 
 import numpy as np
 
-CLONE = Path(os.environ.get("CLONE", "/tmp/round5/clone"))
-IN = Path(os.environ.get("IN", "/tmp/round5/work/in"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the refusal tables' helpers
+from refusals import reseal  # noqa: E402
+
+CLONE = Path(os.environ.get("CLONE", Path(__file__).resolve().parents[2]))
+IN = Path(os.environ["IN"])
 MG = str(CLONE / ".venv/bin/manifoldgen")
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 BUILTIN = CLONE / "src/manifoldgen/tasks"
@@ -52,24 +55,6 @@ def drop(*keys):
             d = d[k]
         d.pop(keys[-1])
     return fn
-
-
-def reseal(folder, edit=None, weights=None):
-    import safetensors.numpy
-    from manifoldgen.models.files import document_checksum
-    folder = Path(folder)
-    doc = json.loads((folder / "model.json").read_text())
-    if weights is not None:
-        arrays = safetensors.numpy.load((folder / "model.safetensors").read_bytes())
-        r = weights(arrays)
-        arrays = r if isinstance(r, dict) else arrays
-        blob = safetensors.numpy.save(arrays)
-        (folder / "model.safetensors").write_bytes(blob)
-        doc["weights_sha256"] = hashlib.sha256(blob).hexdigest()
-    if edit is not None:
-        edit(doc)
-    doc["sha256"] = document_checksum(doc)
-    (folder / "model.json").write_text(json.dumps(doc))
 
 
 def model_copy(name, edit=None, weights=None):
