@@ -351,8 +351,7 @@ def _prepare_partial(partial: Path, settings: dict) -> None:
 def _collects_own(name: str) -> bool:
     """Whether a file named ``name`` in a partial folder is one collect writes: its meta.json, a batch, or a
     temporary file of an interrupted atomic write."""
-    return name == "meta.json" or re.fullmatch(r"c\d+-b\d+\.npz", name) is not None or (
-        name.startswith(".") and name.endswith(".tmp"))
+    return re.fullmatch(r"meta\.json|c\d+-b\d+\.npz|\.(meta\.json|c\d+-b\d+\.npz)\.\d+-.+\.tmp", name) is not None
 
 
 def _condition_values(task: Task, conditions) -> np.ndarray:
