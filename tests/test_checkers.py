@@ -16,6 +16,7 @@ import pytest
 from manifoldgen.data import collect
 from manifoldgen.dataset import Dataset
 from manifoldgen.tasks import get_task, task_from_meta
+from refusals import set_key
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -448,15 +449,6 @@ def _edited(source: Path, out: Path, edit_meta=None, **arrays) -> Path:
     return out
 
 
-def _set(*keys, value):
-    """A meta edit: ``meta[keys[0]]...[keys[-1]] = value``."""
-    def edit(meta):
-        for key in keys[:-1]:
-            meta = meta[key]
-        meta[keys[-1]] = value
-    return edit
-
-
 def test_absurd_resolutions_and_too_many_states_are_refused(wall, tmp_path, monkeypatch, capsys):
     """A resolution outside [1e-5, 0.05] rad (the file's, a roadmap's, a bench folder's or --resolution) cannot
     recheck, nor can a check that would make more than MAX_STATES states; the package's own files pass."""
@@ -468,10 +460,10 @@ def test_absurd_resolutions_and_too_many_states_are_refused(wall, tmp_path, monk
     path, roadmap = wall
     assert outside_check(path)["status"] == 0 and roadmap_check(roadmap)["status"] == 0
     for value in (1e-300, 100.0, 0.0, float("nan")):
-        report = outside_check(_edited(path, tmp_path / "p.npz", _set("validation", "resolution", value=value)))
+        report = outside_check(_edited(path, tmp_path / "p.npz", set_key("validation", "resolution", value=value)))
         assert report["status"] == 3 and f"meta validation.resolution {value!r} is outside the rechecked range " \
             "[1e-05, 0.05] rad" in report["line"], report["line"]
-        report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", _set("resolution", value=value)))
+        report = roadmap_check(_edited(roadmap, tmp_path / "r.npz", set_key("resolution", value=value)))
         assert report["status"] == 3 and f"meta resolution {value!r} is outside" in report["line"], report["line"]
     assert main([str(path), "--resolution", "100"]) == 3
     assert capsys.readouterr().out.strip() == f"{path}: CANNOT RECHECK: --resolution 100.0 is outside the rechecked " \
@@ -525,7 +517,7 @@ def test_a_locked_joint_outside_its_limits_is_invalid(wall, tmp_path):
     from check_roadmap import roadmap_check
 
     path, roadmap = wall
-    locked = _set("locked", "panda_finger_joint1", value=5.0)
+    locked = set_key("locked", "panda_finger_joint1", value=5.0)
     report = outside_check(_edited(path, tmp_path / "p.npz", locked))
     assert report["status"] == 1 and report["outside"] == report["states"], report["line"]
     assert report["reason"] == "segment 0 (state 0): limits: locked joint panda_finger_joint1 = 5.0000 not in " \
@@ -539,7 +531,7 @@ def test_check_path_refuses_another_kind_of_file(wall, tmp_path):
     from check_path import outside_check
 
     for kind in ("roadmap", "dataset"):
-        report = outside_check(_edited(wall[0], tmp_path / "p.npz", _set("kind", value=kind)))
+        report = outside_check(_edited(wall[0], tmp_path / "p.npz", set_key("kind", value=kind)))
         assert report["status"] == 3 and f"meta 'kind' is '{kind}', not 'path'" in report["line"], report["line"]
 
 
@@ -559,10 +551,10 @@ def test_roadmap_format_identity_arrays_and_edges_are_checked(wall, tmp_path):
     swapped[2] = swapped[2, ::-1]
     repeated = np.concatenate([edges, edges[1:2]])
     cases = [
-        ({}, _set("robot_identity", "urdf_sha256", value="0" * 64), "meta robot_identity urdf_sha256 000000000000 "
+        ({}, set_key("robot_identity", "urdf_sha256", value="0" * 64), "meta robot_identity urdf_sha256 000000000000 "
          "is not that of the robot files found"),
-        ({}, _set("robot_identity", "srdf_sha256", value="1" * 64), "meta robot_identity srdf_sha256 111111111111"),
-        ({}, _set("format_version", value=2), "meta 'format_version' is 2, not 1"),
+        ({}, set_key("robot_identity", "srdf_sha256", value="1" * 64), "meta robot_identity srdf_sha256 111111111111"),
+        ({}, set_key("format_version", value=2), "meta 'format_version' is 2, not 1"),
         ({"edges": self_edge, "lengths": lengths(self_edge)}, None, "edge 2 [4, 4] joins node 4 to itself"),
         ({"edges": swapped, "lengths": lengths(swapped)}, None, f"edge 2 {swapped[2].tolist()} has its higher node "
          "first"),
