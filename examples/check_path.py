@@ -191,7 +191,8 @@ def outside_check(file, urdf: str | None = None, srdf: str | None = None, resolu
 
 
 def bench_checks(folder: Path, urdf: str | None, srdf: str | None, resolution: float | None):
-    """One report per solved run of a ``manifoldgen bench plan`` folder, then one counting the unsolved runs."""
+    """One report per solved run of a ``manifoldgen bench plan`` folder, then one counting the unsolved runs (cannot
+    recheck where no run was solved)."""
     try:
         meta = json.loads((folder / "problem.json").read_text())
         records = [json.loads(line) for line in (folder / "runs.jsonl").read_text().splitlines() if line.strip()]
@@ -213,6 +214,10 @@ def bench_checks(folder: Path, urdf: str | None, srdf: str | None, resolution: f
         name = f"{folder} {record.get('method')} run {record.get('run')}"
         yield outside_check(name, urdf, srdf, resolution, content=(meta, np.asarray(record.get("path", []), float)),
                             near=folder)
+    if unsolved == len(records):  # nothing rechecked: exit 0 would vouch for nothing
+        yield {"status": EXIT_CANNOT, "details": [], "line": f"{folder}: CANNOT RECHECK: no solved run to recheck "
+               f"({len(records)} runs in runs.jsonl, none solved)"}
+        return
     yield {"status": EXIT_VALID, "details": [],
            "line": f"{folder}: {len(records) - unsolved} solved runs rechecked above, {unsolved} unsolved (no path)"}
 

@@ -89,7 +89,8 @@ def test_only_the_tray_hits_an_obstacle_and_its_holding_links_are_ignored():
 
 
 def _variant(tmp_path, robot: str, old: str, new: str):
-    text = get_task("dualarm", robot).file.read_text()
+    file = get_task("dualarm", robot).file
+    text = file.read_text().replace('"scenes/', f'"{file.parent}/scenes/')
     assert old in text
     path = tmp_path / f"dualarm-{robot}.toml"
     path.write_text(text.replace(old, new))

@@ -568,7 +568,7 @@ CASES = [
     cli("trajectory-still-path", "trajectory {I}/path-still.npz -o {O}/t.json", "0.00 s", code=0),
     cli("trajectory-outside-limits", "trajectory {I}/path-outside-limits.npz -o {O}/t.json", "invalid"),
     cli("trajectory-off-manifold", "trajectory {I}/path-offmanifold.npz -o {O}/t.json", "invalid"),
-    cli("trajectory-int-path", "trajectory {I}/path-int.npz -o {O}/t.json", "invalid"),
+    cli("trajectory-int-path", "trajectory {I}/path-int.npz -o {O}/t.json", "float64 array of finite numbers"),
     cli("trajectory-3d-path", "trajectory {I}/path-3d.npz -o {O}/t.json", "path-3d.npz"),
     cli("trajectory-condition-nan", "trajectory {I}/path-condition-nan.npz -o {O}/t.json", "condition"),
     cli("trajectory-condition-str", "trajectory {I}/path-condition-str.npz -o {O}/t.json", "condition"),

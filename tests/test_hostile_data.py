@@ -48,7 +48,7 @@ def files(tmp_path_factory, panda_task):
     reseal(shutil.copytree(root / "model", root / "pr2"), lambda d: d["meta"].__setitem__("robot", "pr2"))
     reseal(shutil.copytree(root / "model", root / "top"), lambda d: d.__setitem__("mixx", 0.5))
     reseal(shutil.copytree(root / "model", root / "foo"), lambda d: d["meta"].__setitem__("foo", 1))
-    text = (BUILTIN_DIR / "pose-panda.toml").read_text()
+    text = (BUILTIN_DIR / "pose-panda.toml").read_text().replace('"scenes/', f'"{BUILTIN_DIR}/scenes/')
     (root / "tight.toml").write_text(text.replace('position_axes = ["z"]\n',
                                                   'position_axes = ["z"]\nposition_tolerance = 1e-300\n'))
     return root

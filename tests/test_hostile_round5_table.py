@@ -1,8 +1,7 @@
 """A hostile round's cases (its fix set) that must be refused in one line naming the problem, exit code 2, nothing
 written or changed, run through tests/refusals.py. The inputs are made once per module by round5/fixtures.py with
 the repository's .venv (about a minute). Cases with a set-up (a link, a user's file beside the output) run it in a
-folder O/keep that a refusal must leave as it was. The needles are the least a message must name. A case still open
-is a strict expected failure with its reason (:data:`OPEN`): fixed, it fails until it is moved back.
+folder O/keep that a refusal must leave as it was. The needles are the least a message must name.
 """
 
 from __future__ import annotations
@@ -425,12 +424,7 @@ def _alarm(signum, frame):
     raise TimeoutError("still running after 60 s: a hang")
 
 
-OPEN = {"plan-model-extra-tensor": "plan's reader (no torch) knows only the sampling network's tensors; an extra "
-                                   "one is refused only where torch builds the model (sample, train)"}
-
-
-@pytest.mark.parametrize("case", [pytest.param(c, id=c.id, marks=pytest.mark.xfail(strict=True, reason=OPEN[c.id]))
-                                  if c.id in OPEN else pytest.param(c, id=c.id) for c in CASES])
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_round5_refused_in_one_line(case, inputs, tmp_path):
     out = tmp_path
     if case.id in SETUPS:

@@ -14,6 +14,7 @@ from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models import MODELS, load_model, pretrained_model_dir
 from manifoldgen.models.base import document_checksum
+from manifoldgen.models.files import MODEL_NETS
 from manifoldgen.tasks import get_task
 
 TINY = {"hidden": [32, 32], "batch": 32}
@@ -67,6 +68,8 @@ def test_model_contract(name, trained, tiny, task):
     loaded = load_model(path)
     assert type(loaded) is type(model) and loaded.meta == model.meta
     np.testing.assert_array_equal(loaded.sample([0.3], 50, torch.Generator().manual_seed(0)), q)
+    # the networks its files hold are the ones a reader without torch allows (models/files.py)
+    assert tuple(sorted(model.nets)) == MODEL_NETS[name]
     # conditioning changes the output
     other = model.sample([0.5], 50, torch.Generator().manual_seed(0))
     assert np.abs(other - q).max() > 1e-3

@@ -90,10 +90,11 @@ BAD = [
      "line 3: 'group' (planning group joints) must be a list of joint names"),
     (GOOD.replace("values = [[0.3], [0.5]]", "values = [[0.3], [0.5]]\nposition_axes = \"xy\""),
      "constraint 'pose': position_axes must be a list"),
-    (GOOD + "position_tolerance = nan\n", "constraint 'pose': position_tolerance must be at least 1e-05"),
+    (GOOD + "position_tolerance = nan\n", "constraint 'pose': position_tolerance must be a finite number, got nan"),
     (GOOD + "position_tolerance = -0.01\n", "constraint 'pose': position_tolerance must be at least 1e-05"),
     (GOOD + "position_tolerance = 1e-7\n", "position_tolerance must be at least 1e-05 (projection stops at a residual"),
-    (GOOD + "orientation_tolerance = \"0.01\"\n", "constraint 'pose': orientation_tolerance must be at least 1e-05"),
+    (GOOD + "orientation_tolerance = \"0.01\"\n",
+     "constraint 'pose': orientation_tolerance must be a finite number (written without quotes), got '0.01'"),
     (GOOD.replace('frame = "panda_hand_tcp"', "frame = 3"), "constraint 'pose': frame must be a string, got 3"),
 ]
 

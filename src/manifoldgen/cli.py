@@ -10,7 +10,7 @@ from manifoldgen.cli_common import (MADE_FOR_HELP, ROBOT_HELP, TASK_HELP, TRUST_
                                     load_task, made_for)  # the first of ours: it limits the thread pools
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import check_output_path
-from manifoldgen.runtime import CANDIDATES, REFINE, TORCH_THREADS, set_threads
+from manifoldgen.runtime import CANDIDATES, MAX_THREADS, REFINE, TORCH_THREADS, set_threads
 
 bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Experiments behind the paper's tables.")
 app.add_typer(bench_app, name="bench")
@@ -20,7 +20,7 @@ CLUSTER_HELP = ("Run on a Ray cluster: ray (the Ray running on this machine, els
                 "ray:ADDRESS (a running cluster: its head's HOST:PORT, or auto); needs the [ray] extra; see "
                 "docs/cluster.md")
 WORKERS_HELP = "Parallel worker processes (default 1); with --cluster: runs at once (default: one per cluster CPU)"
-RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, 256), "--refine": (0, 1000),
+RANGES = {"--time": (1e-3, 86_400.0), "--runs": (1, 100_000), "--threads": (1, MAX_THREADS), "--refine": (0, 1000),
           "--epochs": (1, 100_000), "--settle": (0.0, 600.0), "--hold": (0.0, 600.0), "--duration-scale": (0.01, 100.0),
           "--friction": (0.01, 10.0), "--tilt": (0.1, 45.0)}  # inclusive
 
@@ -316,7 +316,7 @@ def physics(path: Path = typer.Argument(..., help="Path .npz of a floating-base 
                                seconds_per_m=pace.seconds_per_m * duration_scale, settle_s=settle, hold_s=hold,
                                friction=friction, tilt_threshold_deg=tilt)
     if output is not None:
-        check_output_path(output, [path], suffixes=(".json",))
+        check_output_path(output, [path], suffixes=(".json",), kind="physics")
     result = check_path_file(path, settings, feet=feet, progress=True, task=made_for(task), trust_code=trust_code)
     if duration_scale != 1.0:
         _warn_same_pace(path, settings, pace, duration_scale)

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import signal
 import sys
+import threading
 import warnings
 
 from manifoldgen.runtime import check_seed, limit_threads
@@ -26,9 +28,19 @@ errors = Console(soft_wrap=True, stderr=True)  # errors and warnings
 _click = sys.modules[typer.BadParameter.__module__]  # click's exceptions: typer's own copy of click, or click
 
 
+for _stream in (sys.stdout, sys.stderr):  # a name the terminal cannot encode is printed escaped, never a traceback
+    if hasattr(_stream, "reconfigure"):
+        _stream.reconfigure(errors="backslashreplace")
+
+
+def one_line(message: str) -> str:
+    """``message`` with its control characters (a newline in a user's label or file name) escaped: one line."""
+    return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in message)
+
+
 def say_error(message: str) -> None:
-    """Print ``message`` as the one ``error:`` line (verbatim: no markup)."""
-    errors.print(Text.assemble(("error: ", "red"), message))
+    """Print ``message`` as the one ``error:`` line (verbatim: no markup; control characters escaped)."""
+    errors.print(Text.assemble(("error: ", "red"), one_line(message)))
 
 
 @contextlib.contextmanager
@@ -70,6 +82,7 @@ def friendly(command):
         def show(message, category, filename, lineno, file=None, line=None):
             errors.print(Text.assemble(("warning: ", "yellow"), str(message)))
         warnings.showwarning = show
+        stop = _stopped_cleanly()
         try:
             if "seed" in kwargs:
                 check_seed(kwargs["seed"])
@@ -89,7 +102,22 @@ def friendly(command):
             say_error(f"user code {blamed} raised {type(exc).__name__}{': ' + why if why else ''}; fix that module "
                       "(see docs/tasks.md)")
             raise typer.Exit(2) from None
+        finally:
+            stop()
     return wrapper
+
+
+def _terminated(signum, frame):
+    raise SystemExit(128 + signum)
+
+
+def _stopped_cleanly():
+    """Make SIGTERM stop the command as Ctrl-C does, through its ``finally`` blocks (a lock released, a temporary
+    file removed) and with exit code 143; returns what puts the previous handler back."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        return lambda: None
+    signal.signal(signal.SIGTERM, _terminated)
+    return lambda: signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 TASK_HELP = "Built-in task name (see `manifoldgen tasks`) or a task .toml file"

@@ -76,7 +76,7 @@ def trajectory(path_file: Path = typer.Argument(..., help="Path .npz made by `ma
     """Time-parameterise a path with TOPP-RA within joint limits; every sample is rechecked."""
     from manifoldgen.io import check_output_path
     from manifoldgen.trajectory import trajectory_of_file
-    check_output_path(output, [path_file], suffixes=TRAJECTORY_FORMATS)
+    check_output_path(output, [path_file], suffixes=TRAJECTORY_FORMATS, kind="trajectory")
     traj = trajectory_of_file(path_file, vel_scale, acc_scale, dt, task=made_for(task), trust_code=trust_code)
     info, check = traj.info, traj.info["check"]
     if check["first_invalid"] is not None:

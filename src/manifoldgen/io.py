@@ -137,6 +137,29 @@ def npz_kind(path: Path) -> str | None:
     return meta["kind"] if meta.get("kind") in NPZ_KINDS else "samples" if "generated_by" in meta else "dataset"
 
 
+JSON_KINDS = ("trajectory", "physics")  # the top-level "kind" of a .json manifoldgen writes
+
+
+def json_kind(path: Path) -> str | None:
+    """What an existing .json holds when manifoldgen wrote it (its ``generator`` is :data:`GENERATOR`): its
+    ``kind`` (:data:`JSON_KINDS`; a trajectory written before files carried one: ``trajectory``); None otherwise."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(doc, dict) or doc.get("generator") != GENERATOR:
+        return None
+    if doc.get("kind") in JSON_KINDS:
+        return doc["kind"]
+    return "trajectory" if "points" in doc and "joint_names" in doc else None
+
+
+def output_kind(path: Path) -> str | None:
+    """The kind of manifoldgen file an existing ``path`` holds (:func:`npz_kind`, :func:`json_kind`), or None."""
+    suffix = path.suffix.lower()
+    return npz_kind(path) if suffix == ".npz" else json_kind(path) if suffix == ".json" else None
+
+
 def written_by_manifoldgen(path: Path) -> bool:
     """Whether the existing file ``path`` is of a kind manifoldgen writes and was written by it: an .npz holding
     its JSON ``meta`` (:func:`npz_kind`), an .html page carrying :data:`GENERATOR_MARK`, a .png with its
@@ -188,8 +211,9 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
     A file output (``directory=False``) must end in one of ``suffixes`` (when given), must not be an existing
     directory, and its directory must exist; an existing file it would replace must be one manifoldgen wrote
     (:func:`written_by_manifoldgen`) unless ``owned`` is False (the command reads and checks that file itself
-    before it replaces it, as ``plan --roadmap`` does), and with ``kind`` (an .npz output: ``dataset``, ``path``) it
-    must hold that kind (a path never replaces a dataset). A directory output must not be an existing file, and with
+    before it replaces it, as ``plan --roadmap`` does), and with ``kind`` (an .npz output: ``dataset``, ``path``; a
+    .json: ``trajectory``, ``physics``) it must hold that kind (a path never replaces a dataset, a trajectory never a
+    physics report). A directory output must not be an existing file, and with
     ``markers`` an existing folder must be empty or hold one of them (:func:`check_own_folder`). The folder written
     into must take a new file. No file written (the output, or for a directory output the names it ``writes``
     inside it) may be one of ``inputs`` or a file of an input folder (a model directory's model.json, say), and a
@@ -240,7 +264,7 @@ def check_output_path(path: str | Path, inputs: Iterable[str | Path | None] = ()
     if owned and not directory and path.is_file() and not written_by_manifoldgen(path):
         raise ManifoldgenError(f"{what} {path} exists and was not written by manifoldgen; give another name, or "
                                "delete it to replace it")
-    if kind and not directory and path.is_file() and (found := npz_kind(path)) not in (None, kind):
+    if kind and not directory and path.is_file() and (found := output_kind(path)) not in (None, kind):
         raise ManifoldgenError(f"{what} {path} holds a {found} file, which this {kind} file would replace; give "
                                "another name, or delete it to replace it")
     _check_writable(path if directory and path.is_dir() else path.parent, path)
@@ -343,6 +367,24 @@ def _unique_keys(pairs: list) -> dict:
     if twice is not None:
         raise ValueError(f"key '{twice}' appears twice in one object (which one counts is ambiguous)")
     return dict(pairs)
+
+
+def read_toml_file(path: Path, what: str) -> dict:
+    """The TOML document of a user's ``what`` file (a task file, a settings file) at ``path``: UTF-8, a leading
+    byte-order mark dropped; a binary file (a dataset given as a task file) or bad TOML refused in one line."""
+    import tomllib
+
+    data = path.read_bytes()
+    if data.startswith(b"PK\x03\x04") or b"\x00" in data[:8192]:
+        looks = "a zip archive (an .npz dataset, path or roadmap?)" if data.startswith(b"PK") else "a binary file"
+        raise ManifoldgenError(f"{path} is {looks}, not a {what} (TOML text); give a .toml {what}")
+    try:
+        return tomllib.loads(data.decode("utf-8-sig"))
+    except UnicodeDecodeError as exc:
+        raise ManifoldgenError(f"{path} is not UTF-8 text (byte {exc.start}); save the {what} as UTF-8") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        hint = "a .json file is not a {what}: give a .toml {what}" if path.suffix.lower() == ".json" else "fix the file"
+        raise ManifoldgenError(f"{path}: not valid TOML ({exc}); {hint.format(what=what)}") from None
 
 
 def read_json(text: str):

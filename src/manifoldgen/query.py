@@ -184,9 +184,9 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     _check_contents(path_file, meta, arrays)
     _check_values(path_file, meta)
     path = arrays["path"]
-    if path.dtype.kind not in "fiu" or path.ndim != 2 or len(path) == 0 or not np.isfinite(path).all():
-        raise ManifoldgenError(f"{path_file}: 'path' must be a non-empty (K, n) array of finite numbers, got "
-                               f"{path.dtype} of shape {path.shape}; plan the query again")
+    if path.dtype != np.float64 or path.ndim != 2 or len(path) == 0 or not np.isfinite(path).all():
+        raise ManifoldgenError(f"{path_file}: 'path' must be a non-empty (K, n) float64 array of finite numbers (as "
+                               f"`plan` writes it), got {path.dtype} of shape {path.shape}; plan the query again")
     path = np.asarray(path, float)
     task = task_from_meta(meta, task=task, trust_code=trust_code, what=str(path_file))
     if path.shape[1] != task.robot.n:

@@ -18,15 +18,27 @@ def limit_threads() -> None:
         os.environ.setdefault(variable, str(TORCH_THREADS))
 
 
+MAX_THREADS = 256  # torch CPU threads a command may ask for
+
+
 def set_threads(threads: int = TORCH_THREADS) -> None:
-    """Set torch's CPU thread count (at least 1): at once where torch is loaded, else through
-    ``OMP_NUM_THREADS``, which torch reads when it loads (a command that never needs torch never pays its
-    2-3 s import); and numpy's BLAS pool as :func:`limit_threads` sizes it (its idle threads spin: 45 % of a
-    whole-body query's CPU on a busy machine, and a torch thread beside them runs many times slower)."""
+    """Set torch's CPU thread count (1 to :data:`MAX_THREADS`, else a one-line error): at once where torch is
+    loaded, else through ``OMP_NUM_THREADS``, which torch reads when it loads (a command that never needs torch
+    never pays its 2-3 s import); and numpy's BLAS pool as :func:`limit_threads` sizes it (its idle threads spin:
+    45 % of a whole-body query's CPU on a busy machine, and a torch thread beside them runs many times slower)."""
+    import operator
     import os
     import sys
 
-    threads = max(1, int(threads))
+    from manifoldgen.errors import ManifoldgenError
+
+    try:
+        whole = operator.index(threads)
+    except TypeError:
+        whole = None
+    if whole is None or isinstance(threads, bool) or not 1 <= whole <= MAX_THREADS:
+        raise ManifoldgenError(f"threads must be a whole number from 1 to {MAX_THREADS}, got {threads!r}")
+    threads = whole
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(threads)
     else:

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from pathlib import Path
 
 from manifoldgen.errors import ManifoldgenError, not_a_file
+from manifoldgen.io import read_toml_file
 
 
 def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, what: str) -> dict:
@@ -21,10 +21,7 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
     if config is not None:
         if not Path(config).is_file():
             raise ManifoldgenError(f"{not_a_file(config, 'config file')}; give a TOML file of KEY = VALUE lines")
-        try:
-            values.update(tomllib.loads(Path(config).read_text()))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
-            raise ManifoldgenError(f"{config}: not valid TOML ({type(exc).__name__}: {exc}); fix the file") from None
+        values.update(read_toml_file(Path(config), "settings file"))
     given: set[str] = set()
     for pair in pairs or []:
         key, eq, text = pair.partition("=")

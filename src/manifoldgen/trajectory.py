@@ -63,12 +63,13 @@ class Trajectory:
         points = [{"positions": p.tolist(), "velocities": v.tolist(), "accelerations": a.tolist(),
                    "time_from_start": {"sec": int(s), "nanosec": int(ns)}}
                   for p, v, a, s, ns in zip(self.positions, self.velocities, self.accelerations, sec, nanosec)]
-        return {"generator": GENERATOR, "joint_names": self.joint_names, "points": points, "manifoldgen": self.info}
+        return {"generator": GENERATOR, "kind": "trajectory", "joint_names": self.joint_names, "points": points,
+                "manifoldgen": self.info}
 
     def save(self, out: str | Path) -> None:
         """Write ``.json`` (:meth:`to_ros`) or ``.csv`` (time, then each joint's position, velocity,
         acceleration columns), atomically."""
-        out = check_output_path(out)
+        out = check_output_path(out, kind="trajectory")
         if out.suffix.lower() == ".json":
             atomic_write_text(out, json.dumps(self.to_ros(), indent=1))
             return

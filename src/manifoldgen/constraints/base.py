@@ -274,15 +274,17 @@ def check_arguments(cls: type, arguments: dict, name: str) -> None:
             ok, need = isinstance(value, bool), "true or false"
         elif isinstance(default, float) or note == "float":
             number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-            if key.endswith("tolerance"):
-                ok, need = number and value >= MIN_TOLERANCE, (f"at least {MIN_TOLERANCE:g} (projection stops at a "
+            if not number:
+                ok, need = False, "a finite number" + (" (written without quotes)" if isinstance(value, str) else "")
+            elif key.endswith("tolerance"):
+                ok, need = value >= MIN_TOLERANCE, (f"at least {MIN_TOLERANCE:g} (projection stops at a "
                                                                "residual of 1e-6: a tighter one rejects every row)")
                 if ok and value > 1:
                     ok, need = False, "at most 1 (m or rad: a wider one accepts almost any configuration)"
             elif key == "margin":
-                ok, need = number and value >= 0, "a number >= 0"
+                ok, need = value >= 0, "a number >= 0"
             else:
-                ok, need = number, "a finite number"
+                ok, need = True, ""
         elif isinstance(default, (tuple, list)) or note.startswith(("list", "tuple")):
             ok, need = isinstance(value, (list, tuple)), "a list (e.g. [\"z\"] or [0.0, 0.0, 1.0])"
         elif isinstance(default, str) or note.startswith("str"):

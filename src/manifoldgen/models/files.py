@@ -65,9 +65,25 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
     if broken is not None:
         raise ManifoldgenError(f"{path}/{WEIGHTS_FILE}: tensor '{broken}' holds NaN or infinite values (its samples "
                                "would be NaN); the file was edited or is damaged: restore or retrain the model")
+    _check_networks(path, doc, arrays)
     _check_decoder_fits_weights(path, doc, arrays)
     _check_config_fits_weights(path, doc, arrays)
     return doc, arrays
+
+
+MODEL_NETS = {"cvae": ("decoder", "encoder"), "cfm": ("velocity",), "cgan": ("critic", "generator"),
+              "wgan": ("critic", "generator"), "flow": ("flow",)}  # the networks each built-in model saves
+
+
+def _check_networks(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
+    """Refuse a tensor that belongs to none of a built-in model's networks (:data:`MODEL_NETS`), as torch would
+    when it builds the model, for readers that never build it (``plan``'s)."""
+    nets = MODEL_NETS.get(doc["model"])
+    stray = next((name for name in sorted(weights) if name.split(".")[0] not in nets), None) if nets else None
+    if stray is not None:
+        raise ManifoldgenError(f"{path}/{WEIGHTS_FILE} holds tensor {short(stray)}, which no network of a "
+                               f"'{doc['model']}' model ({', '.join(nets)}) has; the files were edited (the checksum "
+                               "is not a signature): restore or retrain the model")
 
 
 def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -> str | None:

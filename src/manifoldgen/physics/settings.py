@@ -105,4 +105,4 @@ def summary(result: PhysicsResult) -> str:
 
 
 def to_json(result: PhysicsResult) -> str:
-    return json.dumps({"generator": GENERATOR, **result.to_dict()}, indent=2)
+    return json.dumps({"generator": GENERATOR, "kind": "physics", **result.to_dict()}, indent=2)

@@ -27,6 +27,7 @@ import numpy as np
 
 from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
 from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file, short, unknown_name
+from manifoldgen.io import read_toml_file
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.provenance import check_made_for
 from manifoldgen.robot import Robot, find_robot, resolve_robot
@@ -240,13 +241,8 @@ def load_task_file(path: str | Path) -> Task:
     path = Path(path)
     if not path.is_file():
         raise ManifoldgenError(f"{not_a_file(path, 'task file')}; give a .toml task file or a built-in task name")
-    text = path.read_text(errors="replace")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        hint = "; a .json file is not a task file: give a .toml task file (a scene goes to --scene)" \
-            if path.suffix.lower() == ".json" else "; fix the file"
-        raise ManifoldgenError(f"{path}: not valid TOML ({exc}){hint}") from exc
+    data = read_toml_file(path, "task file")
+    text = path.read_text(encoding="utf-8-sig")  # for the line numbers of messages
 
     def where(key: str) -> str:
         line = _line(text, key)
@@ -299,6 +295,13 @@ def load_task_file(path: str | Path) -> Task:
         raise ManifoldgenError(f"{where('scenes')}: scene '{bad}' must be a scene file path (a string), got "
                                f"{data['scenes'][bad]!r}")
     scenes = {str(k): (base / str(v)).resolve() for k, v in data.get("scenes", {}).items()}
+    gone = next((k for k, file in scenes.items() if not file.is_file()), None)
+    if gone is not None:
+        file = scenes[gone]
+        what = ("is a folder" if file.is_dir() else "is not a regular file (a device, pipe or socket)" if file.exists()
+                else "does not exist")
+        raise ManifoldgenError(f"{where('scenes')}: scene '{gone}': {file} {what} (scene paths are relative "
+                               "to the task file's folder); fix the path or drop the scene")
     try:
         task = _finish(str(data["name"]), robot_obj, constraint, data.get("home"), data.get("home_condition"),
                        str(data.get("description", "")), scenes)
