@@ -5,7 +5,6 @@ and task they were made for (see :meth:`manifoldgen.tasks.Task.meta`; :mod:`mani
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +12,7 @@ import numpy as np
 
 from manifoldgen.errors import ManifoldgenError, did_you_mean, differences, file_reader, short
 from manifoldgen.io import check_output_path, load_npz, save_npz
+from manifoldgen.json_values import finite, number, numbers, text, texts, whole
 from manifoldgen.runtime import MAX_SEED
 
 FORMAT_VERSION = 2  # 2: meta["task"] holds the full task spec
@@ -130,7 +130,7 @@ def check_meta(meta: dict, k: int, where: str) -> None:
             and all(isinstance(condition[key], list) and len(condition[key]) == k
                     and all(isinstance(v, str) for v in condition[key]) for key in ("names", "units"))
             and isinstance(condition["values"], list) and condition["values"]
-            and all(_numbers(row, k) for row in condition["values"])):
+            and all(numbers(row, k) for row in condition["values"])):
         raise bad(f"'condition' must hold names, units and value rows for y's {k} condition columns")
     _check_scenes(meta, k, bad)
 
@@ -160,9 +160,9 @@ def _check_task_spec(task: dict, joints, k: int, bad) -> None:
         if key in task and not fits(task[key]):
             raise bad(f"task '{key}' {short(task[key])} must be {what}")
     n = len(joints) if isinstance(joints, list) else None
-    if "home" in task and not _numbers(task["home"], n):
+    if "home" in task and not numbers(task["home"], n):
         raise bad(f"task 'home' {short(task['home'])} must hold a number per joint ({n})")
-    if "home_condition" in task and not _numbers(task["home_condition"], k):
+    if "home_condition" in task and not numbers(task["home_condition"], k):
         raise bad(f"task 'home_condition' {short(task['home_condition'])} must hold a number per condition column "
                   f"({k})")
 
@@ -174,75 +174,51 @@ def _check_known(data: dict, known: tuple[str, ...], has: str, bad) -> None:
         raise bad(f"{has} an unknown key '{unknown}'{did_you_mean(unknown, known)}")
 
 
-def _number(value, low: float = -math.inf, high: float = math.inf) -> bool:
-    """Whether ``value`` (read from JSON) is a number (not a bool, not NaN) from ``low`` to ``high``."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and low <= value <= high
-
-
-def _whole(value, low: int = 0, high: float = math.inf) -> bool:
-    """Whether ``value`` (read from JSON) is a whole number (not a bool) from ``low`` to ``high``."""
-    return isinstance(value, int) and _number(value, low, high)
-
-
-def _numbers(values, count: int | None) -> bool:
-    """Whether ``values`` is a list of ``count`` (any number when None) finite numbers."""
-    return isinstance(values, list) and count in (None, len(values)) and all(
-        _number(v) and math.isfinite(v) for v in values)
-
-
 def _coverage(report) -> bool:
     """Whether ``report`` has the form :func:`manifoldgen.data.coverage` writes."""
     anchor_keys = {"label", "gap", "spacing", "missed"}
     return (isinstance(report, dict) and "modes" in report and set(report) <= {"modes", "anchors"}
             and isinstance(report["modes"], dict)
-            and all(isinstance(shares, list) and all(_number(s, 0, 1) for s in shares)
+            and all(isinstance(shares, list) and all(number(s, 0, 1) for s in shares)
                     for shares in report["modes"].values())
             and isinstance(report.get("anchors", []), list)
             and all(isinstance(a, dict) and set(a) == anchor_keys and isinstance(a["label"], str)
-                    and isinstance(a["missed"], bool) and _number(a["gap"], 0) and _number(a["spacing"], 0)
+                    and isinstance(a["missed"], bool) and number(a["gap"], 0) and number(a["spacing"], 0)
                     for a in report.get("anchors", [])))
 
 
 KINDS = {  # meta key -> (whether its value fits, what it must be); the task's copies, scenes and anchors: apart
     "task": (lambda v: isinstance(v, dict), "an object (the task's spec)"),
-    "seed": (lambda v: _whole(v, 0, MAX_SEED), f"a whole number from 0 to {MAX_SEED}"),
-    "per_condition": (lambda v: _whole(v, 1), "a positive whole number (rows per condition value)"),
+    "seed": (lambda v: whole(v, 0, MAX_SEED), f"a whole number from 0 to {MAX_SEED}"),
+    "per_condition": (lambda v: whole(v, 1), "a positive whole number (rows per condition value)"),
     "method": (lambda v: isinstance(v, str), "a string (how the rows were seeded)"),
-    "near_home": (lambda v: _number(v, 0, MAX_NEAR_HOME), f"a number from 0 to {MAX_NEAR_HOME:g} (rad)"),
+    "near_home": (lambda v: number(v, 0, MAX_NEAR_HOME), f"a number from 0 to {MAX_NEAR_HOME:g} (rad)"),
     "coverage": (_coverage, 'an object {"modes": {condition: [shares]}, "anchors": [...]} as collect writes it'),
-    "dataset_seed": (lambda v: v is None or _whole(v, 0, MAX_SEED), f"null or a whole number from 0 to {MAX_SEED}"),
+    "dataset_seed": (lambda v: v is None or whole(v, 0, MAX_SEED), f"null or a whole number from 0 to {MAX_SEED}"),
     "rows": (lambda v: v in ("raw", "refined"), '"raw" or "refined"'),
-    "refine": (lambda v: _whole(v, 0), "a whole number >= 0 (projection iterations)"),
+    "refine": (lambda v: whole(v, 0), "a whole number >= 0 (projection iterations)"),
     "generated_by": (lambda v: isinstance(v, dict) and set(v) == {"model", "source"} and all(
         isinstance(x, str) for x in v.values()), 'an object {"model": name, "source": path}'),
-    "raw_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
-    "refined_valid_rate": (lambda v: _number(v, 0, 1), "a share from 0 to 1"),
+    "raw_valid_rate": (lambda v: number(v, 0, 1), "a share from 0 to 1"),
+    "refined_valid_rate": (lambda v: number(v, 0, 1), "a share from 0 to 1"),
 }
 
 
-def _text(value) -> bool:
-    return isinstance(value, str)
-
-
-def _texts(value) -> bool:
-    return isinstance(value, list) and all(isinstance(v, str) for v in value)
-
-
 TASK_SPEC_KINDS = {  # meta["task"] key -> (whether its value fits, what it must be); home and its condition: apart
-    "name": (_text, "a string"),
-    "description": (_text, "a string"),
+    "name": (text, "a string"),
+    "description": (text, "a string"),
     "robot": (lambda v: isinstance(v, (str, dict)), "a robot name or its identity object"),
-    "robot_source": (lambda v: v is None or _text(v), "null or a string"),
-    "srdf_source": (lambda v: v is None or _text(v), "null or a path"),
-    "group": (lambda v: _texts(v) and len(v) > 0, "a list of joint names"),
+    "robot_source": (lambda v: v is None or text(v), "null or a string"),
+    "srdf_source": (lambda v: v is None or text(v), "null or a path"),
+    "group": (lambda v: texts(v) and len(v) > 0, "a list of joint names"),
     "floating_base": (lambda v: isinstance(v, bool), "true or false"),
-    "base_bounds": (lambda v: isinstance(v, list) and len(v) == 2 and any(all(_numbers(b, n) for b in v)
+    "base_bounds": (lambda v: isinstance(v, list) and len(v) == 2 and any(all(numbers(b, n) for b in v)
                                                                           for n in (3, 6)),
                     "[[x, y, z (yaw, pitch, roll) low], [the same high]]"),
-    "locked": (lambda v: isinstance(v, dict) and all(_number(x) and math.isfinite(x) for x in v.values()),
+    "locked": (lambda v: isinstance(v, dict) and all(finite(x) for x in v.values()),
                "an object joint -> value"),
     "constraint": (lambda v: isinstance(v, dict) and isinstance(v.get("type"), str), "an object with a 'type'"),
-    "task_file": (lambda v: v is None or _text(v), "null or a path"),
+    "task_file": (lambda v: v is None or text(v), "null or a path"),
     "attached": (lambda v: isinstance(v, dict), "an object (the held object)"),
     "planner": (lambda v: isinstance(v, dict), "an object (planner settings)"),
 }
@@ -261,6 +237,6 @@ def _check_scenes(meta: dict, k: int, bad) -> None:
     n = len(joints) if isinstance(joints, list) else None
     for i, anchor in enumerate(anchors):
         if not (isinstance(anchor, dict) and set(anchor) == {"label", "q", "condition"}
-                and isinstance(anchor["label"], str) and _numbers(anchor["q"], n) and _numbers(anchor["condition"], k)):
+                and isinstance(anchor["label"], str) and numbers(anchor["q"], n) and numbers(anchor["condition"], k)):
             raise bad(f"anchors[{i}] must hold a 'label', its configuration 'q' (a number per joint: {n}) and its "
                       f"'condition' (a number per condition column: {k})")

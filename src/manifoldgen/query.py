@@ -21,6 +21,7 @@ import numpy as np
 from manifoldgen.dataset import check_copies
 from manifoldgen.errors import ManifoldgenError, did_you_mean, listed, short
 from manifoldgen.io import check_output_path, output_lock, save_npz
+from manifoldgen.json_values import finite, text, whole
 from manifoldgen.planning import PLANNERS, planner_settings
 from manifoldgen.planning.base import SMOOTH_SHORTCUTS, Planner, check_time_limit
 from manifoldgen.planning.local import DEFAULT_LOCAL, LOCAL_PLANNERS
@@ -39,11 +40,19 @@ PATH_KEYS = ("task", "robot", "joints", "locked", "floating_base", "constraint",
 # a path file's meta: the task's (Task.meta), the query's (query_meta) and the planner's (plan_query)
 ENDPOINT_TOLERANCE = 1e-6  # rad: how far path[0] and path[-1] may lie from the recorded start and goal
 
-# the kinds of a path file's meta values besides the task's and the query's, as plan_query writes them
-TEXT, FLAG, COUNT, SEED = "a string", "true or false", "a whole number >= 0", f"a whole number from 0 to {MAX_SEED}"
-POSITIVE, AMOUNT, SEGMENT, OBJECT = "a finite number > 0", "a finite number >= 0", "a whole number >= -1", "an object"
-TRUE, LOCAL = "true (plan writes only solved, checked paths)", f"a local planner ({', '.join(LOCAL_PLANNERS)})"
-RESOLUTION = "a number from {:g} to {:g} (rad)".format(*RESOLUTION_RANGE)
+# the kinds of a path file's meta values besides the task's and the query's, as plan_query writes them: (whether a
+# value fits, what it must be)
+TEXT = (text, "a string")
+FLAG = (lambda v: isinstance(v, bool), "true or false")
+OBJECT = (lambda v: isinstance(v, dict), "an object")
+COUNT = (whole, "a whole number >= 0")
+SEGMENT = (lambda v: whole(v, -1), "a whole number >= -1")
+SEED = (lambda v: whole(v, 0, MAX_SEED), f"a whole number from 0 to {MAX_SEED}")
+POSITIVE = (lambda v: finite(v) and v > 0, "a finite number > 0")
+AMOUNT = (lambda v: finite(v, 0), "a finite number >= 0")
+TRUE = (lambda v: v is True, "true (plan writes only solved, checked paths)")
+LOCAL = (lambda v: text(v) and v in LOCAL_PLANNERS, f"a local planner ({', '.join(LOCAL_PLANNERS)})")
+RESOLUTION = (lambda v: finite(v, *RESOLUTION_RANGE), "a number from {:g} to {:g} (rad)".format(*RESOLUTION_RANGE))
 VALUE_KINDS = {"scene_name": TEXT, "planner": TEXT, "sampler": TEXT, "local": LOCAL, "seed": SEED,
                "time_limit": POSITIVE, "smoothed": FLAG, "planner_settings": OBJECT, "result": OBJECT,
                "validation": OBJECT}
@@ -52,16 +61,6 @@ NESTED_KINDS = {"result": {"solved": TRUE, "time_s": AMOUNT, "iterations": COUNT
                            "extras": OBJECT},
                 "validation": {"valid": TRUE, "worst_violation": AMOUNT, "reason": TEXT, "segment": SEGMENT,
                                "states_checked": COUNT, "resolution": RESOLUTION}}
-
-
-def _is_kind(value, kind: str) -> bool:
-    whole = isinstance(value, int) and not isinstance(value, bool)
-    low, high = RESOLUTION_RANGE
-    real = whole or (isinstance(value, float) and math.isfinite(value))
-    return {TEXT: isinstance(value, str), FLAG: isinstance(value, bool), OBJECT: isinstance(value, dict),
-            COUNT: whole and value >= 0, SEED: whole and 0 <= value <= MAX_SEED, SEGMENT: whole and value >= -1,
-            POSITIVE: real and value > 0, AMOUNT: real and value >= 0, TRUE: value is True,
-            LOCAL: isinstance(value, str) and value in LOCAL_PLANNERS, RESOLUTION: real and low <= value <= high}[kind]
 
 
 def get_planner(name: str) -> type[Planner]:
@@ -247,15 +246,16 @@ def _check_values(path_file: str | Path, meta: dict) -> None:
     check_copies(meta, lambda why: ManifoldgenError(f"{path_file}: meta {why}; the file was edited: plan the query "
                                                     "again"))
 
-    for key, kind in VALUE_KINDS.items():
-        if key in meta and not _is_kind(meta[key], kind):
-            refuse(key, f"must be {kind}, got {short(meta[key])}")
+    for key, (fits, what) in VALUE_KINDS.items():
+        if key in meta and not fits(meta[key]):
+            refuse(key, f"must be {what}, got {short(meta[key])}")
     for key, kinds in NESTED_KINDS.items():
         for name, value in meta.get(key, {}).items():
             if name not in kinds:
                 refuse(f"{key}.{name}", f"is not a key of '{key}' (known: {', '.join(kinds)})")
-            if not _is_kind(value, kinds[name]):
-                refuse(f"{key}.{name}", f"must be {kinds[name]}, got {short(value)}")
+            fits, what = kinds[name]
+            if not fits(value):
+                refuse(f"{key}.{name}", f"must be {what}, got {short(value)}")
     if "planner_settings" in meta:
         planner = meta.get("planner")
         if planner not in PLANNERS.names():

@@ -217,10 +217,8 @@ def _training_log(folder: Path) -> dict:
 def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None) -> None:
     """Refuse to reuse the finished candidate in ``folder`` when it was trained on other rows, with another seed or
     validation share, or (``epochs`` given) for another number of epochs than this run asks for."""
-    try:
-        made = json.loads((folder / "training.json").read_text()).get("identity") or {}
-    except (OSError, ValueError, AttributeError):
-        made = {}
+    made = _training_log(folder).get("identity")
+    made = made if isinstance(made, dict) else {}
     wanted = {"dataset": fingerprint(dataset), "seed": seed, "validation": VALIDATION,
               **({"epochs": epochs} if epochs is not None else {})}
     changed = differences({key: made.get(key) for key in wanted}, wanted)
