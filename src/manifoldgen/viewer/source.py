@@ -17,7 +17,7 @@ import numpy as np
 
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file
-from manifoldgen.io import load_npz
+from manifoldgen.io import load_npz, npz_kind
 from manifoldgen.provenance import check_task_copies
 from manifoldgen.query import read_path_file
 from manifoldgen.scene import Scene, get_scene
@@ -60,22 +60,23 @@ def read_source(file: str | Path, task: str | None = None, *, trust_code: bool =
 
 
 def _read_npz(file: Path, task: Task | None, trust_code: bool) -> ViewSource:
-    meta, arrays = load_npz(file, ())
-    if "path" in arrays:
+    kind = npz_kind(file)  # its meta alone: the reader below loads the arrays once, with its own checks
+    if kind is None:
+        load_npz(file, ())  # refuses a damaged or foreign .npz, naming why
+    if kind == "path":
         meta, path, t = read_path_file(file, task, trust_code=trust_code)
         y = np.broadcast_to(np.asarray(meta["condition"], float), (len(path), t.condition.k))
         scene = Scene.from_meta(meta)
         return ViewSource("path", file, meta, t, path, y, scene,
                           f"{t.robot.name} {t.name}, scene {scene.name or '?'}: {len(path)} waypoints")
-    if "q" in arrays and "y" in arrays:
+    if kind in ("dataset", "samples"):
         data = Dataset.load(file)  # the dataset checks: arrays, meta kinds, its task's copies below
         t = task_from_meta(data.meta, task=task, trust_code=trust_code, what=str(file))
         check_task_copies(data.meta, t.constraint, str(file))
         q, y = data.q, data.y
         _check_width(q, t, file)
-        what = "samples" if "generated_by" in meta else "dataset"
-        return ViewSource("dataset", file, meta, t, q, y, Scene("", [], None, q[:0], q[:0], y[:0]),
-                          f"{t.robot.name} {t.name} {what}: {len(q)} rows")
+        return ViewSource("dataset", file, data.meta, t, q, y, Scene("", [], None, q[:0], q[:0], y[:0]),
+                          f"{t.robot.name} {t.name} {kind}: {len(q)} rows")
     raise ManifoldgenError(f"cannot show {file}: an .npz without 'path' or 'q' and 'y'; give {KINDS}")
 
 
