@@ -516,7 +516,7 @@ CASES = [
     cli("tasks-values-dup", "tasks {I}/task-values-dup.toml", "values", "0.3"),
     cli("tasks-home-short", "tasks {I}/task-home-short.toml", "home"),
     cli("tasks-home-nan", "tasks {I}/task-home-nan.toml", "home must be finite numbers"),
-    cli("tasks-home-limits", "tasks {I}/task-home-limits.toml", "pose", code=0),  # home is projected
+    cli("tasks-home-limits", "tasks {I}/task-home-limits.toml", "home panda_joint1 = 100 is outside its limits"),
     cli("tasks-home-condition-nan", "tasks {I}/task-home-condition-nan.toml", "line 9", "nan"),
     cli("tasks-home-condition-long", "tasks {I}/task-home-condition-long.toml", "line 8", "got 2"),
     cli("tasks-locked-str", "tasks {I}/task-locked-str.toml", "locked", "open"),
@@ -562,7 +562,7 @@ CASES = [
     cli("user-jacobian-raises", f"collect {_user('jac_raises')} --per-condition 5 -o {{O}}/x.npz", "jac_raises",
         "KeyError"),
     cli("user-not-a-class", f"tasks {_user('not_class')}", "not_class"),
-    cli("user-exits", f"tasks {_user('exits')}", "exits", "SystemExit"),
+    cli("user-exits", f"tasks {_user('exits')}", "exits", "called exit(3)"),
     # path files
     cli("trajectory-one-waypoint", "trajectory {I}/path-one.npz -o {O}/t.json", "1 waypoints", code=0),
     cli("trajectory-still-path", "trajectory {I}/path-still.npz -o {O}/t.json", "0.00 s", code=0),

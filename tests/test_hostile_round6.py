@@ -1,13 +1,17 @@
 """Refusals and fixes of the sixth hostile round: a .json output of another kind (a trajectory over a physics report
 and back), a dataset given as a task file, a task file's missing scene, tolerances given as text or true, a path
-stored as float32, a method label holding a newline, torch threads out of range through the API; each one line
-naming the problem, nothing written, no input changed. Accepted: a task file with a UTF-8 byte-order mark, an
+stored as float32, a method label holding a newline, torch threads out of range through the API, and from its
+held-out share: a dataset with no rows to view, a home outside the joint limits, a user's module exiting, a bench
+config.json that no longer lists the methods of its runs, a model directory that is a link loop, a folder given as a
+pg dataset, sampling conditions of the wrong width; each one line naming the problem, nothing written, no input
+changed. Accepted: a task file with a UTF-8 byte-order mark, an
 output name the terminal cannot encode. The outside checker does not vouch for a bench folder with no solved run."""
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -19,11 +23,13 @@ import pytest
 from typer.testing import CliRunner
 
 from manifoldgen.cli import app
+from manifoldgen.models import CVAE
 from manifoldgen.tasks import BUILTIN_DIR
 from refusals import api, cli, edited_npz, refused_as_told
 
 runner = CliRunner()
 ROOT = Path(__file__).resolve().parents[1]
+USER = ROOT / "examples" / "user_task"
 PANDA = (BUILTIN_DIR / "pose-panda.toml").read_text().replace('"scenes/', f'"{BUILTIN_DIR}/scenes/')
 
 
@@ -54,7 +60,24 @@ def inputs(tmp_path_factory, planned_path):
     (root / "tol-str.toml").write_text(tables.replace("TOL", 'orientation_tolerance = "0.01"'))
     (root / "tol-bool.toml").write_text(tables.replace("TOL", "position_tolerance = true"))
     (root / "bom.toml").write_bytes(b"\xef\xbb\xbf" + PANDA.encode())
-    collect(get_task("pose", "panda"), 6, seed=0, conditions=[[0.3]], progress=False).save(root / "data.npz")
+    data = collect(get_task("pose", "panda"), 6, seed=0, conditions=[[0.3], [0.5]], progress=False)
+    data.save(root / "data.npz")
+    edited_npz(root / "data.npz", root / "no-rows.npz", arrays=lambda a: a.update(q=a["q"][:0], y=a["y"][:0]))
+    (root / "home-huge.toml").write_text(PANDA.replace("home = [0.0,", "home = [1e300,"))
+    user = root / "user"
+    user.mkdir()
+    shutil.copy(USER / "tool_down.py", user / "tool_down.py")
+    (user / "exits.py").write_text("from tool_down import ToolDownAtX\nclass C(ToolDownAtX):\n"
+                                   "    def __init__(self, *a, **k):\n        raise SystemExit(0)\n")
+    (user / "task.toml").write_text((USER / "tool-down-xarm7.toml").read_text().replace(
+        "tool_down:ToolDownAtX", "exits:C").replace('open = "open.json"', f'open = "{USER / "open.json"}"'))
+    _ok("bench", "plan", "pose", "--scene", "wall", "--runs", 1, "--time", 2, "-m", "rrtconnect@project",
+        "-o", root / "bench")
+    config = json.loads((root / "bench" / "config.json").read_text())
+    config["methods"] = ["rrtconnect@cvae:elsewhere"]  # no longer lists the method its runs were made with
+    (root / "bench" / "config.json").write_text(json.dumps(config))
+    CVAE(hidden=[8], batch=8, epochs=1, patience=5).fit(data, seed=0, progress=False, out=root / "model")
+    os.symlink(root / "loop", root / "loop")
     return root
 
 
@@ -77,6 +100,22 @@ CASES = [
     cli("bench-label-newline", ["bench", "plan", "pose", "--scene", "wall", "--runs", "1", "--time", "2", "-m",
                                 "a\nb=rrtconnect@project", "-o", "{O}/b"],
         "label 'a\\nb' is not a plain name"),
+    cli("view-dataset-no-rows", "view {I}/no-rows.npz --export {O}/v.html",
+        "{I}/no-rows.npz holds no rows: nothing to show"),
+    cli("tasks-home-outside-limits", "tasks {I}/home-huge.toml",
+        "home panda_joint1 = 1e+300 is outside its limits [-2.8973, 2.8973]; give a home inside the joint limits"),
+    api("load-task-user-code-exits", lambda I, O: __import__("manifoldgen").load_task(I / "user" / "task.toml"),
+        "exits.py, line 4 called exit(0) while its task was read; a constraint's module must not exit"),
+    cli("bench-resume-config-without-its-runs", "bench plan pose --scene wall --runs 2 --time 2 -m rrtconnect@project "
+        "--resume -o {I}/bench", "{I}/bench/config.json does not list method 'rrtconnect@project' as "
+        "'rrtconnect@project', which runs.jsonl holds runs of: the folder was edited"),
+    cli("sample-model-link-loop", "sample {I}/loop --condition 0.4 -o {O}/s.npz",
+        "model directory {I}/loop is a symbolic link loop"),
+    cli("plan-pg-of-a-folder", "plan pose --scene wall --no-picture --sampler pg:{I}/model -o {O}/p.npz",
+        "dataset {I}/model is a directory, not a file; give the dataset's .npz"),
+    api("sample-y-of-another-width", lambda I, O: __import__("manifoldgen").load_model(I / "model").sample(
+        np.zeros((2, 3)), 2), "y must hold conditions of 1 value(s) each, as (k,), (1, k) or (n, k) with k = 1; got "
+        "shape (2, 3)"),
     api("set-threads-million", lambda I, O: __import__("manifoldgen.runtime").runtime.set_threads(10**6),
         "threads must be a whole number from 1 to 256, got 1000000"),
     api("set-threads-text", lambda I, O: __import__("manifoldgen.runtime").runtime.set_threads("2"),

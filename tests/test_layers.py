@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "manifoldgen"
 # Bottom to top. A name covers the module and everything under it (a package); the longest name that covers a
 # module decides its layer; "" is the package's own __init__ (the `mg` namespace).
 LAYERS = [
-    ("base", ["errors", "io", "registry", "runtime", "settings", "progress", "cluster"]),
+    ("base", ["errors", "io", "json_values", "registry", "runtime", "settings", "progress", "cluster"]),
     ("geometry and kinematics", ["robot", "collision", "spheres", "shapes"]),
     ("constraints", ["constraints", "provenance"]),
     ("space", ["space"]),

@@ -77,7 +77,7 @@ BAD = [
     (GOOD + "colour = 1\n", "line 6: constraint 1: constraint 'pose': got an unexpected keyword argument 'colour'"),
     (GOOD.replace("name = ", "nam = "), "unknown key 'nam'"),
     ("robot = [", "not valid TOML"),
-    (GOOD + "[planner]\nreech = 0.2\n", "line 11: unknown planner setting 'reech'; known: "),
+    (GOOD + "[planner]\nreech = 0.2\n", "line 11: unknown planner setting 'reech' (did you mean 'reach'?)"),
     (GOOD + "[planner]\nreach = \"far\"\n", "line 11: planner setting reach must be a float"),
     # values of the wrong kind, refused when the file is read (not by a later command, not read letter by letter)
     (GOOD + "[planner]\nreach = -1.0\n", "line 11: reach must be a positive distance"),

@@ -48,7 +48,7 @@ class Dataset:
     @file_reader
     def load(cls, path: str | Path) -> Dataset:
         """Read and validate a dataset file (clear errors for truncated or foreign files)."""
-        meta, arrays = load_npz(path, ())
+        meta, arrays = load_npz(path, (), "dataset")
         missing = [key for key in ("q", "y") if key not in arrays]
         if missing:
             kind = meta.get("kind") if meta.get("kind") in ("path", "roadmap") else None

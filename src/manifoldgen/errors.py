@@ -85,7 +85,8 @@ def user_code(exc: BaseException) -> str | None:
 
 def file_reader(read):
     """Decorate a reader of files: an exception that a damaged or foreign file's content raises deep inside
-    (a string where a number belongs, a missing key ...) becomes one ManifoldgenError naming the file."""
+    (a string where a number belongs, a missing key ...) becomes one ManifoldgenError naming the file, and so does
+    a user's module exiting as the file's task is built (naming its file and line)."""
     @functools.wraps(read)
     def wrapper(*args, **kwargs):
         try:
@@ -99,6 +100,12 @@ def file_reader(read):
             why = (str(exc).strip().splitlines() or [""])[0][:120]
             raise ManifoldgenError(f"{source}: damaged or unexpected content ({type(exc).__name__}: {why}); "
                                    "regenerate the file or fix it") from None
+        except SystemExit as exc:  # a user's module exiting: through the API it would end the caller's program
+            where = user_code(exc)
+            if where is None:
+                raise
+            raise ManifoldgenError(f"user code {where} called exit({exc.code!r}) while its task was read; a "
+                                   "constraint's module must not exit: fix it (see docs/tasks.md)") from None
     return wrapper
 
 

@@ -419,13 +419,14 @@ def _check_members(path: Path, members: list[zipfile.ZipInfo]) -> None:
                                f"{MAX_NPZ_BYTES >> 30} GiB any manifoldgen file holds; regenerate it")
 
 
-def load_npz(path: str | Path, required: tuple[str, ...]) -> tuple[dict, dict[str, np.ndarray]]:
-    """Read an .npz written by :func:`save_npz`; clear errors for missing, truncated or foreign files."""
+def load_npz(path: str | Path, required: tuple[str, ...], what: str = "file") -> tuple[dict, dict[str, np.ndarray]]:
+    """Read an .npz written by :func:`save_npz` (a ``what``: "dataset", "path file" ..., for messages); clear errors
+    for missing, truncated or foreign files."""
     import numpy as np
 
     path = Path(path)
     if not path.is_file():
-        raise ManifoldgenError(not_a_file(path))
+        raise ManifoldgenError(f"{not_a_file(path, what)}; give the {what}'s .npz")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):

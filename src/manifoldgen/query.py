@@ -173,7 +173,7 @@ def read_path_file(path_file: str | Path, task: Task | None = None, *, trust_cod
     from manifoldgen.io import load_npz
     from manifoldgen.tasks import task_from_meta
 
-    meta, arrays = load_npz(path_file, ())
+    meta, arrays = load_npz(path_file, (), "path file")
     if "path" not in arrays or meta.get("kind", "path") != "path":
         raise ManifoldgenError(f"{path_file} is not a path file (no 'path' array, or its meta says kind "
                                f"{short(meta.get('kind'))}); give a file written by `manifoldgen plan`")

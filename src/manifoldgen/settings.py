@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from manifoldgen.errors import ManifoldgenError, not_a_file
+from manifoldgen.errors import ManifoldgenError, did_you_mean, not_a_file
 from manifoldgen.io import read_toml_file
 
 
@@ -54,7 +54,8 @@ def check_settings(values: dict, known: dict, what: str) -> dict:
     out = {}
     for key, value in values.items():
         if key not in known:
-            raise ManifoldgenError(f"unknown {what} setting '{key}'; known: {', '.join(sorted(known))}")
+            hint = did_you_mean(key, known)  # a near name says enough; else every known one
+            raise ManifoldgenError(f"unknown {what} setting '{key}'{hint or '; known: ' + ', '.join(sorted(known))}")
         out[key] = _fit(key, value, known[key], what)
     return out
 

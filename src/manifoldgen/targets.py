@@ -87,7 +87,7 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
     q = on.q[on.converged]
     valid = q[on_target.valid(q)]
     if not len(valid):
-        at = f"at condition {np.round(y, 4).tolist()} puts {frame} at the {what} target {target}"
+        at = f"at condition {np.round(y, 4).tolist()} puts {frame} at the {what} target {target['position']}"
         reaching = reach.satisfied(q, np.broadcast_to(target["position"], (len(q), 3)))
         if reaching.any():  # the target lies on the manifold; obstacles (or the robot itself) are in the way
             raise ManifoldgenError(f"no collision-free configuration on the task's manifold {at}: all "
@@ -95,8 +95,8 @@ def solve_target(constraint: Constraint, y: np.ndarray, target: dict, checker: C
                                    "target away from obstacles")
         miss = float(np.min(np.linalg.norm(robot.frame_pose(q, frame)[0] - np.asarray(target["position"]), axis=1)))
         raise ManifoldgenError(f"no collision-free configuration on the task's manifold {at}: the nearest of "
-                               f"{len(q)} brings {frame} within {miss:.3f} m of it, not onto it ({SEEDS} projected "
-                               "seeds); move the target within reach, onto the task's manifold")
+                               f"{len(q)} misses it by {miss:.3f} m; move the target within reach, onto the task's "
+                               "manifold")
     return _distinct(valid)
 
 

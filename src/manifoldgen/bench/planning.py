@@ -513,14 +513,16 @@ def _prepare_pg(experiment: Experiment, methods: list[Method], out_dir: Path, ro
     return [m.resolved(f"pg:{path}") if m.sampler == "pg" else m for m in methods]
 
 
-def _folder_config(out_dir: Path, experiment: dict, methods: list[Method], resume: bool, done: int) -> dict:
+def _folder_config(out_dir: Path, experiment: dict, methods: list[Method], resume: bool,
+                   records: list[dict]) -> dict:
     """The folder's ``config.json`` after this run: the experiment, and the methods of its earlier runs with this
     run's added (a resume may add methods and runs). A folder with runs is refused without ``resume``; a resume
-    with another experiment, or another spec under a label the folder holds, is refused naming the difference."""
+    with another experiment, or another spec under a label the folder holds, is refused naming the difference, and
+    so is a config.json that does not list a method of the ``records`` (``runs.jsonl``) as they were made."""
     path = out_dir / CONFIG_FILE
-    if done and not resume:
-        raise ManifoldgenError(f"{out_dir} already holds {done} runs; pass --resume to continue them or choose "
-                               "another output folder")
+    if records and not resume:
+        raise ManifoldgenError(f"{out_dir} already holds {len(records)} runs; pass --resume to continue them or "
+                               "choose another output folder")
     held: dict[str, str] = {}
     if path.is_file():  # read before it is replaced: a config.json bench did not write is not replaced
         try:
@@ -537,6 +539,11 @@ def _folder_config(out_dir: Path, experiment: dict, methods: list[Method], resum
                                    f"{f' (and {len(changed) - 3} more)' if len(changed) > 3 else ''}; resume with "
                                    "the same scene, time limit, seed, task and settings, or choose another folder")
         held = {method.label: method.spec for method in map(Method.parse, old_specs)}
+        unlisted = next((r for r in records if held.get(r["method"]) != r.get("spec")), None)
+        if unlisted is not None:
+            raise ManifoldgenError(f"{path} does not list method '{unlisted['method']}' as '{unlisted.get('spec')}', "
+                                   f"which {RUNS_FILE} holds runs of: the folder was edited; restore config.json or "
+                                   "use another folder")
         clash = next((m for m in methods if held.get(m.label, m.spec) != m.spec), None)
         if clash is not None:
             raise ManifoldgenError(f"{out_dir} holds method '{clash.label}' as '{held[clash.label]}', not "
@@ -624,7 +631,7 @@ def run_bench(experiment: Experiment, methods: list[str], out_dir: str | Path, *
     out_dir.mkdir(parents=True, exist_ok=True)
     runs_path = out_dir / RUNS_FILE
     records = read_records(runs_path)
-    config = _folder_config(out_dir, experiment.to_dict(), parsed, resume, len(records))
+    config = _folder_config(out_dir, experiment.to_dict(), parsed, resume, records)
     for record in records:
         match = next((m for m in parsed if m.label == record["method"]), None)
         if match is not None and match.spec != record.get("spec"):

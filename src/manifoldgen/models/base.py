@@ -180,7 +180,11 @@ class ConditionalSampler(ModelFacts, ABC):
             raise ManifoldgenError(f"model '{self.name}' is not trained; call fit() or load one")
         if n < 0:
             raise ManifoldgenError(f"number of samples must be >= 0, got {n}")
-        given = np.asarray(y, dtype=float).reshape(-1, self.k)
+        given = np.asarray(y, dtype=float)
+        if given.ndim > 2 or (given.ndim == 2 and given.shape[1] != self.k) or given.size % self.k:
+            raise ManifoldgenError(f"y must hold conditions of {self.k} value(s) each, as (k,), (1, k) or (n, k) with "
+                                   f"k = {self.k}; got shape {given.shape}")
+        given = given.reshape(-1, self.k)
         bad = ~(np.abs(given) < 1e30).all(axis=1)  # NaN, infinite, or lost in float32
         if bad.any():
             raise ManifoldgenError(f"condition y must be finite numbers of sensible size, got {given[bad][0].tolist()}")

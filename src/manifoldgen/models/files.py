@@ -20,7 +20,7 @@ import safetensors.numpy
 
 from manifoldgen.constraints import Condition
 from manifoldgen.dataset import check_meta
-from manifoldgen.errors import ManifoldgenError, did_you_mean, short
+from manifoldgen.errors import ManifoldgenError, did_you_mean, not_a_file, short
 from manifoldgen.io import read_json
 
 MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its fields
@@ -42,8 +42,10 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
     weights by name (numpy arrays)."""
     path = Path(path)
     if not path.is_dir():
-        what = "is a file, not a directory" if path.exists() else "not found"
-        raise ManifoldgenError(f"model directory {what}: {path}; train one with `manifoldgen train`")
+        kind = "a file" if path.is_file() else "a device, pipe or socket"
+        why = f"model directory {path} is {kind}, not a directory" if path.exists() else \
+            not_a_file(path, "model directory")  # not found, or a link to nowhere or to itself
+        raise ManifoldgenError(f"{why}; give a model directory written by `manifoldgen train`")
     for name in (CONFIG_FILE, WEIGHTS_FILE):
         if not (path / name).is_file():
             raise ManifoldgenError(f"{path} is missing {name}; it is not a complete model directory "

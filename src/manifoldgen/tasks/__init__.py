@@ -160,6 +160,9 @@ def task_from_meta(meta: dict, robot_hint: str | None = None, *, task: Task | No
                                "regenerate the file") from None
 
 
+HOME_SLACK = 1e-3  # rad or m: how far past a joint limit a task file's home may lie (rounding)
+
+
 def _finish(name: str, robot: Robot, constraint: Constraint, home, home_condition, notes: str,
             scenes: dict[str, Path]) -> Task:
     """A task with a home on the manifold: ``home`` projected, else the first of HOME_SEEDS uniform seeds that converges."""
@@ -170,6 +173,11 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
     if seeds.shape[1] != robot.n:
         raise ManifoldgenError(f"home has {seeds.shape[1]} values but the group has {robot.n} joints "
                                f"({', '.join(robot.joints)}); give one value per joint")
+    past = np.maximum(robot.lower - seeds[0], seeds[0] - robot.upper)
+    if home is not None and past.max() > HOME_SLACK:
+        j = int(np.argmax(past))
+        raise ManifoldgenError(f"home {robot.joints[j]} = {seeds[0, j]:g} is outside its limits [{robot.lower[j]:g}, "
+                               f"{robot.upper[j]:g}]; give a home inside the joint limits")
     residual, m = np.asarray(constraint.residual(seeds, y), float), len(constraint.tolerance)
     if residual.shape != (len(seeds), m) or not np.isfinite(residual).all():
         what = (f"has shape {residual.shape}, not ({len(seeds)}, {m}) (one value per tolerance)"

@@ -75,6 +75,8 @@ def _read_npz(file: Path, task: Task | None, trust_code: bool) -> ViewSource:
         check_task_copies(data.meta, t.constraint, str(file))
         q, y = data.q, data.y
         _check_width(q, t, file)
+        if not len(q):
+            raise ManifoldgenError(f"{file} holds no rows: nothing to show; give a dataset or samples file with rows")
         return ViewSource("dataset", file, data.meta, t, q, y, Scene("", [], None, q[:0], q[:0], y[:0]),
                           f"{t.robot.name} {t.name} {kind}: {len(q)} rows")
     raise ManifoldgenError(f"cannot show {file}: an .npz without 'path' or 'q' and 'y'; give {KINDS}")
