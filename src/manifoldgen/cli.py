@@ -559,44 +559,31 @@ _METHODS_HELP = ("LABEL=PLANNER:LOCAL@SAMPLER (label, local planner and sampler 
                  "(default: the shipped model, PG, CBiRRT, OMPL Projected/Atlas/TangentBundle, uniform)")
 
 
-@bench_app.command("wall")
-@friendly
-def bench_wall(runs: int = typer.Option(None, help="Runs per method (default: the paper's 1000)"),
-               workers: int = typer.Option(None, help=WORKERS_HELP),
-               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default 200)"),
-               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
-               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
-               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
-                                                "methods (repeatable; default: the shipped model)"),
-               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
-               seed: int = typer.Option(0, help="Run r uses seed + r"),
-               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
-               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP),
-               cluster: str = typer.Option(None, help=CLUSTER_HELP)):
-    """Table II: the wall scene, every method on the same query and seeds."""
-    _bench_planning("wall", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot, cluster=cluster)
+def _paper_scene(scene: str, doc: str, runs_default: str, time_default: str) -> None:
+    """Register ``bench SCENE``: one of the paper's panda scenes, every method on the same query and seeds."""
+    def command(runs: int = typer.Option(None, help=f"Runs per method (default: {runs_default})"),
+                workers: int = typer.Option(None, help=WORKERS_HELP),
+                time_limit: float = typer.Option(None, "--time", help=f"Seconds per run (default: {time_default})"),
+                output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
+                methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
+                model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
+                                                 "methods (repeatable; default: the shipped model)"),
+                resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
+                seed: int = typer.Option(0, help="Run r uses seed + r"),
+                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
+                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
+                task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP),
+                cluster: str = typer.Option(None, help=CLUSTER_HELP)):
+        _bench_planning(scene, runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
+                        task, robot, cluster=cluster)
+    command.__doc__ = doc
+    command.__name__ = f"bench_{scene}"
+    bench_app.command(scene)(friendly(command))
 
 
-@bench_app.command("maze")
-@friendly
-def bench_maze(runs: int = typer.Option(None, help="Runs per method (default: the paper's 100)"),
-               workers: int = typer.Option(None, help=WORKERS_HELP),
-               time_limit: float = typer.Option(None, "--time", help="Seconds per run (default: the paper's 200)"),
-               output: Path = typer.Option(..., "-o", "--output", help="Folder for runs.jsonl, results.md, PNGs"),
-               methods: list[str] = typer.Option(None, "--methods", "-m", help=_METHODS_HELP),
-               model: list[Path] = typer.Option(None, "--model", help="Trained model dirs for the default "
-                                                "methods (repeatable; default: the shipped model)"),
-               resume: bool = typer.Option(False, help="Continue the runs already in the output folder"),
-               seed: int = typer.Option(0, help="Run r uses seed + r"),
-               pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
-               baseline: str = typer.Option(None, help="Method label for the speed-up column"),
-               task: str = typer.Option("pose", help=TASK_HELP), robot: str = typer.Option(None, help=ROBOT_HELP),
-               cluster: str = typer.Option(None, help=CLUSTER_HELP)):
-    """Table III: the maze scene (tool in hand), every method on the same query and seeds."""
-    _bench_planning("maze", runs, workers, time_limit, output, methods, model, resume, seed, pg_rows, baseline,
-                    task, robot, cluster=cluster)
+_paper_scene("wall", "Table II: the wall scene, every method on the same query and seeds.", "the paper's 1000", "200")
+_paper_scene("maze", "Table III: the maze scene (tool in hand), every method on the same query and seeds.",
+             "the paper's 100", "the paper's 200")
 
 
 @app.command()
