@@ -82,9 +82,9 @@ CASES = [
         'unknown meta key "sceen" (did you mean \'scene\'?)'),
     # sampler options: the same ranges whether given as arguments or in the spec string
     api("sampler-model-batch-zero", lambda I, O: mg.sampler("pose", "wall", mg.load_model(I / "model"), batch=0),
-        "sampler: batch must be from 1 to 1,000,000, got 0"),
+        "sampler: batch must be from 1 to 100,000, got 0"),
     api("sampler-spec-batch-zero", lambda I, O: mg.sampler("pose", "wall", "project", batch=0),
-        "sampler: batch must be from 1 to 1,000,000, got 0"),
+        "sampler: batch must be from 1 to 100,000, got 0"),
     api("sampler-model-refine-huge", lambda I, O: mg.sampler("pose", "wall", mg.load_model(I / "model"), refine=5000),
         "sampler: refine must be from 0 to 1,000, got 5000"),
     api("sampler-dataset-refine", lambda I, O: mg.sampler("pose", "wall", Dataset.load(I / "data.npz"), refine=2),

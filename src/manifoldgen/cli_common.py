@@ -94,6 +94,11 @@ def friendly(command):
             where = f"{exc.filename}: " if exc.filename else ""
             say_error(f"{where}{exc.strerror or exc}; check the path and its permissions")
             raise typer.Exit(2) from None
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGINT, or a user's module raising it: one line, exit 130
+            blamed = user_code(exc)
+            say_error(f"user code {blamed} raised KeyboardInterrupt; stopped (fix that module if Ctrl-C was not "
+                      "pressed)" if blamed else "interrupted (Ctrl-C); stopped")
+            raise typer.Exit(130) from None
         except (Exception, SystemExit) as exc:
             blamed = user_code(exc)
             if blamed is None or isinstance(exc, (typer.Exit, typer.Abort)):

@@ -15,7 +15,8 @@ TRAJECTORY_FORMATS = (".json", ".csv")
 
 @app.command()
 @friendly
-def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, a scene .json or a task .toml"),
+def view(file: Path = typer.Argument(..., help="A path, dataset or sample .npz, a scene .json, a task .toml or a "
+                                     "built-in task name"),
          host: str = typer.Option("127.0.0.1", help="Address to serve on (0.0.0.0: every interface)"),
          port: int = typer.Option(8080, help="Port to serve on (the next free one if it is taken)"),
          task: str = typer.Option(None, help="Task of a scene .json (default: the built-in task that lists it, "

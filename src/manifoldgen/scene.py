@@ -197,7 +197,7 @@ def task_anchors(task: Task) -> Anchors:
             labels.append(f"{name} {end}")
         scenes.append(solved_document(scene, name))
     n, k = task.robot.n, task.condition.k
-    return Anchors(np.reshape(qs, (-1, n)), np.reshape(ys, (-1, k)), labels, scenes)
+    return Anchors(np.array(qs, float).reshape(len(qs), n), np.array(ys, float).reshape(len(ys), k), labels, scenes)
 
 
 def solved_document(scene: Scene, name: str) -> dict:

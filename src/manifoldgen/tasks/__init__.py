@@ -178,18 +178,26 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         j = int(np.argmax(past))
         raise ManifoldgenError(f"home {robot.joints[j]} = {seeds[0, j]:g} is outside its limits [{robot.lower[j]:g}, "
                                f"{robot.upper[j]:g}]; give a home inside the joint limits")
-    residual, m = np.asarray(constraint.residual(seeds, y), float), len(constraint.tolerance)
+    kind, m = f"{type(constraint).__module__}:{type(constraint).__name__}", len(constraint.tolerance)
+    raw = constraint.residual(seeds, y)
+    if not hasattr(raw, "shape"):
+        raise ManifoldgenError(f"task '{name}': the residual of constraint {kind} is a {type(raw).__name__}, not an "
+                               f"array of shape ({len(seeds)}, {m}); fix its residual() to return an array (numpy "
+                               "in, numpy out; torch in, torch out)")
+    residual = np.asarray(raw, float)
     if residual.shape != (len(seeds), m) or not np.isfinite(residual).all():
         what = (f"has shape {residual.shape}, not ({len(seeds)}, {m}) (one value per tolerance)"
                 if residual.shape != (len(seeds), m) else "holds NaN or infinite values")
-        raise ManifoldgenError(f"task '{name}': the residual of constraint {type(constraint).__module__}:"
-                               f"{type(constraint).__name__} {what}; fix its residual()")
+        raise ManifoldgenError(f"task '{name}': the residual of constraint {kind} {what}; fix its residual()")
+    jacobian = np.asarray(constraint.jacobian(seeds[:1], y)[1], float)
+    if jacobian.shape != (1, m, robot.n):
+        raise ManifoldgenError(f"task '{name}': the jacobian of constraint {kind} has shape {jacobian.shape} for one "
+                               f"configuration, not (1, {m}, {robot.n}) (residuals x joints); fix its jacobian()")
     inequality = np.asarray(constraint.inequality(seeds, y), float)
     if inequality.ndim != 2 or len(inequality) != len(seeds) or not np.isfinite(inequality).all():
         what = (f"has shape {inequality.shape}, not ({len(seeds)}, p) (p inequalities per configuration, 0 for none)"
                 if inequality.ndim != 2 or len(inequality) != len(seeds) else "holds NaN or infinite values")
-        raise ManifoldgenError(f"task '{name}': the inequality of constraint {type(constraint).__module__}:"
-                               f"{type(constraint).__name__} {what}; fix its inequality()")
+        raise ManifoldgenError(f"task '{name}': the inequality of constraint {kind} {what}; fix its inequality()")
     res = project(constraint, seeds, y)
     if not res.converged.any():
         where = "home" if home is not None else f"{HOME_SEEDS} uniform configurations"

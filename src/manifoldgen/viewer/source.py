@@ -23,7 +23,7 @@ from manifoldgen.query import read_path_file
 from manifoldgen.scene import Scene, get_scene
 from manifoldgen.tasks import Task, builtin_tasks, get_task, task_from_meta
 
-KINDS = "a path or dataset/sample .npz, a scene .json or a task .toml"
+KINDS = "a path or dataset/sample .npz, a scene .json, a task .toml or a built-in task name"
 
 
 @dataclass
@@ -47,8 +47,10 @@ def read_source(file: str | Path, task: str | None = None, *, trust_code: bool =
     the scene, else ``pose`` for the scene's robot), or of an .npz (checked against its meta; default: the
     task in its meta; ``trust_code``: see :func:`~manifoldgen.tasks.task_from_spec`)."""
     file = Path(file)
+    if not file.exists() and str(file) in builtin_tasks():  # a built-in task's name: its default robot's file
+        return _read_task(next(iter(builtin_tasks()[str(file)].values())))
     if not file.is_file():
-        raise ManifoldgenError(not_a_file(file))
+        raise ManifoldgenError(f"{not_a_file(file)}; give {KINDS}")
     suffix = file.suffix.lower()
     if suffix == ".npz":
         return _read_npz(file, None if task is None else get_task(task), trust_code)
