@@ -1,7 +1,7 @@
-"""The seventh hostile round's findings, fixed: a task with no condition collected (it crashed), a user constraint
-whose residual() returns a list or whose jacobian() has the wrong shape named with its method and shape (they were
-blamed on the task file), a user's module raising KeyboardInterrupt and Ctrl-C each said in one line, a built-in
-task's name viewed, a sampler batch bounded so that its first row never takes minutes."""
+"""The seventh hostile round's findings, fixed: a task with no condition collected (it crashed); a user constraint
+whose residual() returns a list, whose jacobian() has the wrong shape or whose condition is no Condition, named with
+what is wrong (it was blamed on the task file); a user's module raising KeyboardInterrupt and Ctrl-C each said in one
+line; a built-in task's name viewed; a sampler batch bounded so that its first row never takes minutes."""
 
 from __future__ import annotations
 
@@ -26,17 +26,19 @@ class C(Constraint):
         self.robot, self.frame = robot, frame
         self.condition = Condition(("z",), ("m",), np.asarray([[0.4], [0.5]], float))
         self.tolerance = np.full(1, 0.01)
+        {init}
 
     def residual(self, q, y):
         q, y = self.batch(q, y)
         return {residual}
 {more}'''
-USER = {  # module -> (what residual() returns, more methods)
-    "as_list": ("(self.robot.frame_pose(q, self.frame)[0][:, 2:3] - y).tolist()", ""),
-    "wide_jacobian": ("self.robot.frame_pose(q, self.frame)[0][:, 2:3] - y",
-                      "\n    def jacobian(self, q, y):\n"
+HEIGHT = "self.robot.frame_pose(q, self.frame)[0][:, 2:3] - y"
+USER = {  # module -> (the end of __init__, what residual() returns, more methods)
+    "as_list": ("pass", f"({HEIGHT}).tolist()", ""),
+    "wide_jacobian": ("pass", HEIGHT, "\n    def jacobian(self, q, y):\n"
                       "        return self.residual(q, y), np.zeros((len(q), 3, 3))\n"),
-    "interrupts": ("self.stop()", "\n    def stop(self):\n        raise KeyboardInterrupt\n"),
+    "interrupts": ("pass", "self.stop()", "\n    def stop(self):\n        raise KeyboardInterrupt\n"),
+    "tuple_condition": ('self.condition = ("z",)', HEIGHT, ""),
 }
 
 
@@ -46,8 +48,8 @@ def inputs(tmp_path_factory):
     root = tmp_path_factory.mktemp("inputs")
     (root / "upright.toml").write_text(TASK.format(type="orientation") + 'frame = "panda_hand_tcp"\n'
                                        "axis = [0.0, 0.0, 1.0]\ndirection = [0.0, 0.0, -1.0]\n")
-    for name, (residual, more) in USER.items():
-        (root / f"{name}.py").write_text(MODULE.format(residual=residual, more=more))
+    for name, (init, residual, more) in USER.items():
+        (root / f"{name}.py").write_text(MODULE.format(init=init, residual=residual, more=more))
         (root / f"{name}.toml").write_text(TASK.format(type=f"{name}:C"))
     return root
 
@@ -57,6 +59,8 @@ CASES = [
         "the residual of constraint as_list:C is a list, not an array of shape (256, 1); fix its residual()"),
     cli("user-jacobian-wrong-shape", "collect {I}/wide_jacobian.toml --per-condition 5 -o {O}/d.npz",
         "the jacobian of constraint wide_jacobian:C has shape (1, 3, 3) for one configuration, not (1, 1, 7)"),
+    cli("user-condition-a-tuple", "collect {I}/tuple_condition.toml --per-condition 5 -o {O}/d.npz",
+        "constraint 'tuple_condition:C': its condition must be a manifoldgen.constraints.Condition, got tuple"),
     api("sampler-batch-over-its-cap", lambda I, O: mg.sampler("pose", "wall", "project", batch=100_001),
         "sampler: batch must be from 1 to 100,000, got 100001"),
 ]
@@ -82,7 +86,7 @@ def test_a_users_keyboard_interrupt_is_one_line_naming_it(inputs, tmp_path):
                                  str(tmp_path / "d.npz")])
     assert result.exit_code == 130 and not list(tmp_path.iterdir()), result.output
     errors = [line for line in result.stderr.splitlines() if line.startswith("error: ")]
-    assert errors == [f"error: user code {inputs / 'interrupts.py'}, line 16 raised KeyboardInterrupt; stopped (fix "
+    assert errors == [f"error: user code {inputs / 'interrupts.py'}, line 17 raised KeyboardInterrupt; stopped (fix "
                       "that module if Ctrl-C was not pressed)"], result.output
 
 

@@ -247,6 +247,11 @@ def build_constraint(robot: Robot, spec: dict) -> Constraint:
     except TypeError as exc:
         params = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "robot")]
         raise ManifoldgenError(f"constraint '{spec['type']}': {exc}; its parameters are {', '.join(params)}") from exc
+    condition = getattr(constraint, "condition", None)
+    if not isinstance(condition, Condition):
+        raise ManifoldgenError(f"constraint '{spec['type']}': its condition must be a manifoldgen.constraints."
+                               f"Condition, got {type(condition).__name__}; set self.condition = Condition(names, "
+                               "units, values) in its __init__")
     try:
         tolerance = np.asarray(getattr(constraint, "tolerance", []), dtype=float).reshape(-1)
     except (TypeError, ValueError):
