@@ -260,14 +260,19 @@ def _differences(key: str, made, wanted) -> list[str]:
     """``key``'s values in the file and in this query (of an object: one line per field that differs)."""
     name = IDENTITY.get(key, key)
     if isinstance(made, dict) and isinstance(wanted, dict):
-        return [f"{name} {field} {_show(made.get(field))} (the file) vs {_show(wanted.get(field))} (this query)"
+        if made.get("type") != wanted.get("type"):  # another kind of object: its other fields say nothing more
+            return [_difference(f"{name} type", made.get("type"), wanted.get("type"))]
+        return [_difference(f"{name} {field}", made.get(field), wanted.get(field))
                 for field in sorted({*made, *wanted}) if made.get(field) != wanted.get(field)]
-    return [f"{name} {_show(made)} (the file) vs {_show(wanted)} (this query)"]
+    return [_difference(name, made, wanted)]
 
 
-def _show(value) -> str:
-    """A value as short JSON (a sha256: its first 12 digits)."""
-    return short(value[:12] if isinstance(value, str) and len(value) == 64 else value, 60)
+def _difference(name: str, made, wanted) -> str:
+    """``name`` with both values when they are short (a sha256: its first 12 digits), else that they differ."""
+    shown = [json.dumps(v[:12] if isinstance(v, str) and len(v) == 64 else v) for v in (made, wanted)]
+    if max(map(len, shown)) > 30:
+        return f"{name} differs"
+    return f"{name} {shown[0]} (the file) vs {shown[1]} (this query)"
 
 
 def _arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
