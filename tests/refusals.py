@@ -3,8 +3,11 @@ is a command line or an API call that must be refused in one line naming the pro
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,6 +88,59 @@ def refused_cleanly(case: Case, inputs: Path, out: Path) -> str:
     message = refusal(case, inputs, out)
     assert digest(inputs) == before, "an input file changed"
     return message
+
+
+@contextlib.contextmanager
+def within(seconds: int):
+    """Fail the case with a TimeoutError (a hang) when its body runs past ``seconds``."""
+    def late(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s: a hang")
+    old = signal.signal(signal.SIGALRM, late)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def refused_after(case: Case, inputs: Path, out: Path, setup=None) -> str:
+    """:func:`refused_as_told`, after ``setup(inputs, out)`` put files in ``out`` (a user's file, a link, a lock it
+    may return, open, to be closed after the case), which the refusal must leave exactly as they were."""
+    if setup is None:
+        return refused_as_told(case, inputs, out)
+    held = setup(inputs, out)
+    before, listed = digest(out), sorted(out.rglob("*"))
+    try:
+        message = refused_cleanly(case, inputs, out)
+    finally:
+        if held is not None:
+            held.close()
+    assert case.needle.replace("{I}", str(inputs)).replace("{O}", str(out)) in message, message
+    assert len(message.replace(str(inputs), "I").replace(str(out), "O")) < SHORT, message
+    assert digest(out) == before, "a refused command changed the files beside its output"
+    assert sorted(out.rglob("*")) == listed, "a refused command left files or folders"
+    return message
+
+
+def copied(source: str, name: str):
+    """A set-up: the input ``source`` (a file or folder) copied into the case's folder as ``name``."""
+    def setup(I, O):
+        (shutil.copytree if (I / source).is_dir() else shutil.copy)(I / source, O / name)
+    return setup
+
+
+def ran(args: str | list[str], setup=None):
+    """An accepted command line (``{I}``, ``{O}`` as in a case): after ``setup(I, O)``, exit code 0 and no error
+    line; returns its output."""
+    def run(I, O):
+        if setup is not None:
+            setup(I, O)
+        words = args.split() if isinstance(args, str) else args
+        result = runner.invoke(app, [w.replace("{I}", str(I)).replace("{O}", str(O)) for w in words])
+        assert result.exit_code == 0 and "error: " not in result.output, result.output
+        return result.output
+    return run
 
 
 def reseal(folder: Path, edit=None, weights=None) -> None:

@@ -7,7 +7,6 @@ folder O/keep that a refusal must leave as it was. The needles are the least a m
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import tracemalloc
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from refusals import api, cli, digest, refused_cleanly
+from refusals import api, cli, digest, refused_cleanly, within
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -420,10 +419,6 @@ HANGS = ['collect-grid-27-million']  # refused within 60 s once fixed; today the
 BOMBS = ['train-npz-bomb', 'trajectory-npz-bomb']  # a 3 MB file holding a 3 GB compressed array: refused without allocating it
 
 
-def _alarm(signum, frame):
-    raise TimeoutError("still running after 60 s: a hang")
-
-
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_round5_refused_in_one_line(case, inputs, tmp_path):
     out = tmp_path
@@ -437,15 +432,12 @@ def test_round5_refused_in_one_line(case, inputs, tmp_path):
     listed = sorted(p.relative_to(out) for p in out.rglob("*"))  # folders too: a refusal leaves no empty folder
     if case.args is not None:
         case.args = [a.replace("{C}", C) for a in case.args]
-    old = signal.signal(signal.SIGALRM, _alarm)
-    signal.alarm(60 if case.id in HANGS else 600)
     if case.id in BOMBS:
         tracemalloc.start()
     try:
-        message = refused_cleanly(case, inputs, out)
+        with within(60 if case.id in HANGS else 600):
+            message = refused_cleanly(case, inputs, out)
     finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
         peak = tracemalloc.get_traced_memory()[1] if tracemalloc.is_tracing() else 0
         tracemalloc.stop()
     assert case.needle.format(I=inputs, O=out) in message, message

@@ -31,18 +31,15 @@ from __future__ import annotations
 import fcntl
 import json
 import os
-import shutil
-import signal
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 import manifoldgen as mg
-from manifoldgen.cli import app
 from manifoldgen.dataset import Dataset
 from manifoldgen.runtime import set_threads
-from refusals import SHORT, api, cli, digest, refused_as_told, refused_cleanly
+from refusals import api, cli, copied, ran, refused_after, within
 from round6 import fixtures
 
 pytestmark = pytest.mark.slow
@@ -472,18 +469,11 @@ CASES = [
 ]
 
 
-def _copy(source: str, name: str):
-    """A set-up: the input ``source`` (a file or folder) copied into the case's folder as ``name``."""
-    def setup(I, O):
-        (shutil.copytree if (I / source).is_dir() else shutil.copy)(I / source, O / name)
-    return setup
-
-
 def _linked(name: str, target: str, source: str | None = None):
     """A set-up: ``name`` a symbolic link to ``target``, a copy of the input ``source`` or else a user's text."""
     def setup(I, O):
         if source:
-            _copy(source, target)(I, O)
+            copied(source, target)(I, O)
         else:
             (O / target).write_text("keep\n")
         (O / name).symlink_to(O / target)
@@ -507,42 +497,38 @@ SETUPS = {
     "collect-lock-is-a-dir": lambda I, O: (O / "d.npz.lock").mkdir(),
     "collect-two-writers": _held("a.npz"),
     "collect-task-fifo": lambda I, O: os.mkfifo(O / "t.toml"),
-    "train-output-folder-of-dataset": _copy("data.npz", "data.npz"),
+    "train-output-folder-of-dataset": copied("data.npz", "data.npz"),
     "train-output-link-to-other-model": _linked("m", "other", "model"),
-    "train-resume-other-seed": _copy("ck", "m"),
-    "train-resume-other-hidden": _copy("ck", "m"),
-    "train-resume-other-dataset": _copy("ck", "m"),
+    "train-resume-other-seed": copied("ck", "m"),
+    "train-resume-other-hidden": copied("ck", "m"),
+    "train-resume-other-dataset": copied("ck", "m"),
     "train-two-writers": _held("m"),
     "train-dataset-fifo": lambda I, O: os.mkfifo(O / "d.npz"),
     "train-dataset-link-dev-zero": lambda I, O: (O / "d.npz").symlink_to("/dev/zero"),
     "sample-output-link-to-user-file": _linked("s.npz", "mine.txt"),
     "plan-scene-fifo": lambda I, O: os.mkfifo(O / "s.json"),
-    "plan-output-over-a-dataset": _copy("data.npz", "d.npz"),
+    "plan-output-over-a-dataset": copied("data.npz", "d.npz"),
     "plan-output-link-to-dataset": _linked("p.npz", "keep.npz", "data.npz"),
-    "plan-roadmap-format-2": _copy("rm-fmt2.npz", "rm.npz"),
-    "plan-roadmap-resolution-lie": _copy("rm-res-lie.npz", "rm.npz"),
-    "plan-roadmap-edge-negative": _copy("rm-edge-neg.npz", "rm.npz"),
-    "plan-roadmap-is-a-dataset": _copy("data.npz", "rm.npz"),
+    "plan-roadmap-format-2": copied("rm-fmt2.npz", "rm.npz"),
+    "plan-roadmap-resolution-lie": copied("rm-res-lie.npz", "rm.npz"),
+    "plan-roadmap-edge-negative": copied("rm-edge-neg.npz", "rm.npz"),
+    "plan-roadmap-is-a-dataset": copied("data.npz", "rm.npz"),
     "plan-roadmap-two-writers": _held("rm.npz"),
-    "traj-output-over-physics-report": _copy("phys.json", "r.json"),
+    "traj-output-over-physics-report": copied("phys.json", "r.json"),
     "traj-output-link-to-user-file": _linked("t.json", "mine.txt"),
-    "physics-output-over-trajectory": _copy("traj.json", "r.json"),
-    "bench-resume-record-through-wall": _copy("b-rec-direct", "b"),
-    "bench-resume-other-seed": _copy("bench", "b"),
-    "bench-rerun-without-resume": _copy("bench", "b"),
-    "sweep-output-is-its-dataset": _copy("data.npz", "d.npz"),
-    "demo-output-is-a-file": _copy("data.npz", "x"),
-    "api-collect-out-over-a-path": _copy("path.npz", "p.npz"),
+    "physics-output-over-trajectory": copied("traj.json", "r.json"),
+    "bench-resume-record-through-wall": copied("b-rec-direct", "b"),
+    "bench-resume-other-seed": copied("bench", "b"),
+    "bench-rerun-without-resume": copied("bench", "b"),
+    "sweep-output-is-its-dataset": copied("data.npz", "d.npz"),
+    "demo-output-is-a-file": copied("data.npz", "x"),
+    "api-collect-out-over-a-path": copied("path.npz", "p.npz"),
 }
 PATCHES = {
     "two_cpus": lambda monkeypatch, O: monkeypatch.setattr(os, "cpu_count", lambda: 2),
     "ompl_native": lambda monkeypatch, O: monkeypatch.setenv("MANIFOLDGEN_OMPL_NATIVE", str(O / "nope")),
     "chdir": lambda monkeypatch, O: monkeypatch.chdir(O),
 }
-
-
-def _alarm(signum, frame):
-    raise TimeoutError("still running after 60 s: a hang (a pipe read?)")
 
 
 def test_the_table_holds_each_case_once():
@@ -554,39 +540,8 @@ def test_the_table_holds_each_case_once():
 def test_round6_refused_in_one_line(case, inputs, tmp_path, monkeypatch):
     if case.patch:
         PATCHES[case.patch](monkeypatch, tmp_path)
-    old = signal.signal(signal.SIGALRM, _alarm)
-    signal.alarm(60)
-    try:
-        if case.id not in SETUPS:
-            refused_as_told(case, inputs, tmp_path)
-            return
-        held = SETUPS[case.id](inputs, tmp_path)
-        before, listed = digest(tmp_path), sorted(tmp_path.rglob("*"))
-        try:
-            message = refused_cleanly(case, inputs, tmp_path)
-        finally:
-            if held is not None:
-                held.close()
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-    assert case.needle.replace("{I}", str(inputs)).replace("{O}", str(tmp_path)) in message, message
-    assert len(message.replace(str(inputs), "I").replace(str(tmp_path), "O")) < SHORT, message
-    assert digest(tmp_path) == before, "a refused command changed the files beside its output"
-    assert sorted(tmp_path.rglob("*")) == listed, "a refused command left files or folders"
-
-
-def ran(args: str | list[str], setup=None):
-    """An accepted command line (``{I}``, ``{O}`` as in :data:`CASES`): after ``setup(I, O)``, exit code 0 and no
-    error line; returns its output."""
-    def run(I, O):
-        if setup is not None:
-            setup(I, O)
-        words = args.split() if isinstance(args, str) else args
-        result = runner.invoke(app, [w.replace("{I}", str(I)).replace("{O}", str(O)) for w in words])
-        assert result.exit_code == 0 and "error: " not in result.output, result.output
-        return result.output
-    return run
+    with within(60):
+        refused_after(case, inputs, tmp_path, SETUPS.get(case.id))
 
 
 def _method(O) -> str:
@@ -608,7 +563,7 @@ ACCEPTED = [  # (id, run(I, O), check(I, O, what run returned))
     ("collect-user-returns-int", ran("collect {I}/user/u_int.toml --per-condition 5 -o {O}/d.npz"),
      lambda I, O, out: "runs through Python callbacks instead" in out and "15 rows" in out),
     ("plan-roadmap-edge-through-wall",
-     ran(WALL + " --roadmap {O}/rm.npz -o {O}/p.npz", _copy("rm-direct-edge.npz", "rm.npz")),
+     ran(WALL + " --roadmap {O}/rm.npz -o {O}/p.npz", copied("rm-direct-edge.npz", "rm.npz")),
      lambda I, O, out: "1 edges read from it that failed the check" in out
      and mg.check_path("pose", "wall", mg.QueryResult.load(O / "p.npz")).valid),
     ("view-task-file-export", ran("view {I}/tasks/builtin-only.toml --export {O}/v.html"),
@@ -619,7 +574,7 @@ ACCEPTED = [  # (id, run(I, O), check(I, O, what run returned))
      lambda I, O, out: _method(O) == "rrtconnect@project"),
     ("bench-resume-empty-jsonl",
      ran("bench plan pose --scene wall --runs 2 --time 5 -m rrtconnect@project --resume -o {O}/b",
-         _copy("b-empty-jsonl", "b")),
+         copied("b-empty-jsonl", "b")),
      lambda I, O, out: len((O / "b" / "runs.jsonl").read_text().splitlines()) == 2),
     ("bench-method-pg-dataset-file", ran(BENCH + " -m rrtconnect@pg:{I}/data.npz -o {O}/b"),
      lambda I, O, out: _method(O) == "rrtconnect@pg:data.npz"),

@@ -65,18 +65,16 @@ from __future__ import annotations
 
 import json
 import shutil
-import signal
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 import manifoldgen as mg
-from manifoldgen.cli import app
 from manifoldgen.io import load_npz
 from manifoldgen.runtime import set_threads
 from manifoldgen.tasks import BUILTIN_DIR
-from refusals import SHORT, api, cli, digest, refused_as_told, refused_cleanly
+from refusals import api, cli, copied, ran, refused_after, within
 from round7 import fixtures
 
 pytestmark = pytest.mark.slow
@@ -392,20 +390,13 @@ CASES = [
 ]
 
 
-def _copy(source: str, name: str):
-    """A set-up: the input ``source`` (a file or folder) copied into the case's folder as ``name``."""
-    def setup(I, O):
-        (shutil.copytree if (I / source).is_dir() else shutil.copy)(I / source, O / name)
-    return setup
-
-
 def _evil(source: str | None = None, name: str | None = None):
     """A set-up: evilmod.py, whose import writes PWNED into the working folder (the case's, on sys.path: a refusal
     imports nothing), and the input ``source`` copied in as ``name``."""
     def setup(I, O):
         (O / "evilmod.py").write_text('open("PWNED", "w").write("x")\n\n\nclass C:\n    pass\n')
         if source:
-            _copy(source, name)(I, O)
+            copied(source, name)(I, O)
     return setup
 
 
@@ -419,22 +410,22 @@ def _touch(*names: str):
 
 
 SETUPS = {
-    "plan-output-over-own-dataset": _copy("data.npz", "data.npz"),
-    "plan-roadmap-is-output": _copy("rm.npz", "rm.npz"),
-    "plan-roadmap-is-scene": _copy("wall.json", "wall.json"),
-    "plan-roadmap-edge-reversed": _copy("rm-reversed.npz", "r.npz"),
-    "plan-roadmap-length-off-1e-8": _copy("rm-length-1e-8.npz", "r.npz"),
+    "plan-output-over-own-dataset": copied("data.npz", "data.npz"),
+    "plan-roadmap-is-output": copied("rm.npz", "rm.npz"),
+    "plan-roadmap-is-scene": copied("wall.json", "wall.json"),
+    "plan-roadmap-edge-reversed": copied("rm-reversed.npz", "r.npz"),
+    "plan-roadmap-length-off-1e-8": copied("rm-length-1e-8.npz", "r.npz"),
     "code-roadmap-user-type": _evil("rm-evil.npz", "r.npz"),
     "code-trajectory-sampler-field": _evil(),
     "code-sample-model-name-module": _evil(),
-    "collect-over-own-path-file": _copy("path.npz", "path.npz"),
-    "train-into-dataset-folder": _copy("data.npz", "data.npz"),
-    "train-resume-fewer-epochs": _copy("ck", "ck"),
-    "train-resume-other-model": _copy("ck", "ck"),
+    "collect-over-own-path-file": copied("path.npz", "path.npz"),
+    "train-into-dataset-folder": copied("data.npz", "data.npz"),
+    "train-resume-fewer-epochs": copied("ck", "ck"),
+    "train-resume-other-model": copied("ck", "ck"),
     "traj-over-empty-file": _touch("t.json"),
-    "traj-csv-over-own-csv-as-json": _copy("traj.csv", "t.json"),
-    "phys-output-over-trajectory-csv": _copy("traj.csv", "r.json"),
-    "bench-resume-unknown-label-record": _copy("b-ghost", "b"),
+    "traj-csv-over-own-csv-as-json": copied("traj.csv", "t.json"),
+    "phys-output-over-trajectory-csv": copied("traj.csv", "r.json"),
+    "bench-resume-unknown-label-record": copied("b-ghost", "b"),
     "bench-into-hidden-file-folder": _touch("b/.keep"),
     "sweep-output-file": _touch("m"),
     "api-save-over-user-npz": lambda I, O: np.savez(O / "mine.npz", a=np.arange(3)),
@@ -443,10 +434,6 @@ PATCHES = {
     "evil": lambda monkeypatch, O: (monkeypatch.chdir(O), monkeypatch.syspath_prepend(str(O))),
     "ompl_native": lambda monkeypatch, O: monkeypatch.setenv("MANIFOLDGEN_OMPL_NATIVE", "/nonexistent/bin"),
 }
-
-
-def _alarm(signum, frame):
-    raise TimeoutError("still running after 60 s: a hang")
 
 
 def test_the_table_holds_each_case_once():
@@ -458,35 +445,8 @@ def test_the_table_holds_each_case_once():
 def test_round7_refused_in_one_line(case, inputs, tmp_path, monkeypatch):
     if case.patch:
         PATCHES[case.patch](monkeypatch, tmp_path)
-    old = signal.signal(signal.SIGALRM, _alarm)
-    signal.alarm(60)
-    try:
-        if case.id not in SETUPS:
-            refused_as_told(case, inputs, tmp_path)
-            return
-        SETUPS[case.id](inputs, tmp_path)
-        before, listed = digest(tmp_path), sorted(tmp_path.rglob("*"))
-        message = refused_cleanly(case, inputs, tmp_path)
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-    assert case.needle.replace("{I}", str(inputs)).replace("{O}", str(tmp_path)) in message, message
-    assert len(message.replace(str(inputs), "I").replace(str(tmp_path), "O")) < SHORT, message
-    assert digest(tmp_path) == before, "a refused command changed the files beside its output"
-    assert sorted(tmp_path.rglob("*")) == listed, "a refused command left files or folders"
-
-
-def ran(args: str | list[str], setup=None):
-    """An accepted command line (``{I}``, ``{O}`` as in :data:`CASES`): after ``setup(I, O)``, exit code 0 and no
-    error line; returns its output."""
-    def run(I, O):
-        if setup is not None:
-            setup(I, O)
-        words = args.split() if isinstance(args, str) else args
-        result = runner.invoke(app, [w.replace("{I}", str(I)).replace("{O}", str(O)) for w in words])
-        assert result.exit_code == 0 and "error: " not in result.output, result.output
-        return result.output
-    return run
+    with within(60):
+        refused_after(case, inputs, tmp_path, SETUPS.get(case.id))
 
 
 def _valid(scene: str, task: str = "pose", name: str = "p.npz"):
@@ -612,17 +572,17 @@ ACCEPTED = [  # (id, run(I, O), check(I, O, what run returned))
                                     "-o {O}/p.npz"), _valid("{I}/scenes7/no-obstacles.json")),
     ("plan-scene-held-sphere", ran("plan pose --scene {I}/scenes7/held-sphere.json --time 30 --no-picture "
                                    "-o {O}/p.npz"), _valid("{I}/scenes7/held-sphere.json")),
-    ("plan-output-replaces-own-path", ran(WALL + " --seed 3 -o {O}/path.npz", _copy("path.npz", "path.npz")),
+    ("plan-output-replaces-own-path", ran(WALL + " --seed 3 -o {O}/path.npz", copied("path.npz", "path.npz")),
      lambda I, O, out: _valid("wall", name="path.npz")(I, O, out)
      and (O / "path.npz").read_bytes() != (I / "path.npz").read_bytes()),
     ("plan-roadmap-through-link", ran(WALL + " --seed 5 --roadmap {O}/l.npz -o {O}/p.npz", _linked),
      lambda I, O, out: (O / "l.npz").is_symlink() and _meta(O / "real.npz", "kind") == "roadmap"
      and _valid("wall")(I, O, out)),
-    ("plan-roadmap-node-in-wall", ran(WALL + " --roadmap {O}/r.npz -o {O}/p.npz", _copy("rm-node-alone.npz", "r.npz")),
+    ("plan-roadmap-node-in-wall", ran(WALL + " --roadmap {O}/r.npz -o {O}/p.npz", copied("rm-node-alone.npz", "r.npz")),
      lambda I, O, out: len(load_npz(O / "r.npz", ())[1]["nodes"]) == len(load_npz(I / "rm.npz", ())[1]["nodes"])
      and _valid("wall")(I, O, out)),
     ("plan-roadmap-length-off-1e-11",
-     ran(WALL + " --roadmap {O}/r.npz -o {O}/p.npz", _copy("rm-length-1e-11.npz", "r.npz")),
+     ran(WALL + " --roadmap {O}/r.npz -o {O}/p.npz", copied("rm-length-1e-11.npz", "r.npz")),
      lambda I, O, out: "routed through it" in out and _valid("wall")(I, O, out)),
     ("task-planner-shortcut", ran("plan {I}/tasks7/planner-shortcut.toml --scene wall --time 20 --no-picture "
                                   "-o {O}/p.npz"),
@@ -681,9 +641,9 @@ ACCEPTED = [  # (id, run(I, O), check(I, O, what run returned))
     ("traj-csv-times-increase", ran("trajectory {I}/path.npz -o {O}/t.csv"), _csv_rides_the_path),
     ("traj-json-ends-at-rest", ran("trajectory {I}/path.npz -o {O}/t.json"), _json_at_rest),
     ("traj-over-own-trajectory",
-     ran("trajectory {I}/path.npz --vel-scale 0.5 -o {O}/t.json", _copy("traj.json", "t.json")),
+     ran("trajectory {I}/path.npz --vel-scale 0.5 -o {O}/t.json", copied("traj.json", "t.json")),
      lambda I, O, out: json.loads((O / "t.json").read_text())["manifoldgen"]["vel_scale"] == 0.5),
-    ("bench-resume-add-runs", ran(BENCH + " --runs 3 -m rrtconnect@project --resume -o {O}/b", _copy("bench", "b")),
+    ("bench-resume-add-runs", ran(BENCH + " --runs 3 -m rrtconnect@project --resume -o {O}/b", copied("bench", "b")),
      lambda I, O, out: _bench_valid(O, 3)),
     ("bench-resume-truncated-last-line",
      ran(BENCH + " --runs 2 -m rrtconnect@project --resume -o {O}/b",
