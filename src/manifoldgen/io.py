@@ -369,9 +369,10 @@ def _unique_keys(pairs: list) -> dict:
     return dict(pairs)
 
 
-def read_toml_file(path: Path, what: str) -> dict:
-    """The TOML document of a user's ``what`` file (a task file, a settings file) at ``path``: UTF-8, a leading
-    byte-order mark dropped; a binary file (a dataset given as a task file) or bad TOML refused in one line."""
+def read_toml_file(path: Path, what: str) -> tuple[dict, str]:
+    """The TOML document of a user's ``what`` file (a task file, a settings file) at ``path``, and its text (for the
+    line numbers of later messages): UTF-8, a leading byte-order mark dropped; a binary file (a dataset given as a
+    task file) or bad TOML refused in one line."""
     import tomllib
 
     data = path.read_bytes()
@@ -379,7 +380,8 @@ def read_toml_file(path: Path, what: str) -> dict:
         looks = "a zip archive (an .npz dataset, path or roadmap?)" if data.startswith(b"PK") else "a binary file"
         raise ManifoldgenError(f"{path} is {looks}, not a {what} (TOML text); give a .toml {what}")
     try:
-        return tomllib.loads(data.decode("utf-8-sig"))
+        text = data.decode("utf-8-sig")
+        return tomllib.loads(text), text
     except UnicodeDecodeError as exc:
         raise ManifoldgenError(f"{path} is not UTF-8 text (byte {exc.start}); save the {what} as UTF-8") from None
     except (tomllib.TOMLDecodeError, RecursionError) as exc:

@@ -21,7 +21,7 @@ def parse_settings(pairs: list[str] | None, config: Path | None, known: dict, wh
     if config is not None:
         if not Path(config).is_file():
             raise ManifoldgenError(f"{not_a_file(config, 'config file')}; give a TOML file of KEY = VALUE lines")
-        values.update(read_toml_file(Path(config), "settings file"))
+        values.update(read_toml_file(Path(config), "settings file")[0])
     given: set[str] = set()
     for pair in pairs or []:
         key, eq, text = pair.partition("=")

@@ -257,8 +257,7 @@ def load_task_file(path: str | Path) -> Task:
     path = Path(path)
     if not path.is_file():
         raise ManifoldgenError(f"{not_a_file(path, 'task file')}; give a .toml task file or a built-in task name")
-    data = read_toml_file(path, "task file")
-    text = path.read_text(encoding="utf-8-sig")  # for the line numbers of messages
+    data, text = read_toml_file(path, "task file")
 
     def where(key: str) -> str:
         line = _line(text, key)
