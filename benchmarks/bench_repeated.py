@@ -1,11 +1,14 @@
 """Repeated queries on one manifold and scene: 100 random start/goal pairs in the panda maze, one process.
 
-    python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse atlas-c++]
-                                        [--pairs PAIRS.npy] [--grouped]
+    python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse prm atlas-c++]
+                                        [--pairs PAIRS.npy] [--grouped] [--prm-samples 2000]
 
 Methods, interleaved per query (``--grouped``: each method's queries back to back, caches warm): ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
 one planner whose queries start from nothing; ``reuse``, the same with ``reuse=true`` (the paths found so far are
-a roadmap that later queries search first, :mod:`manifoldgen.planning.roadmap`); ``atlas-c++``, C++ OMPL Atlas +
+a roadmap that later queries search first, :mod:`manifoldgen.planning.roadmap`); ``prm``, the same planner whose
+roadmap is first built from the same CVAE's samples (a PRM on the same samples, ``Planner.roadmap_of``: --prm-samples
+valid states, each joined to its 10 nearest within the planner's range by segments that pass the dense check; its
+making is timed apart, not in any query); ``atlas-c++``, C++ OMPL Atlas +
 RRTConnect, cold (each query its own program). All with sphere models as the collision broad phase. Start and goal
 are valid, collision-free states of the maze's manifold in the component of the scene's start (the CVAE's samples,
 drawn with another seed than the planners', that RRT-Connect with the CVAE reaches from there within 1 s). Every
@@ -15,7 +18,7 @@ which counts all of this process's threads). CPU: ours,
 this process's over ``solve``; Atlas's, its program's from "go" plus our dense check of its paths (as
 ``bench_ompl_native.py`` counts it), its wall from "go" (not the program's start and loading). Prints,
 per method: solved and rechecked, median CPU and wall over all queries and over queries 2.., routed queries
-(reuse: answered from the roadmap) and their median CPU, median path length.
+(reuse, prm: answered from the roadmap) and their median CPU, median path length, the CPU of all queries.
 """
 
 import argparse
@@ -32,7 +35,7 @@ from manifoldgen.space import ConstrainedSpace
 from manifoldgen.specs import make_sampler
 from manifoldgen.tasks import get_task
 
-METHODS = ("cold", "reuse", "atlas-c++")
+METHODS = ("cold", "reuse", "prm", "atlas-c++")
 
 
 def queries(space: ConstrainedSpace, start: np.ndarray, count: int, seed: int, time_limit: float = 1.0) -> np.ndarray:
@@ -57,7 +60,21 @@ def planner_for(method: str, space: ConstrainedSpace, seed: int):
         from manifoldgen.ompl_native import NativeOmplPlanner
         return NativeOmplPlanner(space, ompl_space="atlas", seed=seed, spheres=True)
     sampler = make_sampler(f"cvae:{pretrained_model_dir()}", space, seed)
-    return RRTConnect(space, sampler, seed=seed, settings=RRTConnectSettings(spheres=True, reuse=method == "reuse"))
+    return RRTConnect(space, sampler, seed=seed, settings=RRTConnectSettings(spheres=True, reuse=method != "cold"))
+
+
+def sample_roadmap(planner: RRTConnect, space: ConstrainedSpace, count: int, seed: int) -> None:
+    """Give ``planner`` a roadmap made from ``count`` of the CVAE's samples that pass the space's whole check (drawn
+    with another seed than the planners'): a PRM on the same samples; prints what making it cost."""
+    cpu, wall = time.process_time(), time.perf_counter()
+    sampler, states = make_sampler(f"cvae:{pretrained_model_dir()}", space, seed + 3_000_000), []
+    while sum(map(len, states)) < count:
+        rows = sampler.sample_many(256)
+        states.append(rows[space.valid(rows)])
+    planner.roadmap_of(np.concatenate(states)[:count])
+    roadmap = planner.roadmap
+    print(f"prm: a roadmap of {len(roadmap)} samples and {roadmap.edge_count()} edges ({roadmap.checks} segments "
+          f"checked) made in {time.process_time() - cpu:.1f} s CPU, {time.perf_counter() - wall:.1f} s wall")
 
 
 def recheck(space: ConstrainedSpace, record: list, result, start: np.ndarray, goal: np.ndarray) -> None:
@@ -75,6 +92,7 @@ def main() -> None:
     parser.add_argument("--grouped", action="store_true", help="each method's queries back to back, their paths "
                         "rechecked after all of them (warm caches); default: methods interleaved per query, each path "
                         "rechecked at once")
+    parser.add_argument("--prm-samples", type=int, default=2000, help="valid samples of the prm method's roadmap")
     parser.add_argument("--pairs", default=None, help="an .npy file of the start/goal pairs: read when it exists "
                         "(its queries, not --queries), else written after they are chosen (choosing takes minutes)")
     args = parser.parse_args()
@@ -89,6 +107,8 @@ def main() -> None:
         if args.pairs:
             np.save(args.pairs, pairs)
     planners = {m: planner_for(m, space, args.seed) for m in args.methods}
+    if "prm" in planners:
+        sample_roadmap(planners["prm"], space, args.prm_samples, args.seed)
     runs = {m: [] for m in args.methods}
     order = ([(k, m) for m in args.methods for k in range(len(pairs))] if args.grouped
              else [(k, m) for k in range(len(pairs)) for m in args.methods])
@@ -115,13 +135,14 @@ def main() -> None:
     print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, "
           + ("each method's queries back to back" if args.grouped else "methods interleaved"))
     print("| method | solved | rechecked | median CPU (s) | median wall (s) | median CPU, queries 2.. (s) "
-          "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) | CPU, all queries (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for method, rows in runs.items():
         solved, checked, cpu, wall, routed, length = (np.array(c) for c in zip(*rows))
         print(f"| {method} | {solved.sum()}/{len(rows)} | {checked.sum()}/{len(rows)} | {np.median(cpu):.4f} | "
               f"{np.median(wall):.4f} | {np.median(cpu[1:]):.4f} | {np.median(wall[1:]):.4f} | {routed.sum()} | "
-              f"{f'{np.median(cpu[routed]):.4f}' if routed.any() else '-'} | {np.median(length[solved]):.2f} |")
+              f"{f'{np.median(cpu[routed]):.4f}' if routed.any() else '-'} | {np.median(length[solved]):.2f} | "
+              f"{cpu.sum():.3f} |")
 
 
 if __name__ == "__main__":

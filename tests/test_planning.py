@@ -210,6 +210,23 @@ def test_reuse_routes_later_queries_through_the_paths_found():
     assert third.extras["roadmap"]["nodes"] == len(first.path) + 2 + len(third.path)
 
 
+def test_a_roadmap_made_from_samples_answers_queries_without_a_search():
+    """``Roadmap.of_samples``: a PRM's roadmap built before any query from a sampler's valid states; every edge it
+    keeps passes the dense check, and a query whose ends join it is routed (no search) along checked segments."""
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, reuse=True)
+    rows = planner.sampler.sample_many(400)
+    samples = rows[space.valid(rows)]
+    planner.roadmap_of(samples)
+    roadmap = planner.roadmap
+    assert len(roadmap) == len(samples) > 300 and roadmap.edge_count() > len(samples)
+    pairs, lengths = roadmap.edge_array()
+    assert all(space.validate_path(samples[pair]).valid for pair in pairs[::10])
+    assert np.allclose(np.linalg.norm(samples[pairs[:, 0]] - samples[pairs[:, 1]], axis=1), lengths)
+    result = planner.solve(start, goal, 20.0)
+    _check(result, space, start, goal)
+    assert result.extras["roadmap"]["routed"] is True and result.iterations == 0 and result.samples_drawn == 0
+
+
 def test_a_route_found_past_the_time_limit_is_no_answer():
     """A route through the roadmap counts against the query's time limit: one checked past it is refused with the
     reason, and nothing else is tried."""

@@ -228,6 +228,15 @@ class Planner(ABC):
                                    "settings reuse=True")
         self.roadmap = Roadmap.load(path, self._segment_valid, self.settings.range, expect=meta)
 
+    def roadmap_of(self, samples: np.ndarray) -> None:
+        """Search a PRM's roadmap made now from ``samples (N, n)`` (valid states of this planner's space, e.g. a
+        model's) from the next query on, in place of this planner's (``reuse`` on; see
+        :meth:`~manifoldgen.planning.roadmap.Roadmap.of_samples`)."""
+        if self.roadmap is None:
+            raise ManifoldgenError(f"{self.name}: a roadmap is searched only with reuse on; make the planner with "
+                                   "settings reuse=True")
+        self.roadmap = Roadmap.of_samples(np.asarray(samples, float), self._segment_valid, self.settings.range)
+
     @abstractmethod
     def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
         """A path (K, n) that passed :meth:`_accept`, or None at the deadline."""

@@ -26,6 +26,7 @@ from manifoldgen.errors import ManifoldgenError, file_reader, listed, short
 from manifoldgen.io import load_npz, save_npz
 
 TRIES, JOINS = 6, 2  # a query's start or goal (or a new waypoint) tries its 6 nearest nodes, joins the first 2 it can
+NEIGHBOURS = 10  # a sample of a roadmap made from samples (Roadmap.of_samples) tries its 10 nearest nodes, as PRM's k
 FORMAT_VERSION = 1
 # the meta keys that say which query space a roadmap holds for (a file whose values differ is refused) -> their name
 IDENTITY = {"robot_identity": "robot", "joints": "joints", "locked": "locked joints", "base_bounds": "base bounds",
@@ -49,6 +50,29 @@ class Roadmap:
         self.unchecked_nodes = 0  # nodes 0 .. unchecked_nodes - 1 were read from a file and are not checked yet
         self.dropped = {"nodes": 0, "edges": 0}  # what was read from a file and failed its check
         self.grown = False  # nodes or edges added since it was made or read
+
+    @classmethod
+    def of_samples(cls, samples: np.ndarray, valid: Callable[[np.ndarray], bool], reach: float,
+                   neighbours: int = NEIGHBOURS) -> Roadmap:
+        """A PRM's roadmap (Kavraki et al. 1996) made before any query: ``samples (N, n)`` (valid states) are the
+        nodes, each joined to those of its ``neighbours`` nearest within ``reach`` whose straight segment passes
+        ``valid`` (each pair checked once)."""
+        roadmap = cls(samples.shape[1], valid, reach)
+        q = roadmap.q = np.array(samples, float)
+        roadmap.edges, roadmap.grown = [{} for _ in q], True
+        squares, tried = np.sum(q**2, axis=1), set()
+        for a in range(len(q)):
+            d = np.sqrt(np.maximum(squares + squares[a] - 2.0 * (q @ q[a]), 0.0))
+            d[a] = np.inf
+            near = np.argsort(d)[:neighbours]
+            for b in map(int, near[d[near] <= reach]):
+                if (min(a, b), max(a, b)) in tried:
+                    continue
+                tried.add((min(a, b), max(a, b)))
+                roadmap.checks += 1
+                if valid(q[[a, b]]):
+                    roadmap._link(a, b, float(d[b]))
+        return roadmap
 
     def __len__(self) -> int:
         return len(self.q)
