@@ -66,6 +66,9 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
         if r["method"] == "atlas":  # OMPL: a Newton step is one Jacobian; nodes are its planner's vertices
             assert ops["jacobians"] == ops["projection_steps"] > 0 and ops["nodes"] == r["iterations"] >= 2
         assert ops["samples"] == r["samples_drawn"]
+        if r["method"] == "pg":  # the sampler's rows: made, then some of them checked as samples
+            made = r["extras"]["sampler"]
+            assert made["accepted"] <= made["checked"] <= made["generated"]
     # the same seed gives the same run (OMPL reseeded in every worker, our samplers seeded)
     rerun = run_once(experiment, Method.parse(METHODS[0]), 1)
     first = next(r for r in records if (r["method"], r["run"]) == ("atlas", 1))
@@ -74,6 +77,7 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
     text = (out / "results.md").read_text()
     assert "| atlas | 2 | 100.0 |" in text and "| pg | 2 | 100.0 |" in text and table in text
     assert "| Median CPU (s) |" in text and "| atlas | 2/2 |" in text and "| pg | 2/2 |" in text
+    assert "| Sampler rows made | Sampler rows checked |" in text
     assert "- `atlas`: OMPL through its Python bindings (atlas) (2 runs)" in text  # where each method ran
     assert "- `pg`: compiled core (2 runs)" in text or "- `pg`: Python search" in text
     assert (out / "time.png").read_bytes()[:4] == b"\x89PNG" and (out / "length.png").stat().st_size > 0

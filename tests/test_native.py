@@ -236,6 +236,7 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall):
     lazy_jacobians = space.counts()["jacobians"] - before["jacobians"]
     stats = lazy.extras["sampler"]
     assert lazy.solved and 0 < stats["accepted"] <= stats["refined"] < stats["generated"] / 4
+    assert stats["checked"] == stats["refined"]  # every row the search made a sample was refined, then checked
     states = densify(lazy.path, space.settings.resolution)[0]
     assert panda_task.constraint.violation(states, space.y).max() <= 1.0
     assert not space.checker.in_collision(states).any() and space.validate_path(lazy.path).valid

@@ -46,11 +46,14 @@ MAX_SAMPLES = 1_000_000  # rows one sample_many or raw_many call returns (a plan
 
 @dataclass
 class SamplerStats:
-    """Counts since construction: candidates made, projected, accepted; batches drawn; ``mixed``: candidates
-    that were projected uniform rows mixed into a model's (see :class:`ModelSampler`)."""
+    """Counts since construction: candidates made (``generated``: decoded, for a model), projected (``refined``),
+    checked as samples (``checked``: limits and constraint; most of a search's pooled rows never are) and accepted;
+    batches drawn; ``mixed``: candidates that were projected uniform rows mixed into a model's (see
+    :class:`ModelSampler`)."""
 
     generated: int = 0
     refined: int = 0
+    checked: int = 0
     accepted: int = 0
     batches: int = 0
     mixed: int = 0
@@ -91,6 +94,7 @@ class Sampler(ABC):
         """A new batch of checked candidates into the buffer :meth:`sample_many` takes from."""
         q = self.candidates(self._batch_rows())
         self.stats.generated += len(q)
+        self.stats.checked += len(q)
         self.stats.batches += 1
         self._buffer = q[self.space.valid(q)]
 

@@ -103,17 +103,20 @@ OPERATIONS = ("fk", "jacobians", "projection_steps", "collision_checks", "sample
 
 
 def operations_table(records: list[dict], methods: list[str]) -> str:
-    """Markdown: per method, medians over its solved runs of the CPU time, the wall time and each
-    operation count of the records' ``ops`` (see :func:`manifoldgen.bench.planning.operations`)."""
+    """Markdown: per method, medians over its solved runs of the CPU time, the wall time, each operation count
+    of the records' ``ops`` (see :func:`manifoldgen.bench.planning.operations`) and the sampler's rows made
+    (decoded, for a model) and checked as samples (``extras['sampler']``; a search keeps some of them as nodes)."""
     header = ["Method", "Solved", "Median CPU (s)", "Median wall (s)", "FK", "Jacobians", "Projection steps",
-              "Collision checks", "Samples", "Nodes"]
+              "Collision checks", "Samples", "Nodes", "Sampler rows made", "Sampler rows checked"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for method in methods:
         runs = [r for r in records if r["method"] == method]
         solved = [r for r in runs if r["solved"] and "ops" in r]
         median = (lambda values: _num(float(np.median(values))) if values else "-")
+        rows = [r.get("extras", {}).get("sampler", {}) for r in solved]
         row = [method, f"{len(solved)}/{len(runs)}", median([r["cpu_s"] for r in solved]),
-               median([r["time_s"] for r in solved])] + [median([r["ops"][k] for r in solved]) for k in OPERATIONS]
+               median([r["time_s"] for r in solved])] + [median([r["ops"][k] for r in solved]) for k in OPERATIONS] \
+            + [median([made.get(k, 0) for made in rows]) for k in ("generated", "checked")]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 

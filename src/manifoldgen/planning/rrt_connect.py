@@ -207,6 +207,7 @@ class CoreRRTConnect(RRTConnect):
         self.reattached = out["reattached"]
         self.shortcuts, self.found_length = out["shortcuts"], out["found_length"]
         sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
+        sampler.stats.checked += out["refined"]  # raw rows the search made samples (refined, then checked)
         sampler.stats.accepted += out["accepted"]
         return out["path"] if len(out["path"]) else None
 
