@@ -90,8 +90,10 @@ def test_a_model_that_misses_the_query_mixes_in_projected_rows_and_says_why(ship
     assert abs(sampler.stats.mixed - MIX_MISSED * 2000) < 80
     assert space.valid(rows).mean() > 0.5  # the uniform rows were projected fully, the model rows refined
     covered = ModelSampler(space, model, seed=1).sample_many(1)[0]  # a model row: a query the model covers
+    generated = sampler.stats.generated
     assert sampler.begin_query(covered, covered) == "" and sampler.mix() == 0.0
     assert sampler.lazy_refine == sampler.refine
+    assert sampler.stats.generated == generated  # measured on the rows drawn when the sampler was made
 
 
 def test_a_query_that_runs_long_mixes_in_projected_rows_gradually(shipped):

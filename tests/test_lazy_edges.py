@@ -72,10 +72,10 @@ def test_a_bad_edges_value_is_refused_in_one_line(panda_task):
 
 
 def test_a_cut_edge_gives_its_node_another_parent(panda_task):
-    """Coarse checks (every 2nd state, the default) in the maze, seed 28: an edge on a candidate path is cut and
+    """Coarse checks (every 2nd state, the default) in the maze, seed 36: an edge on a candidate path is cut and
     its node reattached to another parent instead of leaving with its subtree; the path returned is valid at
     every state."""
-    space, result = _solve(panda_task, "maze", 28, 2)
+    space, result = _solve(panda_task, "maze", 36, 2)
     assert result.solved and result.extras["cut_edges"] > 0 and result.extras["reattached"] > 0
     _assert_checked_state_by_state(panda_task, space, result.path)
 

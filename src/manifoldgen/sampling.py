@@ -37,7 +37,7 @@ PROJECT_ITERS = inspect.signature(project).parameters["max_iters"].default  # th
 FIRST_ROWS = 64  # a model sampler's first batch; each next one doubles, up to its batch size
 REFERENCE_ROW_COST = 17_792  # multiply-adds of a row of the shipped panda CVAE (4-128-128-7): row counts (a model
 # sampler's batch, a planner's pool) hold for a row this cheap, and shrink in proportion for a dearer one (cost_scale)
-CHECK_ROWS = 256  # model rows a query's start draws to measure its gaps at the start and the goal
+CHECK_ROWS = 256  # model rows a sampler draws when made, to measure each query's gaps at its start and goal
 MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows while the model covers its ends
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
 MIX_AFTER = 20_000  # raw rows a query draws before a model that covers its ends starts mixing (full after twice)
@@ -216,7 +216,8 @@ class ModelSampler(Sampler):
         self.missed = False  # the latest query's start or goal lies far from every model sample
         self.drawn = 0  # raw rows drawn since the latest query began
         from manifoldgen.coverage import spacing
-        self.spacing = spacing(self._decode(CHECK_ROWS))  # the model rows' own spacing at this condition, once
+        self.check_rows = self._decode(CHECK_ROWS)  # (CHECK_ROWS, n) model rows at this condition, drawn once
+        self.spacing = spacing(self.check_rows)  # their own spacing
 
     def _batch_rows(self) -> int:
         """Batches grow from :data:`FIRST_ROWS` rows, doubling up to ``batch`` (fewer in proportion for a model
@@ -232,20 +233,17 @@ class ModelSampler(Sampler):
         return PROJECT_ITERS if self.missed else self.refine
 
     def begin_query(self, start: np.ndarray, goal: np.ndarray) -> str:
-        """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of :data:`CHECK_ROWS` model rows
-        against the rows' own spacing (median nearest-neighbour distance, measured when the sampler was made); a
+        """Measure the gaps from ``start`` and ``goal`` (n,) to the nearest of the :data:`CHECK_ROWS` model rows
+        drawn when the sampler was made, against those rows' own spacing (median nearest-neighbour distance); a
         miss (see :func:`manifoldgen.coverage.missed`) makes every batch of this query :data:`MIX_MISSED`
-        projected uniform rows. Returns one line saying so, or "" when the model covers both ends, whose
-        measured rows are then the query's first raw rows (:meth:`raw_many`)."""
+        projected uniform rows. Returns one line saying so, or "" when the model covers both ends. The query
+        decodes nothing for it: an easy query draws only its first batch (:data:`FIRST_ROWS`)."""
         from manifoldgen.coverage import gaps, missed
 
-        rows = self._decode(CHECK_ROWS)
-        ends = gaps(rows, np.stack([start, goal]))
+        ends = gaps(self.check_rows, np.stack([start, goal]))
         self.missed = bool(missed(ends, self.spacing).any())
         self.drawn = 0
         if not self.missed:
-            self._raw = np.concatenate([rows, self._raw])
-            self.stats.generated += len(rows)
             return ""
         return (f"the model's samples lie {ends[0]:.2f} rad from the start and {ends[1]:.2f} rad from the goal "
                 f"(their own spacing: {self.spacing:.2f} rad): it misses an IK branch of this query, so "
