@@ -3,22 +3,22 @@
     python benchmarks/bench_repeated.py [--queries 100] [--seed 0] [--time 10] [--methods cold reuse prm atlas-c++]
                                         [--pairs PAIRS.npy] [--grouped] [--prm-samples 2000]
 
-Methods, interleaved per query (``--grouped``: each method's queries back to back, caches warm): ``cold``, the shipped CVAE with RRT-Connect (its search in the compiled core),
-one planner whose queries start from nothing; ``reuse``, the same with ``reuse=true`` (the paths found so far are
-a roadmap that later queries search first, :mod:`manifoldgen.planning.roadmap`); ``prm``, the same planner whose
-roadmap is first built from the same CVAE's samples (a PRM on the same samples, ``Planner.roadmap_of``: --prm-samples
-valid states, each joined to its 10 nearest within the planner's range by segments that pass the dense check; its
-making is timed apart, not in any query); ``atlas-c++``, C++ OMPL Atlas +
-RRTConnect, cold (each query its own program). All with sphere models as the collision broad phase. Start and goal
-are valid, collision-free states of the maze's manifold in the component of the scene's start (the CVAE's samples,
-drawn with another seed than the planners', that RRT-Connect with the CVAE reaches from there within 1 s). Every
-path is rechecked here by the Python space's dense check (not the planners' own) and its ends compared; numpy's BLAS
-runs on one thread, as in every command (its idle threads would spin after the recheck, into the next solve's CPU,
-which counts all of this process's threads). CPU: ours,
-this process's over ``solve``; Atlas's, its program's from "go" plus our dense check of its paths (as
-``bench_ompl_native.py`` counts it), its wall from "go" (not the program's start and loading). Prints,
-per method: solved and rechecked, median CPU and wall over all queries and over queries 2.., routed queries
-(reuse, prm: answered from the roadmap) and their median CPU, median path length, the CPU of all queries.
+Methods, interleaved per query (``--grouped``: each method's queries back to back, caches warm): ``cold``, the
+shipped CVAE with RRT-Connect (its search in the compiled core), one planner whose queries start from nothing;
+``reuse``, the same with ``reuse=true`` (the paths found so far are a roadmap that later queries search first,
+:mod:`manifoldgen.planning.roadmap`); ``prm``, the same planner whose roadmap is first built from the same CVAE's
+samples (a PRM on the same samples, ``Planner.roadmap_of``: --prm-samples valid states, each joined to its 10
+nearest within the planner's range by segments that pass the dense check; its making is timed apart, not in any
+query); ``atlas-c++``, C++ OMPL Atlas + RRTConnect, cold (each query its own program). All with sphere models as the
+collision broad phase. Start and goal are valid, collision-free states of the maze's manifold in the component of
+the scene's start (the CVAE's samples, drawn with another seed than the planners', that RRT-Connect with the CVAE
+reaches from there within 1 s). Every path is rechecked here by the Python space's dense check (not the planners'
+own) and its ends compared; numpy's BLAS runs on one thread, as in every command (its idle threads would spin after
+the recheck, into the next solve's CPU, which counts all of this process's threads). CPU: ours, this process's over
+``solve``; Atlas's, its program's from "go" plus our dense check of its paths (as ``bench_ompl_native.py`` counts
+it), its wall from "go" (not the program's start and loading). Prints, per method: solved and rechecked, median CPU
+and wall over all queries and over queries 2.., routed queries (reuse, prm: answered from the roadmap) and their
+median CPU, median path length, the CPU of all queries.
 """
 
 import argparse
@@ -135,7 +135,8 @@ def main() -> None:
     print(f"{len(pairs)} queries (seed {args.seed}), panda maze, {args.time:g} s limit, "
           + ("each method's queries back to back" if args.grouped else "methods interleaved"))
     print("| method | solved | rechecked | median CPU (s) | median wall (s) | median CPU, queries 2.. (s) "
-          "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) | CPU, all queries (s) |")
+          "| median wall, queries 2.. (s) | routed | median CPU, routed (s) | path length (rad, median) "
+          "| CPU, all queries (s) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for method, rows in runs.items():
         solved, checked, cpu, wall, routed, length = (np.array(c) for c in zip(*rows))

@@ -313,5 +313,6 @@ def test_single_query_planners_reach_a_goal_no_sample_lies_near(name):
     target = planner._goal_target(goal, 0.5)
     walked = planner.pool.q[before:planner.pool.head]
     assert len(walked) and np.array_equal(walked[-1], target)
-    assert np.linalg.norm(target - goal) <= 0.5 + planner.settings.step and space.valid(walked).all()  # walks end their last step
+    # walks end their last step
+    assert np.linalg.norm(target - goal) <= 0.5 + planner.settings.step and space.valid(walked).all()
     assert np.abs(np.linalg.norm(walked, axis=1) - 1.0).max() < 0.01
