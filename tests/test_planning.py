@@ -225,6 +225,9 @@ def test_a_roadmap_made_from_samples_answers_queries_without_a_search():
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
     assert result.extras["roadmap"]["routed"] is True and result.iterations == 0 and result.samples_drawn == 0
+    cold, *_ = _planner("rrt", "auto", corridor_problem, seed=1)
+    with pytest.raises(ManifoldgenError, match="a roadmap is searched only with reuse on"):
+        cold.roadmap_of(samples)
 
 
 def test_a_route_found_past_the_time_limit_is_no_answer():

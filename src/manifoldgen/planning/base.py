@@ -223,19 +223,21 @@ class Planner(ABC):
         """Search the roadmap saved at ``path`` from the next query on, in place of this planner's (``reuse`` on);
         refused when its meta names another query space than ``meta`` (see
         :meth:`~manifoldgen.planning.roadmap.Roadmap.load`)."""
-        if self.roadmap is None:
-            raise ManifoldgenError(f"{self.name}: a roadmap is searched only with reuse on; make the planner with "
-                                   "settings reuse=True")
+        self._check_reuse()
         self.roadmap = Roadmap.load(path, self._segment_valid, self.settings.range, expect=meta)
 
     def roadmap_of(self, samples: np.ndarray) -> None:
         """Search a PRM's roadmap made now from ``samples (N, n)`` (valid states of this planner's space, e.g. a
         model's) from the next query on, in place of this planner's (``reuse`` on; see
         :meth:`~manifoldgen.planning.roadmap.Roadmap.of_samples`)."""
+        self._check_reuse()
+        self.roadmap = Roadmap.of_samples(np.asarray(samples, float), self._segment_valid, self.settings.range)
+
+    def _check_reuse(self) -> None:
+        """A one-line error unless this planner keeps a roadmap (``reuse`` on)."""
         if self.roadmap is None:
             raise ManifoldgenError(f"{self.name}: a roadmap is searched only with reuse on; make the planner with "
                                    "settings reuse=True")
-        self.roadmap = Roadmap.of_samples(np.asarray(samples, float), self._segment_valid, self.settings.range)
 
     @abstractmethod
     def _solve(self, start: np.ndarray, goal: np.ndarray, deadline: float) -> np.ndarray | None:
