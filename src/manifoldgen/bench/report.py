@@ -113,10 +113,10 @@ def operations_table(records: list[dict], methods: list[str]) -> str:
         runs = [r for r in records if r["method"] == method]
         solved = [r for r in runs if r["solved"] and "ops" in r]
         median = (lambda values: _num(float(np.median(values))) if values else "-")
-        rows = [r["extras"]["sampler"] for r in solved if "sampler" in r.get("extras", {})]  # none: OMPL's own
+        stats = [r["extras"]["sampler"] for r in solved if "sampler" in r.get("extras", {})]  # none: OMPL's own
         row = [method, f"{len(solved)}/{len(runs)}", median([r["cpu_s"] for r in solved]),
                median([r["time_s"] for r in solved])] + [median([r["ops"][k] for r in solved]) for k in OPERATIONS] \
-            + [median([made[k] for made in rows if k in made]) for k in ("generated", "checked")]
+            + [median([counts[k] for counts in stats if k in counts]) for k in ("generated", "checked")]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
