@@ -247,8 +247,9 @@ def test_lazy_samples_refine_only_what_the_search_uses(panda_task, wall):
 
 
 def test_the_core_shortens_its_paths_within_the_query(panda_task, wall):
-    """The core's shortcuts (``shortcut`` attempts, native/src/planner.cpp ``Search::shorten``) start from the path
-    its search found (the same search with shortcut=0) and end shorter, with the same ends, valid state by state."""
+    """The core's shortcuts (``shortcut`` attempts, native/src/planner.cpp ``Search::shorten``, then its relaxation)
+    start from the path its search found (the same search with shortcut=0) and end shorter, with the same ends, valid
+    state by state; the relaxation moved waypoints."""
     from manifoldgen.models import pretrained_model_dir
     from manifoldgen.planning import RRTConnect, RRTConnectSettings
     from manifoldgen.specs import make_sampler
@@ -263,11 +264,27 @@ def test_the_core_shortens_its_paths_within_the_query(panda_task, wall):
     space, short = plan(50)
     assert found.solved and short.solved and short.extras["core"] == "native" and "shortcuts" not in found.extras
     assert short.extras["found_length"] == pytest.approx(found.length, rel=1e-12)
-    assert short.extras["shortcuts"] > 0 and short.length < found.length
+    assert short.extras["shortcuts"] > 0 and short.extras["relaxed"] > 0 and short.length < found.length
     np.testing.assert_array_equal(short.path[[0, -1]], found.path[[0, -1]])
     states = densify(short.path, space.settings.resolution)[0]
     assert panda_task.constraint.violation(states, space.y).max() <= 1.0
     assert panda_task.robot.within_limits(states).all() and not space.checker.in_collision(states).any()
+
+
+def test_a_path_shortened_in_the_core_times_into_a_valid_trajectory(panda_task, maze, tmp_path):
+    """The relaxation keeps the path off the obstacles it pulls it against: a maze path shortened in the core
+    (a seed whose taut path grazed a wall between the dense check's states, until the relaxation probed twice as
+    far) becomes a time-parameterised trajectory valid at every sample."""
+    from manifoldgen.models import pretrained_model_dir
+    from manifoldgen.query import run_query, save_path
+    from manifoldgen.trajectory import trajectory_of_file
+
+    result, meta = run_query(panda_task, maze[1], f"cvae:{pretrained_model_dir()}", "rrtconnect", seed=14,
+                             time_limit=20.0, smooth=True)
+    assert result.solved and result.extras["relaxed"] > 0 and result.length < result.extras["found_length"]
+    save_path(tmp_path / "p.npz", result, meta)
+    check = trajectory_of_file(tmp_path / "p.npz").info["check"]
+    assert check["valid"] == check["states"] and check["first_invalid"] is None
 
 
 def test_reach_bounds_the_stepping_stones_in_both_searches(panda_task, wall):

@@ -11,7 +11,7 @@ import pytest
 from manifoldgen.constraints import ConstraintSet, OrientationConstraint, PlaneConstraint, project
 from manifoldgen.data import collect
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.planning import PLANNERS, PlanResult, RRTConnectSettings, RRTSettings, shortcut
+from manifoldgen.planning import PLANNERS, PlanResult, RRTConnectSettings, RRTSettings, relax, shortcut
 from manifoldgen.planning.base import Tree
 from manifoldgen.robot import Robot
 from manifoldgen.sampling import DatasetSampler, ProjectionSampler, UniformSampler
@@ -189,6 +189,23 @@ def test_shortcut_keeps_the_constraint_and_shortens():
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
     assert result.extras["shortcuts"] > 0 and result.length < result.extras["found_length"] - 0.1
+    assert result.extras["relaxed"] >= 0
+
+
+def test_relaxation_pulls_a_path_taut_on_the_manifold():
+    """Relaxation (after the shortcuts): waypoints pulled toward their neighbours' midpoints and projected back; the
+    same ends and waypoint count or fewer, a path valid by the dense check, shorter than the path as found, and a
+    second pass gains less than the first (it converges)."""
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=0)
+    found = planner.solve(start, goal, 20.0)
+    taut, moves = relax(found.path, planner.local)
+    assert moves > 0 and len(taut) <= len(found.path)
+    np.testing.assert_array_equal(taut[[0, -1]], found.path[[0, -1]])
+    assert space.validate_path(taut).valid
+    length = np.linalg.norm(np.diff(taut, axis=0), axis=1).sum()
+    assert length < found.length - 0.1
+    again, _ = relax(taut, planner.local)
+    assert found.length - length > length - np.linalg.norm(np.diff(again, axis=0), axis=1).sum() >= 0
 
 
 def test_reuse_routes_later_queries_through_the_paths_found():

@@ -286,7 +286,8 @@ struct PlannerSettings {
   // (else range)
   double reach;
   // shortcut > 0: a found path is shortened by that many shortcut attempts (planner.cpp Search::shorten; the
-  // Python planners' planning/smoothing.py draws the same points), each kept only when its stretch passes the path check
+  // Python planners' planning/smoothing.py draws the same points), each kept only when its stretch passes the path
+  // check, then relaxed (Search::relax)
   int shortcut;
   // projections: a projected walk's steps go to precision x the smallest tolerance in at most max_iters iterations
   // (planning/local.py's), a raw row's refinement to tol; both with damping and max_step (constraints/projection.py)
@@ -302,6 +303,7 @@ struct PlanOutput {
   long reattached = 0;  // cut edges whose node found another parent (the rest left the search with their subtrees)
   long refined = 0, accepted = 0;  // raw candidates made samples when first used, and of those valid
   long shortcuts = 0;  // shortcuts kept (settings.shortcut)
+  long relaxed = 0;  // waypoint moves kept by the relaxation after them
   double found_length = 0;  // the path's length before its shortcuts
   std::vector<long> nodes;
 };

@@ -445,7 +445,7 @@ NB_MODULE(manifoldgen_core, m) {
           "draw gives raw candidates, each refined (refine projection iterations) and checked when the search "
           "first uses it; reach > 0: a pooled sample is a stepping stone of a tree within min(reach, range) "
           "of its nodes (else range); shortcut > 0: that many shortcut attempts on a found path, each kept when "
-          "its stretch passes the path check; precision, max_iters: a projected walk's projections (to precision x "
+          "its stretch passes the path check, then relaxation sweeps; precision, max_iters: a projected walk's projections (to precision x "
           "the smallest tolerance); tol: a raw row's refinement; damping, max_step: both projections'.")
       .def_ro("range", &mgcore::PlannerSettings::range)
       .def_ro("pool", &mgcore::PlannerSettings::pool)
@@ -481,6 +481,7 @@ NB_MODULE(manifoldgen_core, m) {
         d["refined"] = out.refined;
         d["accepted"] = out.accepted;
         d["shortcuts"] = out.shortcuts;
+        d["relaxed"] = out.relaxed;
         d["found_length"] = out.found_length;
         d["nodes"] = out.nodes;
         return d;
@@ -490,6 +491,6 @@ NB_MODULE(manifoldgen_core, m) {
       "(raw candidates, refined and checked as the search uses them). A dict: path (K, n) (0 rows: unsolved), "
       "iterations, samples, rejected_paths, out_of_reach, projections, cut_edges, verified_states (coarse edges' "
       "states checked on candidate paths), reattached (cut edges whose node got another parent), refined, "
-      "accepted (raw candidates made samples, and of those valid), shortcuts (kept), found_length (before them), "
-      "nodes.");
+      "accepted (raw candidates made samples, and of those valid), shortcuts (kept), relaxed (waypoint "
+      "moves kept after them), found_length (before both), nodes.");
 }

@@ -20,6 +20,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 
 namespace mgcore {
@@ -838,6 +839,63 @@ struct Search {
       path = drop_repeats(shorter);
       ++out.shortcuts;
     }
+    if (s.shortcut > 0) relax();
+  }
+
+  // Relaxation (after the shortcuts, while time is left; planning/smoothing.py relax is the same in Python): each
+  // sweep pulls every inner waypoint toward the midpoint of its neighbours, half way, else a quarter, else an eighth,
+  // projected onto the manifold, and keeps the move when it shortens the two motions at the waypoint and they pass
+  // the path check, and so do the motions through the point pulled twice as far. That probe keeps the path off the
+  // obstacles it is pulled against: a taut path would graze them between the dense check's states, where a
+  // trajectory's samples land. Shortcuts join far points; relaxation pulls the path taut where no straight or walked
+  // shortcut fits (a closed chain's detours). Sweeps stop after one that shortens the path by less than RELAX_GAIN
+  // of its length, or after RELAX_SWEEPS.
+  static constexpr double RELAX_GAIN = 0.01;
+  static constexpr int RELAX_SWEEPS = 30;
+  void relax() {
+    std::vector<Vec> rows;
+    for (long k = 0; k < out.path.rows(); ++k) rows.push_back(out.path.row(k).transpose());
+    for (int sweep = 0; sweep < RELAX_SWEEPS && rows.size() > 2 && time_left(); ++sweep) {
+      double gained = 0.0;
+      for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
+        const Vec &a = rows[i - 1], &b = rows[i + 1];
+        const Vec pull = 0.5 * (a + b) - rows[i];
+        const double before = (rows[i] - a).norm() + (b - rows[i]).norm();
+        for (double share = 0.5; share > 0.1; share /= 2) {
+          const auto m = pulled(rows[i] + share * pull);
+          if (!m) continue;
+          const double after = (*m - a).norm() + (b - *m).norm();
+          if (after >= before || !through_valid(a, *m, b)) continue;
+          const auto probe = pulled(rows[i] + 2 * share * pull);
+          if (!probe || !through_valid(a, *probe, b)) continue;
+          rows[i] = *m;
+          gained += before - after;
+          ++out.relaxed;
+          break;
+        }
+      }
+      if (gained < RELAX_GAIN * length_of(rows)) break;
+    }
+    for (std::size_t r = 0; r < rows.size(); ++r) out.path.row(r) = rows[r].transpose();
+    out.path = drop_repeats(out.path);
+  }
+  // q projected onto the manifold (as a walk's steps are), or none where the projection fails.
+  std::optional<Vec> pulled(Vec q) {
+    ++out.projections;
+    const double tol = local.precision * space.tolerance().minCoeff();
+    if (!space.project(q.data(), tol, local.max_iters, local.damping, local.max_step).converged) return std::nullopt;
+    return q;
+  }
+  // Whether the motions a -> m -> b pass the path check.
+  bool through_valid(const Vec& a, const Vec& m, const Vec& b) {
+    RowMat three(3, space.n());
+    three << a.transpose(), m.transpose(), b.transpose();
+    return space.validate_path(three.data(), 3, true).valid;
+  }
+  static double length_of(const std::vector<Vec>& rows) {
+    double l = 0.0;
+    for (std::size_t k = 1; k < rows.size(); ++k) l += (rows[k] - rows[k - 1]).norm();
+    return l;
   }
   // Whether the straight motion a -> b passes the path check.
   bool flank_valid(const Vec& a, const Vec& b) {

@@ -27,7 +27,8 @@ _HOMES = {"Planner": "base", "PlannerSettings": "base", "CBiRRT": "cbirrt", "CBi
           "KPIECE": "kpiece", "KPIECESettings": "kpiece", "DEFAULT_LOCAL": "local", "LOCAL_PLANNERS": "local",
           "make_local": "local", "PRM": "prm", "PRMSettings": "prm", "PlanResult": "result",
           "path_length": "result", "RRT": "rrt", "RRTSettings": "rrt", "RRTConnect": "rrt_connect",
-          "RRTConnectSettings": "rrt_connect", "SBL": "sbl", "SBLSettings": "sbl", "shortcut": "smoothing"}
+          "RRTConnectSettings": "rrt_connect", "SBL": "sbl", "SBLSettings": "sbl", "shortcut": "smoothing",
+          "relax": "smoothing"}
 
 
 def __getattr__(name: str):

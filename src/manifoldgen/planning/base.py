@@ -24,7 +24,7 @@ from manifoldgen.errors import ManifoldgenError, SamplerFailed
 from manifoldgen.planning.local import DEFAULT_LOCAL, make_local
 from manifoldgen.planning.result import PlanResult, path_length
 from manifoldgen.planning.roadmap import Roadmap
-from manifoldgen.planning.smoothing import shortcut
+from manifoldgen.planning.smoothing import relax, shortcut
 from manifoldgen.sampling import Sampler, cost_scale
 from manifoldgen.space import REASONS, ConstrainedSpace, PathReport
 
@@ -177,7 +177,7 @@ class Planner(ABC):
         self.trees, self.pool, self._goal_gap = [], None, np.inf
         began = time.perf_counter()
         failure = ""
-        self.found_length, self.shortcuts = np.nan, 0
+        self.found_length, self.shortcuts, self.relaxed = np.nan, 0, 0
         checks = self.roadmap.checks if self.roadmap is not None else 0
         path = self.roadmap.route(start, goal) if self.roadmap is not None else None
         if path is not None and time.perf_counter() > began + time_limit:  # a route answers only within the limit
@@ -206,7 +206,7 @@ class Planner(ABC):
                   "rejected_paths": self.rejected, "evaluations": now["evaluations"] - counts["evaluations"],
                   "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
         if path is not None and self.settings.shortcut and not routed:
-            extras["shortcuts"], extras["found_length"] = self.shortcuts, self.found_length
+            extras.update(shortcuts=self.shortcuts, relaxed=self.relaxed, found_length=self.found_length)
         if self.roadmap is not None:
             extras["roadmap"] = {"routed": routed, "nodes": len(self.roadmap), "edges": self.roadmap.edge_count(),
                                  "checks": self.roadmap.checks - checks}
@@ -248,14 +248,15 @@ class Planner(ABC):
         return self.space.validate_path(segment).valid
 
     def _shorten(self, path: np.ndarray, deadline: float) -> np.ndarray:
-        """``path (K, n)`` after ``settings.shortcut`` shortcut attempts until ``deadline``; sets ``found_length``
-        (before them) and ``shortcuts`` (kept)."""
+        """``path (K, n)`` after ``settings.shortcut`` shortcut attempts and a relaxation until ``deadline``; sets
+        ``found_length`` (before them), ``shortcuts`` and ``relaxed`` (kept)."""
         self.found_length = path_length(path)
         if not self.settings.shortcut:
             return path
         shorter, self.shortcuts = shortcut(path, self.local, attempts=self.settings.shortcut,
                                            time_limit=max(deadline - time.perf_counter(), 0.0))
-        return shorter
+        taut, self.relaxed = relax(shorter, self.local, time_limit=max(deadline - time.perf_counter(), 0.0))
+        return taut
 
     def _extras(self) -> dict:
         return {}

@@ -44,7 +44,8 @@ class PlanResult:
     (extensions refused, by reason: see ``REFUSALS``), ``rejected_paths`` (candidates that failed
     the dense validation), ``sampler`` (its stats over the query), ``evaluations`` and
     ``collision_checks`` (configurations checked), ``failure`` (why the sampler gave up), with
-    ``shortcut`` set ``shortcuts`` (kept) and ``found_length`` (before them), with ``reuse`` set
+    ``shortcut`` set ``shortcuts`` and ``relaxed`` (shortcuts and relaxation moves kept) and ``found_length``
+    (before them), with ``reuse`` set
     ``roadmap`` (``routed``: answered from earlier paths; ``nodes``; ``checks``: segments checked);
     :meth:`why` puts them in one line.
     """

@@ -205,14 +205,14 @@ class CoreRRTConnect(RRTConnect):
         self.cut_edges = out["cut_edges"]
         self.verified_states = out["verified_states"]
         self.reattached = out["reattached"]
-        self.shortcuts, self.found_length = out["shortcuts"], out["found_length"]
+        self.shortcuts, self.relaxed, self.found_length = out["shortcuts"], out["relaxed"], out["found_length"]
         sampler.stats.refined += out["refined"] if sampler.lazy_refine else 0
         sampler.stats.checked += out["refined"]  # raw rows the search made samples (refined, then checked)
         sampler.stats.accepted += out["accepted"]
         return out["path"] if len(out["path"]) else None
 
     def _shorten(self, path, deadline):
-        return path  # the core shortened it (found_length and shortcuts booked by _solve)
+        return path  # the core shortened it (found_length, shortcuts and relaxed booked by _solve)
 
     def _segment_valid(self, segment):
         before = self.core.counts()

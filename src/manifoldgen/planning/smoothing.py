@@ -1,7 +1,11 @@
-"""Shortcuts that keep the constraint: points along a path joined by the local planner (a straight motion, or a
-projected walk where the chord leaves the manifold), each new stretch kept only when it is shorter and passes the
-space's dense path check. The compiled core shortens its paths the same way (native/src/planner.cpp,
-``Search::shorten``): the same points, from an additive recurrence instead of random draws."""
+"""Shortening that keeps the constraint. Shortcuts: points along a path joined by the local planner (a straight
+motion, or a projected walk where the chord leaves the manifold), each new stretch kept only when it is shorter and
+passes the space's dense path check. Relaxation, after them: every inner waypoint pulled toward the midpoint of its
+neighbours and projected back onto the manifold, kept when its two motions get shorter and pass the path check, and
+so do those through the point pulled twice as far (the path keeps off the obstacles); it pulls the path taut where
+no shortcut fits (a closed chain's detours). The compiled core shortens its paths the same
+way (native/src/planner.cpp, ``Search::shorten`` and ``Search::relax``): the same points, from an additive recurrence
+instead of random draws."""
 
 from __future__ import annotations
 
@@ -13,6 +17,7 @@ from manifoldgen.planning.local import LocalPlanner
 from manifoldgen.planning.result import path_length
 
 ALPHA = (0.7548776662466927, 0.5698402909980532)  # attempt a joins arc-length fractions sorted((a * ALPHA) mod 1)
+RELAX_GAIN, RELAX_SWEEPS = 0.01, 30  # relaxation stops after a sweep that gains less than RELAX_GAIN of the length
 
 
 def shortcut(path: np.ndarray, local: LocalPlanner, *, attempts: int = 100,
@@ -50,3 +55,43 @@ def _point(path: np.ndarray, cum: np.ndarray, k: int, t: float) -> np.ndarray:
     """The point at arc length ``t`` on segment ``k`` (rows k, k + 1) of ``path``; ``cum`` the rows' arc lengths."""
     span = cum[k + 1] - cum[k]
     return path[k] + (path[k + 1] - path[k]) * ((t - cum[k]) / span if span > 0 else 0.0)
+
+
+def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> tuple[np.ndarray, int]:
+    """``path (K, n)`` pulled taut, no longer, with the same ends, valid wherever it was: sweeps that pull each inner
+    waypoint half way (else a quarter, else an eighth) toward its neighbours' midpoint, projected onto the manifold,
+    keeping the move when its two motions get shorter and pass ``local.space.validate_path``, and so do the motions
+    through the point pulled twice as far (a probe that keeps the path off the obstacles it is pulled against: a taut
+    path would graze them between the dense check's states); until a sweep gains less than ``RELAX_GAIN`` of the
+    length (at most ``RELAX_SWEEPS``, until ``time_limit`` s). Returns it and the moves kept."""
+    deadline = time.perf_counter() + time_limit
+    space, rows, moves = local.space, np.array(path, dtype=float), 0
+    tol = local.precision * float(space.constraint.tolerance.min())
+
+    def pulled(q: np.ndarray) -> np.ndarray | None:
+        local.projections += 1
+        p = space.project(q[None], max_iters=local.max_iters, tol=tol)
+        return p.q[0] if p.converged[0] else None
+
+    def through_valid(a: np.ndarray, m: np.ndarray | None, b: np.ndarray) -> bool:
+        return m is not None and space.validate_path(np.stack([a, m, b])).valid
+
+    for _ in range(RELAX_SWEEPS):
+        if len(rows) < 3 or time.perf_counter() > deadline:
+            break
+        gained = 0.0
+        for i in range(1, len(rows) - 1):
+            a, b = rows[i - 1], rows[i + 1]
+            pull = 0.5 * (a + b) - rows[i]
+            before = np.linalg.norm(rows[i] - a) + np.linalg.norm(b - rows[i])
+            for share in (0.5, 0.25, 0.125):
+                m = pulled(rows[i] + share * pull)
+                after = np.inf if m is None else np.linalg.norm(m - a) + np.linalg.norm(b - m)
+                if (after < before and through_valid(a, m, b)
+                        and through_valid(a, pulled(rows[i] + 2 * share * pull), b)):
+                    rows[i], gained, moves = m, gained + before - after, moves + 1
+                    break
+        if gained < RELAX_GAIN * path_length(rows):
+            break
+    keep = np.concatenate([[True], np.any(np.diff(rows, axis=0) != 0, axis=1)])
+    return rows[keep], moves
