@@ -208,6 +208,30 @@ def test_relaxation_pulls_a_path_taut_on_the_manifold():
     assert found.length - length > length - np.linalg.norm(np.diff(again, axis=0), axis=1).sum() >= 0
 
 
+def test_a_relaxed_path_that_fails_the_whole_check_is_not_kept():
+    """The relaxation checks the motions through each probe only; the whole path is checked at the end, and when
+    that check fails the path comes back as it was, with no moves counted."""
+    from types import SimpleNamespace
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=0)
+    found = planner.solve(start, goal, 20.0)
+
+    class ProbesOnly:  # the space, but a path longer than a probe's three rows fails its check
+        constraint = space.constraint
+
+        def project(self, q, **options):
+            return space.project(q, **options)
+
+        def validate_path(self, path):
+            report = space.validate_path(path)
+            return report if len(path) == 3 else SimpleNamespace(valid=False)
+
+    local = SimpleNamespace(space=ProbesOnly(), projections=0, max_iters=planner.local.max_iters,
+                            precision=planner.local.precision)
+    same, moves = relax(found.path, local)
+    assert moves == 0 and local.projections > 0
+    np.testing.assert_array_equal(same, found.path)
+
+
 def test_reuse_routes_later_queries_through_the_paths_found():
     """``reuse``: a planner keeps its paths as a roadmap; a later query whose ends join it takes a route made of
     checked segments (valid state by state, the right ends, no search), one that cannot join it is planned."""

@@ -844,12 +844,13 @@ struct Search {
 
   // Relaxation (after the shortcuts, while time is left; planning/smoothing.py relax is the same in Python): each
   // sweep pulls every inner waypoint toward the midpoint of its neighbours, half way, else a quarter, else an eighth,
-  // projected onto the manifold, and keeps the move when it shortens the two motions at the waypoint and they pass
-  // the path check, and so do the motions through the point pulled twice as far. That probe keeps the path off the
-  // obstacles it is pulled against: a taut path would graze them between the dense check's states, where a
-  // trajectory's samples land. Shortcuts join far points; relaxation pulls the path taut where no straight or walked
-  // shortcut fits (a closed chain's detours). Sweeps stop after one that shortens the path by less than RELAX_GAIN
-  // of its length, or after RELAX_SWEEPS.
+  // projected onto the manifold, and keeps the move when it shortens the two motions at the waypoint and the motions
+  // through the point pulled twice as far pass the path check. That probe keeps the path off the obstacles it is
+  // pulled against (a taut path would graze them between the dense check's states, where a trajectory's samples
+  // land), and the motions through the kept point lie between two checked ones: the whole path is checked once at
+  // the end, and should it fail, the path as shortened stays. Shortcuts join far points; relaxation pulls the path
+  // taut where no straight or walked shortcut fits (a closed chain's detours). Sweeps stop after one that shortens
+  // the path by less than RELAX_GAIN of its length, or after RELAX_SWEEPS.
   static constexpr double RELAX_GAIN = 0.01;
   static constexpr int RELAX_SWEEPS = 30;
   void relax() {
@@ -865,7 +866,7 @@ struct Search {
           const auto m = pulled(rows[i] + share * pull);
           if (!m) continue;
           const double after = (*m - a).norm() + (b - *m).norm();
-          if (after >= before || !through_valid(a, *m, b)) continue;
+          if (after >= before) continue;
           const auto probe = pulled(rows[i] + 2 * share * pull);
           if (!probe || !through_valid(a, *probe, b)) continue;
           rows[i] = *m;
@@ -876,8 +877,10 @@ struct Search {
       }
       if (gained < RELAX_GAIN * length_of(rows)) break;
     }
-    for (std::size_t r = 0; r < rows.size(); ++r) out.path.row(r) = rows[r].transpose();
-    out.path = drop_repeats(out.path);
+    RowMat taut(rows.size(), space.n());
+    for (std::size_t r = 0; r < rows.size(); ++r) taut.row(r) = rows[r].transpose();
+    if (space.validate_path(taut.data(), static_cast<int>(taut.rows()), true).valid) out.path = drop_repeats(taut);
+    else out.relaxed = 0;  // the path as shortened stays
   }
   // q projected onto the manifold (as a walk's steps are), or none where the projection fails.
   std::optional<Vec> pulled(Vec q) {

@@ -1,9 +1,9 @@
 """Shortening that keeps the constraint. Shortcuts: points along a path joined by the local planner (a straight
 motion, or a projected walk where the chord leaves the manifold), each new stretch kept only when it is shorter and
 passes the space's dense path check. Relaxation, after them: every inner waypoint pulled toward the midpoint of its
-neighbours and projected back onto the manifold, kept when its two motions get shorter and pass the path check, and
-so do those through the point pulled twice as far (the path keeps off the obstacles); it pulls the path taut where
-no shortcut fits (a closed chain's detours). The compiled core shortens its paths the same
+neighbours and projected back onto the manifold, kept when its two motions get shorter and those through the point
+pulled twice as far pass the path check (the path keeps off the obstacles), the whole path checked at the end; it
+pulls the path taut where no shortcut fits (a closed chain's detours). The compiled core shortens its paths the same
 way (native/src/planner.cpp, ``Search::shorten`` and ``Search::relax``): the same points, from an additive recurrence
 instead of random draws."""
 
@@ -60,10 +60,11 @@ def _point(path: np.ndarray, cum: np.ndarray, k: int, t: float) -> np.ndarray:
 def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> tuple[np.ndarray, int]:
     """``path (K, n)`` pulled taut, no longer, with the same ends, valid wherever it was: sweeps that pull each inner
     waypoint half way (else a quarter, else an eighth) toward its neighbours' midpoint, projected onto the manifold,
-    keeping the move when its two motions get shorter and pass ``local.space.validate_path``, and so do the motions
-    through the point pulled twice as far (a probe that keeps the path off the obstacles it is pulled against: a taut
-    path would graze them between the dense check's states); until a sweep gains less than ``RELAX_GAIN`` of the
-    length (at most ``RELAX_SWEEPS``, until ``time_limit`` s). Returns it and the moves kept."""
+    keeping the move when its two motions get shorter and the motions through the point pulled twice as far pass
+    ``local.space.validate_path`` (a probe that keeps the path off the obstacles it is pulled against: a taut path
+    would graze them between the dense check's states); until a sweep gains less than ``RELAX_GAIN`` of the length
+    (at most ``RELAX_SWEEPS``, until ``time_limit`` s). The whole path is then checked: should it fail, ``path``
+    comes back as it was. Returns it and the moves kept."""
     deadline = time.perf_counter() + time_limit
     space, rows, moves = local.space, np.array(path, dtype=float), 0
     tol = local.precision * float(space.constraint.tolerance.min())
@@ -87,11 +88,12 @@ def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> 
             for share in (0.5, 0.25, 0.125):
                 m = pulled(rows[i] + share * pull)
                 after = np.inf if m is None else np.linalg.norm(m - a) + np.linalg.norm(b - m)
-                if (after < before and through_valid(a, m, b)
-                        and through_valid(a, pulled(rows[i] + 2 * share * pull), b)):
+                if after < before and through_valid(a, pulled(rows[i] + 2 * share * pull), b):
                     rows[i], gained, moves = m, gained + before - after, moves + 1
                     break
         if gained < RELAX_GAIN * path_length(rows):
             break
+    if not space.validate_path(rows).valid:
+        return np.array(path, dtype=float), 0
     keep = np.concatenate([[True], np.any(np.diff(rows, axis=0) != 0, axis=1)])
     return rows[keep], moves
