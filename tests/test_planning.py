@@ -225,8 +225,7 @@ def test_a_relaxed_path_that_fails_the_whole_check_is_not_kept():
             report = space.validate_path(path)
             return report if len(path) == 3 else SimpleNamespace(valid=False)
 
-    local = SimpleNamespace(space=ProbesOnly(), projections=0, max_iters=planner.local.max_iters,
-                            precision=planner.local.precision)
+    local = type(planner.local)(ProbesOnly())
     same, moves = relax(found.path, local)
     assert moves == 0 and local.projections > 0
     np.testing.assert_array_equal(same, found.path)

@@ -20,7 +20,6 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <optional>
 #include <stdexcept>
 
 namespace mgcore {
@@ -510,6 +509,13 @@ struct Local {
     return {s.row(count - 1), false};
   }
 
+  // q (n) projected in place onto the manifold to precision x the smallest tolerance (a walk's step, a relaxed
+  // waypoint), counted; whether it converged.
+  bool onto_manifold(double* q) {
+    ++projections;
+    return space.project(q, precision * space.tolerance().minCoeff(), max_iters, damping, max_step).converged;
+  }
+
   std::pair<RowMat, bool> walk(const double* a, const double* b, double max_distance, bool creep = true) {
     loose = false;
     const int nn = n();
@@ -517,7 +523,6 @@ struct Local {
     std::vector<Vec> waypoints;
     Vec q = Eigen::Map<const Vec>(a, nn), target(nn);
     double travelled = 0.0, length = step;
-    const double tol = precision * space.tolerance().minCoeff();
     auto result = [&](bool reached) {
       RowMat out(waypoints.size(), nn);
       for (std::size_t i = 0; i < waypoints.size(); ++i) out.row(i) = waypoints[i].transpose();
@@ -533,10 +538,9 @@ struct Local {
         if (!creep && space.stop == COLLISION) break;
       } else {
         target = q + (vb - q) * std::min(1.0, length / std::max(gap, 1e-12));
-        const Projection p = space.project(target.data(), tol, max_iters, damping, max_step);
-        ++projections;
+        const bool converged = onto_manifold(target.data());
         const double moved = (target - q).norm();
-        if (!p.converged || moved > 2 * length || moved < 1e-9 || (vb - target).norm() >= gap) break;
+        if (!converged || moved > 2 * length || moved < 1e-9 || (vb - target).norm() >= gap) break;
         if (whole(q.data(), target.data())) {
           waypoints.push_back(target);
           travelled += moved;
@@ -829,7 +833,7 @@ struct Search {
       RowMat motion(piece.rows() + 1, nn);
       motion << A.transpose(), piece;
       if (!space.validate_path(motion.data(), static_cast<int>(motion.rows()), true).valid ||
-          !flank_valid(path.row(i).transpose(), A) || !flank_valid(B, path.row(j + 1).transpose()))
+          !motions_valid(Vec(path.row(i).transpose()), A) || !motions_valid(B, Vec(path.row(j + 1).transpose())))
         continue;
       const RowMat stretch = stretch_of(path, i, A, piece, j);
       RowMat shorter(i + stretch.rows() + (path.rows() - j - 2), nn);
@@ -854,57 +858,38 @@ struct Search {
   static constexpr double RELAX_GAIN = 0.01;
   static constexpr int RELAX_SWEEPS = 30;
   void relax() {
-    std::vector<Vec> rows;
-    for (long k = 0; k < out.path.rows(); ++k) rows.push_back(out.path.row(k).transpose());
-    for (int sweep = 0; sweep < RELAX_SWEEPS && rows.size() > 2 && time_left(); ++sweep) {
+    RowMat taut = out.path;
+    long moves = 0;
+    for (int sweep = 0; sweep < RELAX_SWEEPS && taut.rows() > 2 && time_left(); ++sweep) {
       double gained = 0.0;
-      for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
-        const Vec &a = rows[i - 1], &b = rows[i + 1];
-        const Vec pull = 0.5 * (a + b) - rows[i];
-        const double before = (rows[i] - a).norm() + (b - rows[i]).norm();
+      for (long i = 1; i + 1 < taut.rows(); ++i) {
+        const Vec a = taut.row(i - 1).transpose(), q = taut.row(i).transpose(), b = taut.row(i + 1).transpose();
+        const Vec pull = 0.5 * (a + b) - q;
+        const double before = (q - a).norm() + (b - q).norm();
         for (double share = 0.5; share > 0.1; share /= 2) {
-          const auto m = pulled(rows[i] + share * pull);
-          if (!m) continue;
-          const double after = (*m - a).norm() + (b - *m).norm();
-          if (after >= before) continue;
-          const auto probe = pulled(rows[i] + 2 * share * pull);
-          if (!probe || !through_valid(a, *probe, b)) continue;
-          rows[i] = *m;
+          Vec m = q + share * pull, probe = q + 2 * share * pull;
+          if (!local.onto_manifold(m.data())) continue;
+          const double after = (m - a).norm() + (b - m).norm();
+          if (after >= before || !local.onto_manifold(probe.data()) || !motions_valid(a, probe, b)) continue;
+          taut.row(i) = m.transpose();
           gained += before - after;
-          ++out.relaxed;
+          ++moves;
           break;
         }
       }
-      if (gained < RELAX_GAIN * length_of(rows)) break;
+      if (gained < RELAX_GAIN * length(taut)) break;
     }
-    RowMat taut(rows.size(), space.n());
-    for (std::size_t r = 0; r < rows.size(); ++r) taut.row(r) = rows[r].transpose();
-    if (space.validate_path(taut.data(), static_cast<int>(taut.rows()), true).valid) out.path = drop_repeats(taut);
-    else out.relaxed = 0;  // the path as shortened stays
+    if (!space.validate_path(taut.data(), static_cast<int>(taut.rows()), true).valid) return;  // as shortened
+    out.path = drop_repeats(taut);
+    out.relaxed = moves;
   }
-  // q projected onto the manifold (as a walk's steps are), or none where the projection fails.
-  std::optional<Vec> pulled(Vec q) {
-    ++out.projections;
-    const double tol = local.precision * space.tolerance().minCoeff();
-    if (!space.project(q.data(), tol, local.max_iters, local.damping, local.max_step).converged) return std::nullopt;
-    return q;
-  }
-  // Whether the motions a -> m -> b pass the path check.
-  bool through_valid(const Vec& a, const Vec& m, const Vec& b) {
-    RowMat three(3, space.n());
-    three << a.transpose(), m.transpose(), b.transpose();
-    return space.validate_path(three.data(), 3, true).valid;
-  }
-  static double length_of(const std::vector<Vec>& rows) {
-    double l = 0.0;
-    for (std::size_t k = 1; k < rows.size(); ++k) l += (rows[k] - rows[k - 1]).norm();
-    return l;
-  }
-  // Whether the straight motion a -> b passes the path check.
-  bool flank_valid(const Vec& a, const Vec& b) {
-    RowMat ends(2, space.n());
-    ends << a.transpose(), b.transpose();
-    return space.validate_path(ends.data(), 2, true).valid;
+  // Whether the straight motions through points (n each, in order) pass the path check.
+  template <class... Points>
+  bool motions_valid(const Points&... points) {
+    RowMat rows(sizeof...(points), space.n());
+    long r = 0;
+    ((rows.row(r++) = points.transpose()), ...);
+    return space.validate_path(rows.data(), static_cast<int>(rows.rows()), true).valid;
   }
   static double length(const RowMat& p) {
     double l = 0.0;

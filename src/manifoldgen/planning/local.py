@@ -88,6 +88,14 @@ class LocalPlanner(ABC):
             return states[count - 1:count], False
         return states[:0], False
 
+    def onto_manifold(self, q: np.ndarray) -> np.ndarray | None:
+        """``q (n,)`` projected onto the manifold to ``precision`` x the smallest tolerance (a walk's step, a relaxed
+        waypoint), counted in ``projections``; None where the projection does not converge."""
+        self.projections += 1
+        p = self.space.project(q[None], max_iters=self.max_iters,
+                               tol=self.precision * float(self.space.constraint.tolerance.min()))
+        return p.q[0] if p.converged[0] else None
+
     def walk(self, a: np.ndarray, b: np.ndarray, max_distance: float = np.inf, *,
              creep: bool = True) -> tuple[np.ndarray, bool]:
         """A walk on the manifold from ``a`` toward ``b``, as :meth:`steer` answers: steps toward
@@ -107,13 +115,9 @@ class LocalPlanner(ABC):
                 if not creep and space.stop == "collision":
                     break
             else:
-                target = q + (b - q) * min(1.0, length / max(gap, 1e-12))
-                projected = space.project(target[None], max_iters=self.max_iters,
-                                          tol=self.precision * float(space.constraint.tolerance.min()))
-                self.projections += 1
-                nxt = projected.q[0]
-                moved = float(np.linalg.norm(nxt - q))
-                if not projected.converged[0] or moved > 2 * length or moved < 1e-9 or np.linalg.norm(b - nxt) >= gap:
+                nxt = self.onto_manifold(q + (b - q) * min(1.0, length / max(gap, 1e-12)))
+                moved = np.inf if nxt is None else float(np.linalg.norm(nxt - q))
+                if nxt is None or moved > 2 * length or moved < 1e-9 or np.linalg.norm(b - nxt) >= gap:
                     break  # the manifold leads no closer to b from here
                 if self._whole(q, nxt):
                     waypoints.append(nxt)

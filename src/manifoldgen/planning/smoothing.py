@@ -67,16 +67,6 @@ def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> 
     comes back as it was. Returns it and the moves kept."""
     deadline = time.perf_counter() + time_limit
     space, rows, moves = local.space, np.array(path, dtype=float), 0
-    tol = local.precision * float(space.constraint.tolerance.min())
-
-    def pulled(q: np.ndarray) -> np.ndarray | None:
-        local.projections += 1
-        p = space.project(q[None], max_iters=local.max_iters, tol=tol)
-        return p.q[0] if p.converged[0] else None
-
-    def through_valid(a: np.ndarray, m: np.ndarray | None, b: np.ndarray) -> bool:
-        return m is not None and space.validate_path(np.stack([a, m, b])).valid
-
     for _ in range(RELAX_SWEEPS):
         if len(rows) < 3 or time.perf_counter() > deadline:
             break
@@ -86,9 +76,12 @@ def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> 
             pull = 0.5 * (a + b) - rows[i]
             before = np.linalg.norm(rows[i] - a) + np.linalg.norm(b - rows[i])
             for share in (0.5, 0.25, 0.125):
-                m = pulled(rows[i] + share * pull)
+                m = local.onto_manifold(rows[i] + share * pull)
                 after = np.inf if m is None else np.linalg.norm(m - a) + np.linalg.norm(b - m)
-                if after < before and through_valid(a, pulled(rows[i] + 2 * share * pull), b):
+                if after >= before:
+                    continue
+                probe = local.onto_manifold(rows[i] + 2 * share * pull)
+                if probe is not None and space.validate_path(np.stack([a, probe, b])).valid:
                     rows[i], gained, moves = m, gained + before - after, moves + 1
                     break
         if gained < RELAX_GAIN * path_length(rows):
