@@ -135,6 +135,7 @@ Problem::Problem(const std::string& json_path) : impl_(new Impl) {
     p.space->set_spheres(ints_of(sp.at("joint")), rows_of(sp.at("center")), vector_of(sp.at("radius")),
                          ints_of(sp.at("geometry")), exact);
   }
+  p.space->prepare();  // what its first certified check would build, built before "ready" as ours is
   p.J.resize(p.space->m(), p.space->n());
   const auto& s = o.at("settings").as_object();
   p.settings.space = std::string(s.at("space").as_string());

@@ -274,6 +274,7 @@ void Space::set_spheres(const std::vector<int>& joint, const RowMat& center, con
   p.span_d = Vec::Zero(p.n());
   p.last_stop = -1;
   p.build_holders();
+  prepare();  // the rates too, as the hulls: not in the first plan's checks
 }
 
 void Space::clear_spheres() {

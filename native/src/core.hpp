@@ -197,6 +197,10 @@ class Space {
   // PathCheck as state by state. On by default; off: state by state. sweeps() says whether they are used.
   void set_sweeps(bool on);
   bool sweeps() const;
+  // What the first certified path check would otherwise build (each constraint row's rate bounds over the
+  // coordinates: certified constraint checks and sweeps), built now, once the terms are added: when the space
+  // is made, not in the first query's time. Again only after terms or spheres change.
+  void prepare();
   std::string sweep_report() const;  // why sweeps are unavailable ("" when they are)
   // The states (k, n) taken as consecutive dense states of a path: true when every state of the polyline through
   // them is certified collision-free (one sweep test; counted). Needs sweeps().

@@ -252,6 +252,9 @@ NB_MODULE(manifoldgen_core, m) {
            "Certified sweeps in validate_path (on by default; used only with sphere models): the same reports, "
            "fewer collision checks.")
       .def_prop_ro("sweeps", &Space::sweeps, "validate_path uses certified sweeps")
+      .def("prepare", &Space::prepare,
+           "Build now what the first certified path check would (the constraint's rate bounds): call it once the "
+           "terms are added, so that no query pays for it.")
       .def("sweep_report", &Space::sweep_report, "why certified sweeps are unavailable ('' when they are)")
       .def(
           "sweep_free",

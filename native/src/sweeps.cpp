@@ -524,6 +524,9 @@ bool Space::Impl::outers_apart(std::size_t k, int common) {
 }
 
 void Space::set_sweeps(bool on) { impl_->sweeps_on = on; }
+void Space::prepare() {
+  if (impl_->rates_stale) impl_->build_rates();
+}
 bool Space::sweeps() const { return impl_->sweeps_ready(); }
 std::string Space::sweep_report() const {
   return impl_->sphere_joint.empty() ? "no sphere models" : impl_->sweep_unavailable;

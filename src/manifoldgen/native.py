@@ -54,6 +54,7 @@ def core_space(space: ConstrainedSpace, *, compile: bool = True):
     layout, refused = checked_layout(space, compile)
     out = empty_core(space)
     add_terms(out, space, layout)
+    out.prepare()  # what the first certified path check would build: here, not in a query's time
     _REPORTS[space] = {"compiled": [term[0].spec()["type"] for kind, term in layout if kind == "expression"],
                        "callbacks": {part.spec()["type"]: refused.get(id(part), "compilation is off")
                                      for kind, term in layout if kind == "callback" for part, _ in term.parts}}
