@@ -289,8 +289,9 @@ def check_cli_values(block: Block, names: list[str], ctx) -> None:
             sampler(parsed.sampler)
     if params.get("settings") and names == ["plan"]:
         parse_settings(params["settings"], None, planner_settings(params["planner"]), "planner")
-    elif params.get("settings") and names[0] == "bench":  # any planner's settings
-        known = {k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}
+    elif params.get("settings") and names[0] == "bench":  # any planner's settings, and OMPL's ompl_KEY (as the CLI)
+        from manifoldgen.ompl_settings import benchmark_keys
+        known = {**{k: v for name in PLANNERS.names() for k, v in planner_settings(name).items()}, **benchmark_keys()}
         parse_settings(params["settings"], None, known, "planner")
     if params.get("settings") and names == ["train"] and params.get("model") not in (None, "auto"):
         from manifoldgen.models import get_model_class
