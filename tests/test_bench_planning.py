@@ -10,7 +10,7 @@ import pytest
 
 from manifoldgen.bench.planning import (Experiment, Method, default_baseline, drop_truncated_line, read_records,
                                         run_bench, run_once)
-from manifoldgen.bench.report import markdown_table, summarize
+from manifoldgen.bench.report import markdown_table, operations_table, summarize
 from manifoldgen.constraints import project
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.scene import Scene
@@ -119,6 +119,20 @@ def test_summary_counts_failures_at_the_limit():
     assert summarize(late)[0].time_max == 14.0
     none = markdown_table(summarize(late + fast), baseline="a")
     assert "speed-up" not in none.splitlines()[0] and "the baseline a solved none of its runs" in none
+
+
+def test_the_operations_table_gives_the_cores_collision_queries():
+    """With sphere models the core's collision queries are its sphere tests plus its certified sweep tests: their
+    median over the solved runs; '-' for a method without them, and a failed run does not count."""
+    ops = {"fk": 10, "jacobians": 1, "projection_steps": 1, "collision_checks": 4, "samples": 2, "nodes": 3}
+    run = {"method": "core", "solved": True, "cpu_s": 0.1, "time_s": 0.1, "ops": ops}
+    records = [{**run, "extras": {"sphere_checks": 100, "sweep_checks": 20}},
+               {**run, "extras": {"sphere_checks": 300, "sweep_checks": 40}},
+               {**run, "solved": False, "extras": {"sphere_checks": 9000, "sweep_checks": 0}},
+               {**run, "method": "plain", "extras": {}}]
+    table = operations_table(records, ["core", "plain"]).splitlines()
+    column = table[0].split(" | ").index("Collision queries (sphere + sweep tests)")
+    assert table[2].split(" | ")[column] == "230" and table[3].split(" | ")[column] == "-"
 
 
 RECORD = {"method": "a", "spec": "a=rrtconnect@project", "run": 0, "seed": 0, "scene": "wall", "time_limit": 1.0,

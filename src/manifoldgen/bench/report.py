@@ -104,19 +104,25 @@ OPERATIONS = ("fk", "jacobians", "projection_steps", "collision_checks", "sample
 
 def operations_table(records: list[dict], methods: list[str]) -> str:
     """Markdown: per method, medians over its solved runs of the CPU time, the wall time, each operation count
-    of the records' ``ops`` (see :func:`manifoldgen.bench.planning.operations`) and the sampler's rows made
-    (decoded, for a model) and checked as samples (``extras['sampler']``; a search keeps some of them as nodes)."""
+    of the records' ``ops`` (see :func:`manifoldgen.bench.planning.operations`), the collision queries of the
+    compiled core with sphere models (its sphere tests plus its certified sweep tests, ``extras``; '-' without
+    sphere models) and the sampler's rows made (decoded, for a model) and checked as samples
+    (``extras['sampler']``; a search keeps some of them as nodes)."""
     header = ["Method", "Solved", "Median CPU (s)", "Median wall (s)", "FK", "Jacobians", "Projection steps",
-              "Collision checks", "Samples", "Nodes", "Sampler rows made", "Sampler rows checked"]
+              "Collision checks", "Samples", "Nodes", "Collision queries (sphere + sweep tests)", "Sampler rows made",
+              "Sampler rows checked"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for method in methods:
         runs = [r for r in records if r["method"] == method]
         solved = [r for r in runs if r["solved"] and "ops" in r]
         median = (lambda values: _num(float(np.median(values))) if values else "-")
         stats = [r["extras"]["sampler"] for r in solved if "sampler" in r.get("extras", {})]  # none: OMPL's own
+        queries = [r["extras"]["sphere_checks"] + r["extras"].get("sweep_checks", 0) for r in solved
+                   if r.get("extras", {}).get("sphere_checks")]
         row = [method, f"{len(solved)}/{len(runs)}", median([r["cpu_s"] for r in solved]),
                median([r["time_s"] for r in solved])] + [median([r["ops"][k] for r in solved]) for k in OPERATIONS] \
-            + [median([counts[k] for counts in stats if k in counts]) for k in ("generated", "checked")]
+            + [median(queries)] + [median([counts[k] for counts in stats if k in counts]) for k in ("generated",
+                                                                                                 "checked")]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
@@ -217,10 +223,12 @@ def write_report(records: list[dict], out_dir: str | Path, title: str, *, method
             f"{ValidationSettings.resolution} rad."
             "\n\n" + table + engine_lines(records, order) + _stability_section(records, order)
             + "\nWhat the solved runs cost (medians over solved runs; CPU: the planner process's own; the C++ "
-            "baseline's: its program's plus our dense check of its paths, not the harness around it; FK: configurations whose constraint kinematics was computed, Jacobians "
-            "included; collision checks: configurations checked, robot-robot and robot-scene pairs together, "
-            "each with its own FK of every link; samples: from our samplers, or drawn by the C++ OMPL baseline's "
-            "sampler, not counted for the Python-callback OMPL methods):\n\n"
+            "baseline's: its program's plus our dense check of its paths, not the harness around it; FK: "
+            "configurations whose constraint kinematics was computed, Jacobians included; collision checks: "
+            "configurations checked, robot-robot and robot-scene pairs together, each with its own FK of every link; "
+            "collision queries: with sphere models, the compiled core's sphere tests plus its certified sweep tests; "
+            "samples: from our samplers, or drawn by the C++ OMPL baseline's sampler, not counted for the "
+            "Python-callback OMPL methods):\n\n"
             + operations_table(records, order) + "\n![time](time.png)\n\n![length](length.png)\n")
     atomic_write_text(out_dir / "results.md", text)
     atomic_write_bytes(out_dir / "time.png", box_plot(records, "time", order, f"{title}: planning time",
