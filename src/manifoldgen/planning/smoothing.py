@@ -45,9 +45,7 @@ def shortcut(path: np.ndarray, local: LocalPlanner, *, attempts: int = 100,
             continue
         stretch = np.concatenate([out[i:i + 1], A[None], piece, out[j + 1:j + 2]])
         if local.space.validate_path(stretch).valid:
-            joined = np.concatenate([out[:i], stretch, out[j + 2:]])
-            keep = np.concatenate([[True], np.any(np.diff(joined, axis=0) != 0, axis=1)])
-            out, kept = joined[keep], kept + 1
+            out, kept = _without_repeats(np.concatenate([out[:i], stretch, out[j + 2:]])), kept + 1
     return out, kept
 
 
@@ -88,5 +86,10 @@ def relax(path: np.ndarray, local: LocalPlanner, *, time_limit: float = 1.0) -> 
             break
     if not space.validate_path(rows).valid:
         return np.array(path, dtype=float), 0
-    keep = np.concatenate([[True], np.any(np.diff(rows, axis=0) != 0, axis=1)])
-    return rows[keep], moves
+    return _without_repeats(rows), moves
+
+
+def _without_repeats(path: np.ndarray) -> np.ndarray:
+    """``path (K, n)`` without the rows equal to the one before them (a shortcut's point on a waypoint, a waypoint
+    pulled onto its neighbour)."""
+    return path[np.concatenate([[True], np.any(np.diff(path, axis=0) != 0, axis=1)])]
