@@ -2,12 +2,13 @@
 
     python benchmarks/bench_shorten.py RUNS_DIR [--method atlas-c++] [--attempts 50]
 
-RUNS_DIR is a ``manifoldgen bench plan`` output folder (its ``config.json`` names the task, robot and scene; its
-``runs.jsonl`` holds every solved path). Each solved path of ``--method`` gets our shortening as ``--smooth`` runs it
+RUNS_DIR is a ``manifoldgen bench plan`` output folder (its ``config.json`` holds the experiment; its
+``runs.jsonl`` every solved path). Each solved path of ``--method`` gets our shortening as ``--smooth`` runs it
 (:func:`manifoldgen.planning.smoothing.shortcut`, ``--attempts`` attempts, then
-:func:`~manifoldgen.planning.smoothing.relax`, the Python twins of the core's), in the scene's constrained space
-with the auto local planner. Prints per seed the path's length as recorded and after our shortening, whether the
-shortened path passes the dense check, and the medians.
+:func:`~manifoldgen.planning.smoothing.relax`, the Python twins of the core's), in the space the benchmark judged
+that method's paths in (:func:`manifoldgen.bench.planning.method_space`), with the auto local planner. Prints
+per seed the path's length as recorded and after our shortening, whether the shortened path passes the dense
+check, and the medians.
 """
 
 from __future__ import annotations
@@ -18,14 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-import manifoldgen as mg
-from manifoldgen.bench.planning import read_records
+from manifoldgen.bench.planning import CONFIG_FILE, RUNS_FILE, Experiment, Method, method_space, read_records
 from manifoldgen.native import fast_space
 from manifoldgen.planning import relax, shortcut
 from manifoldgen.planning.local import make_local
 from manifoldgen.planning.result import path_length
 from manifoldgen.runtime import set_threads
-from manifoldgen.space import ConstrainedSpace
 
 
 def main() -> None:
@@ -35,15 +34,12 @@ def main() -> None:
     parser.add_argument("--attempts", type=int, default=50, help="shortcut attempts (the bench's --set shortcut)")
     args = parser.parse_args()
     set_threads()
-    experiment = json.loads((args.runs / "config.json").read_text())["experiment"]
-    task = mg.load_task(experiment["task"], robot=experiment["robot"])
-    scene = mg.load_scene(task, experiment["scene"])
-    space = fast_space(ConstrainedSpace(task.constraint, task.condition.check(scene.condition)[0],
-                                        scene.checker(task.robot)))
-    local = make_local("auto", space)
-    rows = [r for r in read_records(args.runs / "runs.jsonl") if r["method"] == args.method and r["solved"]]
+    experiment = Experiment(**json.loads((args.runs / CONFIG_FILE).read_text())["experiment"])
+    rows = [r for r in read_records(args.runs / RUNS_FILE) if r["method"] == args.method and r["solved"]]
     if not rows:
-        raise SystemExit(f"{args.runs}/runs.jsonl holds no solved run of method '{args.method}'")
+        raise SystemExit(f"{args.runs}/{RUNS_FILE} holds no solved run of method '{args.method}'")
+    space = fast_space(method_space(experiment, Method.parse(rows[0]["spec"]).sampler))
+    local = make_local("auto", space)
     before, after = [], []
     for record in rows:
         path = np.asarray(record["path"], float)
