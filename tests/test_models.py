@@ -231,3 +231,57 @@ def test_a_cvae_posterior_variance_too_large_for_float32_keeps_the_losses_finite
     assert float(logvar.detach().max()) == LOGVAR_RANGE[1] and torch.isfinite(z).all()
     losses = model._losses(q, y, y, torch.Generator().manual_seed(0))
     assert all(torch.isfinite(v) for v in losses.values())
+
+
+def test_a_blend_draws_its_share_from_the_partner_and_its_files_are_checked(trained, tmp_path):
+    """A model with a blend partner draws each row from the partner with probability ``share``, in torch and in the
+    core alike, keeps the partner in its directory, and refuses a partner that is missing, edited or not its own."""
+    from manifoldgen.models import open_model
+    from manifoldgen.models.files import BLEND_DIR, BlendDecoder
+
+    own, partner = load_model(trained["cvae"][2]), load_model(trained["cfm"][2])
+    blend = load_model(trained["cvae"][2])
+    blend.blend = (partner, 0.3)
+    path = tmp_path / "blend"
+    path.mkdir()
+    blend.save(path)
+    loaded = load_model(path)
+    assert loaded.label == "cvae+cfm" and loaded.blend[1] == 0.3 and (path / BLEND_DIR / "model.json").is_file()
+    q = loaded.sample([0.3], 4000, torch.Generator().manual_seed(0))
+    g = torch.Generator().manual_seed(0)
+    taken = (torch.rand(4000, generator=g) < 0.3).numpy()
+    expected = np.empty_like(q)
+    expected[~taken] = own.sample([0.3], int((~taken).sum()), g)
+    expected[taken] = partner.sample([0.3], int(taken.sum()), g)
+    np.testing.assert_array_equal(q, expected)
+    assert abs(taken.mean() - 0.3) < 0.03
+    assert loaded.sample(np.array([[0.3], [0.5], [0.4]]), 3).shape == (3, 7)
+    # the core draws the same law: the share from the partner's network, in an order its seed shuffles
+    saved = open_model(path)
+    decoder = saved.native_decoder()
+    assert isinstance(decoder, BlendDecoder) and saved.label == "cvae+cfm"
+    assert own.row_cost() < saved.row_cost() < partner.row_cost()
+    rows = decoder.sample(np.array([0.3]), 2000, 7)
+    rng = np.random.default_rng(7)
+    count = int(rng.binomial(2000, 0.3))
+    mine = own.native_decoder().sample(np.array([0.3]), 2000 - count, int(rng.integers(0, 2**63 - 1)))
+    theirs = partner.native_decoder().sample(np.array([0.3]), count, int(rng.integers(0, 2**63 - 1)))
+    np.testing.assert_array_equal(rows, np.concatenate([mine, theirs])[rng.permutation(2000)])
+    # a partner edited, missing, or a blend entry out of range: refused in one line
+    doc = json.loads((path / BLEND_DIR / "model.json").read_text())
+    doc["refine"] = 9
+    doc["sha256"] = document_checksum(doc)
+    (path / BLEND_DIR / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifoldgenError, match="is not the partner .* names"):
+        load_model(path)
+    with pytest.raises(ManifoldgenError, match="is not the partner .* names"):
+        open_model(path)
+    shutil.rmtree(path / BLEND_DIR)
+    with pytest.raises(ManifoldgenError, match="missing or unreadable; .* copy the whole model directory"):
+        load_model(path)
+    doc = json.loads((path / "model.json").read_text())
+    doc["blend"]["share"] = 1.5
+    doc["sha256"] = document_checksum(doc)
+    (path / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifoldgenError, match=r"'blend' must hold the partner's 'share' of the rows \(a number in"):
+        load_model(path)

@@ -148,12 +148,17 @@ def test_auto_trains_every_candidate_and_keeps_the_rule_s_choice(tiny, tmp_path)
     result = runner.invoke(app, ["train", str(_saved(tiny, tmp_path)), "--seed", "0", "-o", str(out), "--epochs", "2"])
     assert result.exit_code == 0, result.output
     table = json.loads((out / "selection.json").read_text())["candidates"]
-    assert [row["model"] for row in table] == ["cvae", "cfm"] and sum(row["chosen"] for row in table) == 1
+    assert [row["model"] for row in table][:2] == ["cvae", "cfm"] and sum(row["chosen"] for row in table) == 1
+    by_accuracy, by_recall = (max(table[:2], key=lambda row: row[key])["model"] for key in ("accuracy", "recall"))
+    blends = [f"{by_accuracy}+{by_recall}"] if by_accuracy != by_recall else []  # the accurate one's rows blended
+    assert [row["model"] for row in table][2:] == blends and all(row["blend"] == 0.3 for row in table[2:])
     best = max(row["recall"] for row in table)
     chosen = next(row for row in table if row["chosen"])
     assert chosen["recall"] >= best - 0.1
     assert all(row["accuracy"] <= chosen["accuracy"] for row in table if row["recall"] >= best - 0.1)
-    assert load_model(out).name == chosen["model"] and f"chosen {chosen['model']}" in result.output
+    assert load_model(out).label == chosen["model"] and f"chosen {chosen['model']}" in result.output
+    assert (out / "blend").is_dir() == ("+" in chosen["model"])
+    assert all(load_model(out / "candidates" / name).label == name for name in blends)
     refused = runner.invoke(app, ["train", str(_saved(tiny, tmp_path)), "-o", str(out), "--set", "latent=2"])
     assert refused.exit_code == 2 and "name it with --model" in refused.output
 
@@ -188,13 +193,15 @@ def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_p
 
     task = get_task("sphere")
     data = collect(task, 400, seed=3, progress=False)
-    model, _, raced = select_model(data, tmp_path / "m", seed=1, epochs=2, progress=False, workers=1, task=task)
-    assert [row["label"] for row in raced] == ["cvae", "cfm", PROJECTION]
+    model, table, raced = select_model(data, tmp_path / "m", seed=1, epochs=2, progress=False, workers=1, task=task)
+    blends = [row["model"] for row in table if "blend" in row]  # the most accurate with the most covering's rows
+    assert blends in ([], ["cvae+cfm"], ["cfm+cvae"])
+    assert [row["label"] for row in raced] == ["cvae", "cfm", *blends, PROJECTION]
     assert all(row["runs"] == RACE_SEEDS * len(task.scenes) for row in raced)
     winner = max(raced, key=lambda r: (r["solved"], -r["cpu"]))
     assert winner["chosen"] and sum(row["chosen"] for row in raced) == 1
     saved = load_model(tmp_path / "m")
-    assert saved.name == winner["model"] and saved.mix == winner["mix"]
+    assert saved.label == winner["model"] and saved.mix == winner["mix"]
     assert json.loads((tmp_path / "m" / "selection.json").read_text())["race"] == raced
 
 

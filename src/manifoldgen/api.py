@@ -280,7 +280,7 @@ def _sampler_for(function: str, argument: str, space: ConstrainedSpace, model: A
         return make_sampler(spec, space, seed), spec
     if isinstance(model, ConditionalSampler):
         refine = REFINE if refine is None else refine
-        return model_sampler(space, model, refine=refine, **common), f"{model.name}:(in memory),refine={refine}"
+        return model_sampler(space, model, refine=refine, **common), f"{model.label}:(in memory),refine={refine}"
     if isinstance(model, Dataset):
         if refine is not None:
             raise ManifoldgenError(f"{function}: refine applies to a model's samples; a Dataset's rows are drawn as "

@@ -377,17 +377,18 @@ def train(dataset: Path = typer.Argument(..., help="Dataset .npz made by `manifo
             verdict = ("kept  " if raced else "chosen") if row["chosen"] else "tried "  # raced: the race chooses
             diverged = (f" (diverged at epoch {row['diverged_at']}: epoch {row['best_epoch']} kept)"
                         if row.get("diverged_at") else "")
-            console.print(f"{verdict} {row['model']}: {row['epochs']} epochs in "
-                          f"{row['seconds']:.0f} s{diverged}; on held-out rows {row['accuracy']:.1%} of raw samples within "
-                          f"tolerance, recall {row['recall']:.2f}", markup=False)
+            made = (f"{row['blend']:.0%} of its rows from the second" if "blend" in row else
+                    f"{row['epochs']} epochs in {row['seconds']:.0f} s{diverged}")
+            console.print(f"{verdict} {row['model']}: {made}; on held-out rows {row['accuracy']:.1%} of raw samples "
+                          f"within tolerance, recall {row['recall']:.2f}", markup=False)
         for row in raced:
             console.print(f"{'chosen' if row['chosen'] else 'raced '} {row['label']} on the task's scenes: "
                           f"{row['solved']}/{row['runs']} solved, median CPU {row['cpu']:.3f} s", markup=False)
         if raced and net.mix == 1.0:
             console.print("plain projection planned this task's scenes fastest: the model directory's sampler is the "
                           "projection sampler (see selection.json)", markup=False)
-        console.print(f"trained {net.name} on {dataset} -> {output} (model.json, model.safetensors, loss.png, "
-                      f"{SELECTION_FILE}, candidates/)")
+        console.print(f"trained {net.label} on {dataset} -> {output} (model.json, model.safetensors, loss.png, "
+                      f"{SELECTION_FILE}, candidates/{', blend/' if net.blend else ''})")
     else:
         cls = get_model_class(model)
         net = cls(**parse_settings(settings, config, cls.defaults, f"{model} model"))

@@ -17,6 +17,10 @@ each, seeds no benchmark uses) with every candidate's sampler and with the proje
 kept as the rule's model at ``mix`` 1, which a model sampler spec then maps to the projection sampler), and the
 chosen model is the race's winner: most runs solved, then the least median CPU time. Its files are
 copied to ``OUT`` with its ``mix``; ``OUT/selection.json`` holds both tables. Without scenes the rule decides.
+
+Where one candidate is the more accurate and the other the more covering, a third is scored and raced: the
+accurate one with :data:`BLEND_SHARE` of its rows drawn from the covering one (``cvae+cfm``, saved in
+``OUT/candidates/cvae+cfm`` with its partner in ``blend/``): most of the one's accuracy, most of the other's recall.
 """
 
 from __future__ import annotations
@@ -40,12 +44,14 @@ from manifoldgen.io import atomic_write_text, locks_output
 from manifoldgen.metrics import joint_features, prdc
 from manifoldgen.models import get_model_class, load_model
 from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_task
+from manifoldgen.models.files import BLEND_DIR
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.scene import Scene
 from manifoldgen.tasks import Task, code_types
 from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
+BLEND_SHARE = 0.3  # the share of rows the most covering candidate gives the most accurate one's blend
 SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
 SAMPLES = 1000  # samples drawn per scored condition value
 K = 5  # neighbours of the k-NN recall
@@ -114,6 +120,13 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1),
                       **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]}
                          if log.get("diverged_at") else {})})
+    blend = blended(models, table, folders)
+    if blend is not None:  # saved beside the others, so that it can be sampled and benchmarked as they can
+        (out / "candidates" / blend.label).mkdir(exist_ok=True)
+        blend.save(out / "candidates" / blend.label)
+        models[blend.label] = blend
+        table.append({"model": blend.label, **score(blend, task, dataset.q[held_out], dataset.y[held_out], seed),
+                      "blend": BLEND_SHARE})
     best_recall = max(row["recall"] for row in table)
     ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
     raced = race(models, ruled["model"], task, recorded, progress=progress) \
@@ -127,13 +140,30 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     model = models[name]
     model.mix = winner["mix"] if winner else None
     model.save(out)
+    if model.blend is None:
+        shutil.rmtree(out / BLEND_DIR, ignore_errors=True)  # a blend kept by an earlier run of this directory
     for file in ("training.json", "loss.png"):
-        shutil.copyfile(out / "candidates" / name / file, out / file)
+        shutil.copyfile(out / "candidates" / model.name / file, out / file)
     atomic_write_text(out / SELECTION_FILE, json.dumps({
         "rule": f"most accurate within {RECALL_SLACK} of the best recall; then, where the task names scenes, the "
                 f"race's winner (most of {RACE_SEEDS} runs per scene solved, then least median CPU)",
         "candidates": table, "race": raced}, indent=1))
     return model, table, raced
+
+
+def blended(models: dict[str, ConditionalSampler], table: list[dict], folders: dict[str, Path],
+            ) -> ConditionalSampler | None:
+    """The most accurate candidate with :data:`BLEND_SHARE` of its rows drawn from the most covering one (its
+    ``refine``: the larger of the two), or None where one candidate is both."""
+    accurate = max(table, key=lambda row: row["accuracy"])["model"]
+    covering = max(table, key=lambda row: row["recall"])["model"]
+    if accurate == covering:
+        return None
+    blend = load_model(folders[accurate])
+    blend.blend = (models[covering], BLEND_SHARE)
+    refines = [m.refine for m in (blend, models[covering]) if m.refine is not None]
+    blend.refine = max(refines) if refines else None
+    return blend
 
 
 def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded: list[dict] = (), *,

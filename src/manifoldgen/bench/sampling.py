@@ -180,7 +180,7 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
     with progress_bar("models", total=len(models) * (len(conditions) + 1), enabled=progress) as bar:
         for label, model in models.items():
             name = _label(model, label, models)
-            entry = {"dir": label, "model": model.name, "per_condition": {}}
+            entry = {"dir": label, "model": model.label, "per_condition": {}}
             entry["time_ms"] = {str(n): t for n, t in
                                 time_sampling(model, np.array(seen[len(seen) // 2]), counts, repeats, seed,
                                               threads).items()}
@@ -219,11 +219,11 @@ def run_sampling_bench(model_dirs: list[str | Path], out: str | Path, *, samples
 
 def _label(model: ConditionalSampler, label: str, models: dict) -> str:
     """The model's name; with others of its kind, its folder name too (its whole path when names collide)."""
-    same = [k for k, m in models.items() if m.name == model.name]
+    same = [k for k, m in models.items() if m.label == model.label]
     if len(same) == 1:
-        return model.name
+        return model.label
     names = [Path(k).name for k in same]
-    return f"{model.name} ({Path(label).name if names.count(Path(label).name) == 1 else label})"
+    return f"{model.label} ({Path(label).name if names.count(Path(label).name) == 1 else label})"
 
 
 def _average(per_condition: dict, ys: list[tuple]) -> dict:

@@ -51,7 +51,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     table.add_row("dataset", f"{figures['rows']} rows at {len(task.condition.grid)} (d, pitch) values in "
                   f"{figures['collect_s']:.1f} s")
     table.add_row("train", f"{race_line(figures)} in {figures['train_s']:.0f} s")
-    table.add_row(f"{model.name} samples", f"{SAMPLES} samples at (d, pitch) = ({y[0]:g} m, {y[1]:g} rad), drawn and "
+    table.add_row(f"{model.label} samples", f"{SAMPLES} samples at (d, pitch) = ({y[0]:g} m, {y[1]:g} rad), drawn and "
                   f"refined in {figures['sample_ms']:.0f} ms: {figures['raw_valid']:.1%} within tolerance raw, "
                   f"{figures['refined_valid']:.1%} after {REFINE} projection steps")
     table.add_row("plan", f"RRT-Connect, sampler {sampler}: {'solved' if result.solved else 'NOT solved'} in "

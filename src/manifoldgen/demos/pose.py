@@ -47,7 +47,7 @@ def run_demo(output: Path, seed: int, console: Console) -> dict:
     table.add_row("dataset", f"{figures['rows']} rows at heights "
                   f"{', '.join(f'{v:g}' for v in task.condition.values.ravel())} m in {figures['collect_s']:.1f} s")
     table.add_row("train", f"{race_line(figures)} in {figures['train_s']:.0f} s")
-    table.add_row(f"{model.name} samples", f"{SAMPLES} samples at y = {y[0]:g} m, drawn and refined in "
+    table.add_row(f"{model.label} samples", f"{SAMPLES} samples at y = {y[0]:g} m, drawn and refined in "
                   f"{figures['sample_ms']:.0f} ms: "
                   f"{figures['raw_valid']:.1%} within tolerance raw, {figures['refined_valid']:.1%} after "
                   f"{REFINE} projection steps")

@@ -37,7 +37,7 @@ def collect_and_train(task, seed: int, output: Path, console: Console, figures: 
     model, table, raced = select_model(rows, output / "model", seed=seed, task=task,
                                        resume=any((output / "model" / "candidates" / name / CHECKPOINT).exists()
                                                   for name in CANDIDATES))
-    figures["train_s"], figures["kept"] = time.perf_counter() - start, ("projection" if model.mix == 1 else model.name)
+    figures["train_s"], figures["kept"] = time.perf_counter() - start, ("projection" if model.mix == 1 else model.label)
     figures["candidates"], figures["race"] = table, raced
     return model, f"model:{output / 'model'}"
 

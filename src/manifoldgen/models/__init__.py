@@ -40,14 +40,16 @@ def get_model_class(name: str) -> type[ConditionalSampler]:
 
 @file_reader
 def load_model(path: str | Path) -> ConditionalSampler:
-    """Load a model directory (model.json + model.safetensors) of any registered model."""
-    from manifoldgen.models.files import read_model_dir
+    """Load a model directory (model.json + model.safetensors) of any registered model, with its blend partner."""
+    from manifoldgen.models.files import read_blend, read_model_dir
 
     doc, tensors = read_model_dir(path)
     if doc["model"] not in MODELS.names():
         raise ManifoldgenError(f"{path}: unknown model type '{doc['model']}' in model.json; "
                                f"known models: {', '.join(MODELS.names())}")
-    return MODELS.get(doc["model"]).from_files(path, doc, tensors)
+    model = MODELS.get(doc["model"]).from_files(path, doc, tensors)
+    model.blend = read_blend(path, doc, load_model)
+    return model
 
 
 @file_reader

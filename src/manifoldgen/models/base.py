@@ -23,8 +23,9 @@ import torch
 
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.adam import Adam
-from manifoldgen.models.files import (CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS_FILE, ModelFacts, check_mix_refine,
-                                      core_decoder, decoder_row_cost, document_checksum, read_model_dir)
+from manifoldgen.models.files import (BLEND_DIR, CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS_FILE, ModelFacts,
+                                      blend_decoder, blend_row_cost, check_mix_refine, core_decoder, decoder_row_cost,
+                                      document_checksum, read_model_dir)
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
@@ -80,6 +81,7 @@ class ConditionalSampler(ModelFacts, ABC):
         self.given = frozenset(hyper)  # set by the user: never resized (see size_for)
         self.refine: int | None = None  # projection iterations its samples need (training measures it), if known
         self.mix: float | None = None  # share of projected uniform rows its sampler mixes in (the race sets it)
+        self.blend: tuple[ConditionalSampler, float] | None = None  # a partner model and its share of the rows
         for key, value in self.config.items():
             _check_hyper(self.name, key, value, self.defaults[key])
         self.meta: dict = {}
@@ -188,11 +190,22 @@ class ConditionalSampler(ModelFacts, ABC):
         bad = ~(np.abs(given) < 1e30).all(axis=1)  # NaN, infinite, or lost in float32
         if bad.any():
             raise ManifoldgenError(f"condition y must be finite numbers of sensible size, got {given[bad][0].tolist()}")
-        y = given.astype(np.float32)
-        if len(y) not in (1, n):
-            raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(y)}")
+        if len(given) not in (1, n):
+            raise ManifoldgenError(f"y must have 1 or n={n} rows, got {len(given)}")
+        if self.blend is None:
+            return self._sample_own(given, n, generator)
+        partner, share = self.blend
+        taken = (torch.rand(n, generator=generator) < share).numpy()
         out = np.empty((n, self.d), dtype=np.float64)
-        yt = self.normalise_y(torch.from_numpy(y))
+        for rows, model in ((~taken, self), (taken, partner)):
+            at = given if len(given) == 1 else given[rows]
+            out[rows] = model._sample_own(at, int(rows.sum()), generator)
+        return out
+
+    def _sample_own(self, given: np.ndarray, n: int, generator: torch.Generator | None) -> np.ndarray:
+        """(n, d) rows of this model's own network (not its blend partner's) at checked conditions (1 or n, k)."""
+        out = np.empty((n, self.d), dtype=np.float64)
+        yt = self.normalise_y(torch.from_numpy(given.astype(np.float32)))
         if self.nets.training:
             self.nets.eval()
         with torch.inference_mode():
@@ -226,13 +239,13 @@ class ConditionalSampler(ModelFacts, ABC):
         if spec is None:
             return None
         weights = {key: value.float().numpy() for key, value in self.state_tensors().items()}
-        return core_decoder(spec, weights, self.d, self.norm)
+        return blend_decoder(core_decoder(spec, weights, self.d, self.norm), self.blend)
 
     def row_cost(self) -> int | None:
         """Multiply-adds to sample one row (:func:`~manifoldgen.models.files.decoder_row_cost`), or None where
         :meth:`decoder_spec` is None."""
         spec = self.decoder_spec()
-        return decoder_row_cost(spec, self.nets.state_dict()) if spec else None
+        return blend_row_cost(decoder_row_cost(spec, self.nets.state_dict()) if spec else None, self.blend)
 
     def _integration_steps(self) -> int:
         """0: the sampling network maps [latent, y] to a row; n > 0: it is a velocity field v([x, y, t]) that
@@ -251,13 +264,21 @@ class ConditionalSampler(ModelFacts, ABC):
                 **({"decoder": spec} if (spec := self.decoder_spec()) else {})}
 
     def save(self, path: str | Path) -> None:
-        """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first)."""
+        """Write ``path/model.safetensors`` and ``path/model.json`` (atomically, weights first; a blend partner
+        first of all, into ``path/blend``)."""
         if not self.nets:
             raise ManifoldgenError(f"model '{self.name}' is not trained; nothing to save")
         path = Path(path)
+        blend = {}
+        if self.blend is not None:
+            partner, share = self.blend
+            (path / BLEND_DIR).mkdir(exist_ok=True)
+            partner.save(path / BLEND_DIR)
+            said = json.loads((path / BLEND_DIR / CONFIG_FILE).read_text())["sha256"]
+            blend = {"blend": {"share": float(share), "sha256": said}}
         blob = safetensors.torch.save(self.state_tensors())
         atomic_write_bytes(path / WEIGHTS_FILE, blob)
-        doc = {**self.describe(), "weights_sha256": hashlib.sha256(blob).hexdigest()}
+        doc = {**self.describe(), **blend, "weights_sha256": hashlib.sha256(blob).hexdigest()}
         doc["sha256"] = document_checksum(doc)
         atomic_write_text(path / CONFIG_FILE, json.dumps(doc, indent=1))
 
@@ -266,9 +287,9 @@ class ConditionalSampler(ModelFacts, ABC):
     def load(cls, path: str | Path) -> ConditionalSampler:
         """Load a model directory written by :meth:`save` (validated; clear errors)."""
         doc, tensors = read_model_dir(path)
-        if doc["model"] != cls.name:
-            raise ManifoldgenError(f"{path} holds a '{doc['model']}' model, not '{cls.name}'; "
-                                   "use manifoldgen.models.load_model")
+        if doc["model"] != cls.name or "blend" in doc:
+            raise ManifoldgenError(f"{path} holds a '{doc['model']}' model{' blended with another' * ('blend' in doc)}"
+                                   f", not a '{cls.name}' alone; use manifoldgen.models.load_model")
         return cls.from_files(path, doc, tensors)
 
     @classmethod

@@ -28,7 +28,8 @@ WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
 DECODER_RANGES = {"noise": (1, 4096), "steps": (0, 1000), "layers": (1, 64)}  # a decoder entry's whole numbers
 DOC_KEYS = ("format_version", "model", "config", "dims", "normalisation", "meta", "refine", "mix", "decoder",
-            "weights_sha256", "sha256")
+            "blend", "weights_sha256", "sha256")
+BLEND_DIR = "blend"  # a blended model's partner: a whole model directory inside its own
 
 
 def document_checksum(doc: dict) -> str:
@@ -191,6 +192,12 @@ def _validate_doc(path: Path, doc: object) -> None:
         raise bad(f"meta must name the robot and its {d} joints")
     check_meta(doc["meta"], k, f"{path}/{CONFIG_FILE}")
     _check_trained_range(norm, doc["meta"], bad)
+    blend = doc.get("blend")
+    if blend is not None and not (
+            isinstance(blend, dict) and set(blend) == {"share", "sha256"} and isinstance(blend["share"], float)
+            and 0 < blend["share"] < 1 and isinstance(blend["sha256"], str) and len(blend["sha256"]) == 64):
+        raise bad("'blend' must hold the partner's 'share' of the rows (a number in (0, 1)) and the 'sha256' of "
+                  f"its {BLEND_DIR}/{CONFIG_FILE}, nothing else")
     decoder = doc.get("decoder")
     if isinstance(decoder, dict):
         _refuse_unknown_keys(decoder, ("net", "law", *DECODER_RANGES), " in 'decoder'", bad)
@@ -250,6 +257,64 @@ def check_mix_refine(path: str | Path, doc: dict) -> tuple[int | None, float | N
     return refine, mix
 
 
+def read_blend(path: str | Path, doc: dict, read: Callable[[Path], object]) -> tuple[object, float] | None:
+    """A blended model's partner (``read(path / BLEND_DIR)``) and its share of the rows, or None without a ``blend``
+    entry; refused unless the partner's model.json is the one the entry names (its ``sha256``), blends nothing
+    itself, and models the same robot, joints and condition width."""
+    entry = doc.get("blend")
+    if entry is None:
+        return None
+    folder = Path(path) / BLEND_DIR
+    fix = "the files were edited or copied in part: copy the whole model directory, or retrain it"
+    try:
+        said = read_json((folder / CONFIG_FILE).read_text())
+    except (OSError, ValueError, UnicodeDecodeError, RecursionError):
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} blends in the model in {folder}, whose {CONFIG_FILE} is missing "
+                               f"or unreadable; {fix}") from None
+    if not isinstance(said, dict) or said.get("sha256") != entry["sha256"]:
+        raise ManifoldgenError(f"{folder}/{CONFIG_FILE} is not the partner {path}/{CONFIG_FILE} names (its sha256 "
+                               f"differs); {fix}")
+    if "blend" in said:
+        raise ManifoldgenError(f"{folder} blends in a model itself; a blend has one partner: retrain the model")
+    partner = read(folder)
+    if (partner.d, partner.k) != (doc["dims"]["d"], doc["dims"]["k"]) or any(
+            partner.meta.get(key) != doc["meta"].get(key) for key in ("robot", "joints")):
+        raise ManifoldgenError(f"{folder} models another robot, joints or condition than {path}; {fix}")
+    return partner, entry["share"]
+
+
+class BlendDecoder:
+    """Two sampling networks in the core as one (``sample(y (k,), count, seed) -> (count, d)``): each row comes
+    from ``partner`` with probability ``share``, else from ``own``, in an order the seed shuffles."""
+
+    def __init__(self, own, partner, share: float):
+        self.own, self.partner, self.share = own, partner, share
+
+    def sample(self, y: np.ndarray, count: int, seed: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        taken = int(rng.binomial(count, self.share))
+        rows = np.concatenate([self.own.sample(y, count - taken, int(rng.integers(0, 2**63 - 1))),
+                               self.partner.sample(y, taken, int(rng.integers(0, 2**63 - 1)))])
+        return rows[rng.permutation(count)]
+
+
+def blend_decoder(own, blend: tuple[object, float] | None):
+    """``own`` (a core decoder or None) with the ``blend`` partner's (:class:`BlendDecoder`); None where either has
+    none (torch then samples both)."""
+    if blend is None or own is None:
+        return own
+    partner = blend[0].native_decoder()
+    return BlendDecoder(own, partner, blend[1]) if partner is not None else None
+
+
+def blend_row_cost(own: int | None, blend: tuple[object, float] | None) -> int | None:
+    """Mean multiply-adds per row of ``own`` (or None) blended with the ``blend`` partner's."""
+    if blend is None or own is None:
+        return own
+    partner = blend[0].row_cost()
+    return None if partner is None else round((1 - blend[1]) * own + blend[1] * partner)
+
+
 def decoder_row_cost(decoder: dict, weights: dict) -> int:
     """Multiply-adds to sample one row with the sampling network ``decoder`` (a model.json ``decoder`` entry) and
     its ``weights`` by name (as :func:`core_decoder` takes them): its Linear weights, twice per integration step
@@ -281,12 +346,18 @@ def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: di
 
 class ModelFacts:
     """What a trained model's files say besides its weights: ``name``, ``config``, ``meta``, ``norm``, ``d``,
-    ``k``, ``refine``, ``mix``, and the conditions it was trained on."""
+    ``k``, ``refine``, ``mix``, ``blend``, and the conditions it was trained on."""
 
     name: str
     meta: dict
     norm: dict
     k: int
+    blend: tuple | None = None  # a partner model and its share of the rows
+
+    @property
+    def label(self) -> str:
+        """The model's name, joined by its blend partner's (``cvae+cfm``)."""
+        return self.name if self.blend is None else f"{self.name}+{self.blend[0].name}"
 
     @property
     def condition(self) -> Condition:
@@ -312,15 +383,18 @@ class SavedModel(ModelFacts):
         self.d, self.k = doc["dims"]["d"], doc["dims"]["k"]
         self.refine, self.mix = check_mix_refine(self.path, doc)
         self.decoder = doc.get("decoder")
+        self.blend = read_blend(self.path, doc, lambda folder: SavedModel(folder, load))
         self._torch_model = None
 
     def native_decoder(self):
-        """The sampling network in the compiled core (see :func:`core_decoder`), or None."""
-        return core_decoder(self.decoder, self.weights, self.d, self.norm) if self.decoder else None
+        """The sampling network in the compiled core (see :func:`core_decoder`; blended with the partner's), or
+        None."""
+        own = core_decoder(self.decoder, self.weights, self.d, self.norm) if self.decoder else None
+        return blend_decoder(own, self.blend)
 
     def row_cost(self) -> int | None:
         """Multiply-adds to sample one row (:func:`decoder_row_cost`), or None without a core decoder entry."""
-        return decoder_row_cost(self.decoder, self.weights) if self.decoder else None
+        return blend_row_cost(decoder_row_cost(self.decoder, self.weights) if self.decoder else None, self.blend)
 
     def sample(self, y: np.ndarray, n: int, generator=None) -> np.ndarray:
         """(n, d) rows at ``y`` from the torch model (loaded on first use): see ``ConditionalSampler.sample``."""
