@@ -28,6 +28,7 @@ import tomllib
 from pathlib import Path
 
 from manifoldgen.bench.planning import read_records
+from manifoldgen.models import open_model
 
 ROOT = Path(__file__).resolve().parents[1]
 HELDOUT = ["dualarm-tiago.toml@tray-over", "balance-g1.toml@reach", "sphere-ur5.toml@shelves",
@@ -81,8 +82,8 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
         pipeline["train"] = (wall, cpu)
         if code:
             raise SystemExit(f"train failed for {entry}; see {log}")
-    doc = json.loads((model / "model.json").read_text())
-    kind = "projection only" if doc.get("mix") == 1 else doc["model"]  # train's race chose plain projection
+    kind = open_model(model).label if json.loads((model / "model.json").read_text()).get("mix") != 1 else \
+        "projection only"  # train's race chose plain projection
     sampler = f"model:{model}"
     wall, cpu, _ = timed(["plan", str(task), "--scene", scene, "--sampler", sampler, "--seed", str(seed),
                           "-o", str(folder / "first-path.npz")], log)
