@@ -326,6 +326,6 @@ def sample_to_file(model, constraint: Constraint, y: np.ndarray, count: int, out
     rates = {"raw_valid_rate": float(space.valid(raw).mean()), "refined_valid_rate": float(space.valid(refined).mean())}
     meta = {**model.meta, "dataset_seed": model.meta.get("seed"), "seed": seed,
             "rows": "refined" if refine else "raw", "refine": refine,
-            "generated_by": {"model": model.name, "source": source}, **rates}
+            "generated_by": {"model": model.label, "source": source}, **rates}
     save_npz(out, meta, q=refined if refine else raw, y=y_rows)
     return {**rates, "rows": meta["rows"], "count": count}
