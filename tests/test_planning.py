@@ -193,6 +193,36 @@ def test_shortcut_keeps_the_constraint_and_shortens():
     assert result.extras["relaxed"] > 0  # the planner's shortening ends with the relaxation
 
 
+def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_informed_set():
+    """``informed``: after the first (shortened) path, searches whose sampler keeps only the rows a shorter path could
+    visit (|x - start| + |x - goal| below the best length so far); the path kept is the shortest of them, valid
+    state by state, and the sampler draws from the whole manifold again after the query. A restricted sampler whose
+    set holds nothing gives up after INFORMED_BATCHES empty batches, in one line."""
+    from manifoldgen.sampling import INFORMED_BATCHES
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=50, informed=2)
+    sampler, outside = planner.sampler, []
+    real = sampler._informed_rows
+
+    def spy(q):
+        kept = real(q)
+        if sampler.informed is not None:
+            s, g, length = sampler.informed
+            outside.append(int(np.sum(np.linalg.norm(kept - s, axis=1) + np.linalg.norm(kept - g, axis=1) >= length)))
+            outside.append(-len(kept))  # rows given: counted apart
+        return kept
+
+    sampler._informed_rows = spy
+    result = planner.solve(start, goal, 20.0)
+    _check(result, space, start, goal)
+    lengths = result.extras["informed"]
+    assert len(lengths) == 3 and np.isclose(result.length, min(v for v in lengths if v is not None))
+    assert max(outside[::2]) == 0 and -sum(outside[1::2]) > 0  # rows were drawn, every one inside the set
+    assert sampler.informed is None
+    sampler.restrict(start, goal, 0.5 * np.linalg.norm(goal - start))  # no state is that close to both ends
+    with pytest.raises(ManifoldgenError, match=f"no valid configuration in {INFORMED_BATCHES} batches .* informed set"):
+        sampler.raw_many(1)
+
+
 def test_relaxation_pulls_a_path_taut_on_the_manifold():
     """Relaxation (after the shortcuts): waypoints pulled toward their neighbours' midpoints and projected back; the
     same ends and waypoint count or fewer, a path valid by the dense check, shorter than the path as found, and a

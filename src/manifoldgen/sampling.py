@@ -42,6 +42,7 @@ MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows w
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
 MIX_AFTER = 20_000  # raw rows a query draws before a model that covers its ends starts mixing (full after twice)
 MAX_SAMPLES = 1_000_000  # rows one sample_many or raw_many call returns (a planner's pool asks for at most this)
+INFORMED_BATCHES = 100  # empty batches in a row after which a sampler restricted to an informed set gives up
 
 
 @dataclass
@@ -72,6 +73,7 @@ class Sampler(ABC):
         self.rng = np.random.default_rng(seed)
         self.stats = SamplerStats()
         self._buffer = self._raw = np.zeros((0, space.n))
+        self.informed: tuple[np.ndarray, np.ndarray, float] | None = None  # (start, goal, length): see restrict
 
     lazy_refine: int = 0  # projection iterations (constraints.project, default options) that refine a raw row
     row_cost: int | None = None  # multiply-adds to make a raw row (a model's decode); None: next to nothing
@@ -90,19 +92,40 @@ class Sampler(ABC):
         """Rows in the next batch: ``batch``."""
         return self.batch
 
+    def restrict(self, start: np.ndarray, goal: np.ndarray, length: float) -> None:
+        """From now on keep only rows ``x`` with ``|x - start| + |x - goal| < length``: the states a path from
+        ``start`` to ``goal`` shorter than ``length`` can visit (the informed set of Gammell et al., 2014); the
+        buffered rows are dropped. :meth:`unrestrict` ends it."""
+        self.informed = (np.asarray(start, float), np.asarray(goal, float), float(length))
+        self._buffer = self._raw = np.zeros((0, self.space.n))
+
+    def unrestrict(self) -> None:
+        """Draw from the whole manifold again (see :meth:`restrict`)."""
+        self.informed = None
+        self._buffer = self._raw = np.zeros((0, self.space.n))
+
+    def _informed_rows(self, q: np.ndarray) -> np.ndarray:
+        """The rows of ``q (B, n)`` inside the informed set (all of them when unrestricted)."""
+        if self.informed is None:
+            return q
+        start, goal, length = self.informed
+        return q[np.linalg.norm(q - start, axis=1) + np.linalg.norm(q - goal, axis=1) < length]
+
     def _refill(self) -> None:
         """A new batch of checked candidates into the buffer :meth:`sample_many` takes from."""
         q = self.candidates(self._batch_rows())
         self.stats.generated += len(q)
-        self.stats.checked += len(q)
         self.stats.batches += 1
+        q = self._informed_rows(q)
+        self.stats.checked += len(q)
         self._buffer = q[self.space.valid(q)]
 
     def _refill_raw(self) -> None:
         """A new batch of raw candidates into the buffer :meth:`raw_many` takes from."""
-        self._raw = self.raw(self._batch_rows())
-        self.stats.generated += len(self._raw)
+        raw = self.raw(self._batch_rows())
+        self.stats.generated += len(raw)
         self.stats.batches += 1
+        self._raw = self._informed_rows(raw)
 
     def sample(self) -> np.ndarray:
         """One valid configuration (n,)."""
@@ -129,11 +152,13 @@ class Sampler(ABC):
             raise ManifoldgenError(f"the number of samples must be a whole number from 0 to {MAX_SAMPLES:,}, got "
                                    f"{count!r}; draw more in several calls")
         rows, need, empty = [], int(count), 0
+        limit = self.max_batches if self.informed is None else min(self.max_batches, INFORMED_BATCHES)
         while need:
             if not len(getattr(self, buffer)):
-                if empty == self.max_batches:
+                if empty == limit:
                     raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
-                                           f"{self.max_batches} batches of {self.batch}")
+                                           f"{limit} batches of {self.batch}"
+                                           + (" inside the informed set" if self.informed is not None else ""))
                 refill()
                 empty = 0 if len(getattr(self, buffer)) else empty + 1
                 continue

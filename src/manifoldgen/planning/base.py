@@ -33,7 +33,8 @@ SMOOTH_SHORTCUTS = 50  # PlannerSettings.shortcut under `plan --smooth` (docs/be
 # each numeric planner setting's range: a resolution finer than 1e-4 rad or a pool of millions of rows would
 # only exhaust memory
 LIMITS = {"range": (1e-4, 100.0), "resolution": (1e-4, 10.0), "step": (1e-4, 100.0), "pool": (0, 10**6),
-          "pool_batch": (1, 10**6), "candidates": (1, 10**4), "shortcut": (0, 10**6)}
+          "pool_batch": (1, 10**6), "candidates": (1, 10**4), "shortcut": (0, 10**6), "informed": (0, 100)}
+INFORMED_BUDGET = 2.0  # an informed search may take this many times the first search's time
 
 @dataclass
 class PlannerSettings:
@@ -49,9 +50,12 @@ class PlannerSettings:
     proportion (:meth:`Planner.pool_rows`); candidates: stepping stones checked (in one batch) per
     extension; shortcut: attempts to shorten a found path within the time limit (each new stretch
     kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
-    0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); reuse: keep
-    the paths found as a roadmap that later queries of this planner (its condition and scene) search first
-    (:mod:`manifoldgen.planning.roadmap`; a route found there is not shortened).
+    0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); informed:
+    searches after the first path, each drawing only rows a shorter path could visit (the informed set of the
+    best length so far) and shortened alike, each within :data:`INFORMED_BUDGET` times the first search's time;
+    the shortest path is kept (0: the first path); reuse: keep the paths found as a roadmap that later queries of
+    this planner (its condition and scene) search first (:mod:`manifoldgen.planning.roadmap`; a route found there
+    is not shortened).
     """
 
     range: float = 0.6
@@ -62,6 +66,7 @@ class PlannerSettings:
     pool_batch: int = 256
     candidates: int = 8
     shortcut: int = 0
+    informed: int = 0
     reuse: bool = False
 
     def check(self) -> None:
@@ -178,6 +183,7 @@ class Planner(ABC):
         began = time.perf_counter()
         failure = ""
         self.found_length, self.shortcuts, self.relaxed = np.nan, 0, 0
+        self.informed_lengths: list[float | None] = []
         checks = self.roadmap.checks if self.roadmap is not None else 0
         path = self.roadmap.route(start, goal) if self.roadmap is not None else None
         if path is not None and time.perf_counter() > began + time_limit:  # a route answers only within the limit
@@ -192,6 +198,7 @@ class Planner(ABC):
                 path = self._solve(start, goal, began + time_limit)
                 if path is not None:
                     path = self._shorten(path, began + time_limit)
+                    path = self._informed(path, start, goal, began, began + time_limit)
             if path is not None and not routed and self.roadmap is not None:
                 self.roadmap.add(path)
         except SamplerFailed as exc:
@@ -207,6 +214,8 @@ class Planner(ABC):
                   "collision_checks": now["collision_checks"] - counts["collision_checks"], **self._extras()}
         if path is not None and self.settings.shortcut and not routed:
             extras.update(shortcuts=self.shortcuts, relaxed=self.relaxed, found_length=self.found_length)
+        if self.informed_lengths:
+            extras["informed"] = self.informed_lengths
         if self.roadmap is not None:
             extras["roadmap"] = {"routed": routed, "nodes": len(self.roadmap), "edges": self.roadmap.edge_count(),
                                  "checks": self.roadmap.checks - checks}
@@ -257,6 +266,36 @@ class Planner(ABC):
                                            time_limit=max(deadline - time.perf_counter(), 0.0))
         taut, self.relaxed = relax(shorter, self.local, time_limit=max(deadline - time.perf_counter(), 0.0))
         return taut
+
+    def _informed(self, path: np.ndarray, start: np.ndarray, goal: np.ndarray, began: float,
+                  deadline: float) -> np.ndarray:
+        """``path (K, n)`` or a shorter one: ``settings.informed`` more searches, each with a fresh tree and the
+        sampler restricted to the informed set of the best length so far (:meth:`Sampler.restrict`), shortened as
+        the first, within :data:`INFORMED_BUDGET` times the first search's time (and ``deadline``); books the
+        length of the first path and of each search's (None: none found) in ``informed_lengths``."""
+        if not self.settings.informed:
+            return path
+        budget = INFORMED_BUDGET * (time.perf_counter() - began)
+        first = (self.found_length, self.shortcuts, self.relaxed)
+        self.informed_lengths = [path_length(path)]
+        for _ in range(self.settings.informed):
+            now = time.perf_counter()
+            if now >= deadline:
+                break
+            self.trees, self.pool, self._goal_gap = [], None, np.inf
+            self.sampler.restrict(start, goal, path_length(path))
+            try:
+                found = self._solve(start, goal, min(deadline, now + budget))
+                found = self._shorten(found, min(deadline, now + budget)) if found is not None else None
+            except SamplerFailed:  # no row inside the informed set: the path is as short as this sampler finds
+                found = None
+            finally:
+                self.sampler.unrestrict()
+            self.informed_lengths.append(path_length(found) if found is not None else None)
+            if found is not None and path_length(found) < path_length(path):
+                path = found
+        self.found_length, self.shortcuts, self.relaxed = first  # the first search's, as the extras say
+        return path
 
     def _extras(self) -> dict:
         return {}
