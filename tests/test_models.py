@@ -276,6 +276,22 @@ def test_a_blend_draws_its_share_from_the_partner_and_its_files_are_checked(trai
         load_model(path)
     with pytest.raises(ManifoldgenError, match="is not the partner .* names"):
         open_model(path)
+    def resealed(edit) -> None:  # the partner's model.json edited, its checksum and the blend entry's made to match
+        doc = json.loads((trained["cfm"][2] / "model.json").read_text())
+        edit(doc)
+        doc["sha256"] = document_checksum(doc)
+        (path / BLEND_DIR / "model.json").write_text(json.dumps(doc))
+        own = json.loads((path / "model.json").read_text())
+        own["blend"]["sha256"] = doc["sha256"]
+        own["sha256"] = document_checksum(own)
+        (path / "model.json").write_text(json.dumps(own))
+
+    resealed(lambda doc: doc["meta"].update(robot="kinova"))  # the partner's own checks refuse it first
+    with pytest.raises(ManifoldgenError, match="blend/model.json: meta 'robot' \"kinova\" contradicts its task"):
+        load_model(path)
+    resealed(lambda doc: doc.update(blend={"share": 0.5, "sha256": "0" * 64}))
+    with pytest.raises(ManifoldgenError, match="blends in a model itself; a blend has one partner"):
+        open_model(path)
     shutil.rmtree(path / BLEND_DIR)
     with pytest.raises(ManifoldgenError, match="missing or unreadable; .* copy the whole model directory"):
         load_model(path)
