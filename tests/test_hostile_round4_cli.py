@@ -114,7 +114,7 @@ CASES = [
     cli("path-unknown-setting", "trajectory {I}/pv-bogus.npz -o {O}/t.json",
         "meta 'planner_settings.bogus' is not a setting of planner rrtconnect"),
     cli("path-setting-string", "trajectory {I}/pv-range.npz -o {O}/t.json",
-        "setting range must be a float (like its default 0.6), got 'abc'"),
+        "setting range must be a number (like its default 0.6), got 'abc'"),
     cli("path-validation-key", "trajectory {I}/pv-extra.npz -o {O}/t.json",
         "meta 'validation.extra' is not a key of 'validation'"),
     # an output replaces only a file manifoldgen wrote; a bench folder must be empty or a bench's own

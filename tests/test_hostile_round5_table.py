@@ -232,7 +232,7 @@ CASES = [
     cli('bench-method-twice', 'bench plan pose --scene wall --runs 1 --time 5 -m rrtconnect@project -m rrtconnect@project -o {O}/b',
         'methods share the labels'),  # clean
     cli('bench-ompl-separated-int', 'bench plan pose --scene wall --runs 1 --time 2 -m rrtconnect@project --set ompl_separated=3 -o {O}/b',
-        'ompl_separated must be a bool'),  # clean
+        'ompl_separated must be true or false'),  # clean
     cli('bench-physics-fixed-base', 'bench plan pose --scene wall --runs 1 --time 2 --physics -m rrtconnect@project -o {O}/b',
         'has a fixed base'),  # clean
     cli('bench-resume-path-nan', 'bench plan pose --scene wall --runs 2 --time 5 -m rrtconnect@project --resume -o {O}/b',
@@ -355,7 +355,7 @@ CASES = [
     cli('tasks-unknown-name', 'tasks poze',
         'poze'),  # clean
     cli('train-config-latent-text', 'train {I}/data.npz --model cvae --epochs 1 --config {I}/cfg-latent-str.toml -o {O}/m',
-        'latent must be a int'),  # clean
+        'latent must be a whole number'),  # clean
     cli('train-dataset-anchor-label-int', 'train {I}/d-anchor-label-int.npz --model cvae --epochs 1 -o {O}/m',
         'anchors[0]'),  # clean
     cli('train-dataset-floating-base-text', 'train {I}/d-fb-str.npz --model cvae --epochs 1 -o {O}/m',

@@ -176,7 +176,7 @@ CASES = [
     cli("plan-time-below-range", WALL + " --time 0.0009 -o {O}/p.npz",
         "--time must be from 0.001 to 86400, got 0.0009"),
     cli("plan-set-empty-value", WALL + " --set range= -o {O}/p.npz",
-        "rrtconnect planner setting range must be a float (like its default 0.6), got ''"),
+        "rrtconnect planner setting range must be a number (like its default 0.6), got ''"),
     cli("plan-set-no-equals", WALL + " --set range -o {O}/p.npz",
         "--set 'range' is not KEY=VALUE; write e.g. --set range=1"),
     cli("plan-resolution-zero", WALL + " --set resolution=0 -o {O}/p.npz",
@@ -185,7 +185,7 @@ CASES = [
         "edges must be 'coarse:K' or 'dense:K' with K a whole number from 1 to 1,000,000 (coarse:1: every motion "
         "state checked for collision at once), got 'coarse:-3'; e.g. edges='coarse:3'"),
     cli("plan-config-range-text", WALL + " --config {I}/cfg-range-str.toml -o {O}/p.npz",
-        "rrtconnect planner setting range must be a float (like its default 0.6), got 'far'"),
+        "rrtconnect planner setting range must be a number (like its default 0.6), got 'far'"),
     cli("plan-config-bad-toml", WALL + " --config {I}/cfg-bad.toml -o {O}/p.npz",
         "{I}/cfg-bad.toml: not valid TOML (Invalid value (at line 1, column 9)); fix the file"),
     cli("plan-planner-capitals", WALL + " --planner RRTConnect -o {O}/p.npz",

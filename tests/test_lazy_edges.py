@@ -67,7 +67,7 @@ def test_a_bad_edges_value_is_refused_in_one_line(panda_task):
         with pytest.raises(ManifoldgenError, match="edges must be 'coarse:K' or 'dense:K'") as error:
             RRTConnectSettings(edges=bad).check()
         assert "\n" not in str(error.value)
-    with pytest.raises(ManifoldgenError, match="edges must be a str"):  # a task file's [planner] table
+    with pytest.raises(ManifoldgenError, match="edges must be a string"):  # a task file's [planner] table
         check_settings({"edges": 2}, planner_settings("rrtconnect"), "planner")
 
 

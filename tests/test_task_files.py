@@ -78,7 +78,7 @@ BAD = [
     (GOOD.replace("name = ", "nam = "), "unknown key 'nam'"),
     ("robot = [", "not valid TOML"),
     (GOOD + "[planner]\nreech = 0.2\n", "line 11: unknown planner setting 'reech' (did you mean 'reach'?)"),
-    (GOOD + "[planner]\nreach = \"far\"\n", "line 11: planner setting reach must be a float"),
+    (GOOD + "[planner]\nreach = \"far\"\n", "line 11: planner setting reach must be a number"),
     # values of the wrong kind, refused when the file is read (not by a later command, not read letter by letter)
     (GOOD + "[planner]\nreach = -1.0\n", "line 11: reach must be a positive distance"),
     (GOOD + "[planner]\nedges = \"lazy\"\n", "line 11: edges must be 'coarse:K' or 'dense:K'"),
@@ -138,7 +138,7 @@ def test_settings_are_checked_against_the_known_keys(tmp_path):
     assert parse_settings(["lr=0.1"], tmp_path / "c.toml", known, "cvae") == {"epochs": 5, "lr": 0.1}
     with pytest.raises(ManifoldgenError, match="unknown cvae setting 'width'; known: epochs, hidden, lr, spectral"):
         parse_settings(["width=3"], None, known, "cvae")
-    with pytest.raises(ManifoldgenError, match="epochs must be a int"):
+    with pytest.raises(ManifoldgenError, match="epochs must be a whole number"):
         parse_settings(["epochs=fast"], None, known, "cvae")
     with pytest.raises(ManifoldgenError, match="is not KEY=VALUE"):
         parse_settings(["epochs"], None, known, "cvae")

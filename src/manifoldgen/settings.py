@@ -60,6 +60,9 @@ def check_settings(values: dict, known: dict, what: str) -> dict:
     return out
 
 
+KINDS = {bool: "true or false", int: "a whole number", float: "a number", str: "a string"}  # a setting's type, said
+
+
 def _fit(key: str, value, default, what: str):
     """``value`` converted to the type of ``default`` (int -> float allowed), or a clear error."""
     if default is None:
@@ -73,5 +76,5 @@ def _fit(key: str, value, default, what: str):
         return float(value)
     elif isinstance(value, type(default)):
         return value
-    kind = type(default).__name__
-    raise ManifoldgenError(f"{what} setting {key} must be a {kind} (like its default {default!r}), got {value!r}")
+    kind = KINDS.get(type(default), f"a {type(default).__name__}")
+    raise ManifoldgenError(f"{what} setting {key} must be {kind} (like its default {default!r}), got {value!r}")
