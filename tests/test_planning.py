@@ -197,8 +197,8 @@ def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_infor
     """``informed``: after the first (shortened) path, searches whose sampler keeps only the rows a shorter path could
     visit (|x - start| + |x - goal| below the best length so far); the path kept is the shortest of them, valid
     state by state, and the sampler draws from the whole manifold again after the query. A restricted sampler whose
-    set holds nothing gives up after INFORMED_BATCHES empty batches, in one line."""
-    from manifoldgen.sampling import INFORMED_BATCHES
+    set holds too few of its rows gives up once it has drawn INFORMED_PROBE, in one line."""
+    from manifoldgen.sampling import INFORMED_PROBE
     planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=50, informed=2)
     sampler, outside = planner.sampler, []
     real = sampler._informed_rows
@@ -215,12 +215,14 @@ def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_infor
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
     lengths = result.extras["informed"]
-    assert len(lengths) == 3 and np.isclose(result.length, min(v for v in lengths if v is not None))
+    assert len(lengths) == 3 and None not in lengths  # both searches found a path here (none would end them)
+    assert np.isclose(result.length, min(lengths))
     assert max(outside[::2]) == 0 and -sum(outside[1::2]) > 0  # rows were drawn, every one inside the set
     assert sampler.informed is None
     sampler.restrict(start, goal, 0.5 * np.linalg.norm(goal - start))  # no state is that close to both ends
-    with pytest.raises(ManifoldgenError, match=f"no valid configuration in {INFORMED_BATCHES} batches .* informed set"):
+    with pytest.raises(ManifoldgenError, match=r"0 of its \d+ rows lay inside the informed set .* too few to search on"):
         sampler.raw_many(1)
+    assert INFORMED_PROBE <= sampler._informed_counts[0] < INFORMED_PROBE + 2 * sampler.batch  # it stopped early
 
 
 def test_relaxation_pulls_a_path_taut_on_the_manifold():

@@ -42,7 +42,8 @@ MIX_MAX = 0.5  # a query mixes in at most this share of projected uniform rows w
 MIX_MISSED = 0.9  # the share of projected uniform rows in a query whose start or goal the model misses
 MIX_AFTER = 20_000  # raw rows a query draws before a model that covers its ends starts mixing (full after twice)
 MAX_SAMPLES = 1_000_000  # rows one sample_many or raw_many call returns (a planner's pool asks for at most this)
-INFORMED_BATCHES = 100  # empty batches in a row after which a sampler restricted to an informed set gives up
+INFORMED_PROBE, INFORMED_SHARE = 512, 0.01  # a restricted sampler gives up when, of the first 512 or more rows it
+# drew, under 1 % lay inside the informed set (a search would starve on them: talos's reach, 0.02 %)
 
 
 @dataclass
@@ -98,6 +99,7 @@ class Sampler(ABC):
         buffered rows are dropped. :meth:`unrestrict` ends it."""
         self.informed = (np.asarray(start, float), np.asarray(goal, float), float(length))
         self._buffer = self._raw = np.zeros((0, self.space.n))
+        self._informed_counts = [0, 0]  # rows drawn, rows inside
 
     def unrestrict(self) -> None:
         """Draw from the whole manifold again (see :meth:`restrict`)."""
@@ -105,11 +107,18 @@ class Sampler(ABC):
         self._buffer = self._raw = np.zeros((0, self.space.n))
 
     def _informed_rows(self, q: np.ndarray) -> np.ndarray:
-        """The rows of ``q (B, n)`` inside the informed set (all of them when unrestricted)."""
+        """The rows of ``q (B, n)`` inside the informed set (all of them when unrestricted); an error once
+        :data:`INFORMED_PROBE` rows or more were drawn and under :data:`INFORMED_SHARE` of them lay inside."""
         if self.informed is None:
             return q
         start, goal, length = self.informed
-        return q[np.linalg.norm(q - start, axis=1) + np.linalg.norm(q - goal, axis=1) < length]
+        inside = q[np.linalg.norm(q - start, axis=1) + np.linalg.norm(q - goal, axis=1) < length]
+        counts = self._informed_counts
+        counts[0], counts[1] = counts[0] + len(q), counts[1] + len(inside)
+        if counts[0] >= INFORMED_PROBE and counts[1] < INFORMED_SHARE * counts[0]:
+            raise ManifoldgenError(f"{type(self).__name__}: {counts[1]} of its {counts[0]} rows lay inside the "
+                                   f"informed set (a path shorter than {length:.3g} rad): too few to search on")
+        return inside
 
     def _refill(self) -> None:
         """A new batch of checked candidates into the buffer :meth:`sample_many` takes from."""
@@ -152,13 +161,11 @@ class Sampler(ABC):
             raise ManifoldgenError(f"the number of samples must be a whole number from 0 to {MAX_SAMPLES:,}, got "
                                    f"{count!r}; draw more in several calls")
         rows, need, empty = [], int(count), 0
-        limit = self.max_batches if self.informed is None else min(self.max_batches, INFORMED_BATCHES)
         while need:
             if not len(getattr(self, buffer)):
-                if empty == limit:
+                if empty == self.max_batches:
                     raise ManifoldgenError(f"{type(self).__name__} found no valid configuration in "
-                                           f"{limit} batches of {self.batch}"
-                                           + (" inside the informed set" if self.informed is not None else ""))
+                                           f"{self.max_batches} batches of {self.batch}")
                 refill()
                 empty = 0 if len(getattr(self, buffer)) else empty + 1
                 continue

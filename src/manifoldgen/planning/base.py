@@ -271,8 +271,8 @@ class Planner(ABC):
                   deadline: float) -> np.ndarray:
         """``path (K, n)`` or a shorter one: ``settings.informed`` more searches, each with a fresh tree and the
         sampler restricted to the informed set of the best length so far (:meth:`Sampler.restrict`), shortened as
-        the first, within :data:`INFORMED_BUDGET` times the first search's time (and ``deadline``); books the
-        length of the first path and of each search's (None: none found) in ``informed_lengths``."""
+        the first, within :data:`INFORMED_BUDGET` times the first search's time (and ``deadline``), until one finds
+        none; books the length of the first path and of each search's (None: none found) in ``informed_lengths``."""
         if not self.settings.informed:
             return path
         budget = INFORMED_BUDGET * (time.perf_counter() - began)
@@ -287,12 +287,14 @@ class Planner(ABC):
             try:
                 found = self._solve(start, goal, min(deadline, now + budget))
                 found = self._shorten(found, min(deadline, now + budget)) if found is not None else None
-            except SamplerFailed:  # no row inside the informed set: the path is as short as this sampler finds
+            except SamplerFailed:  # too few rows inside the informed set: the search would starve
                 found = None
             finally:
                 self.sampler.unrestrict()
             self.informed_lengths.append(path_length(found) if found is not None else None)
-            if found is not None and path_length(found) < path_length(path):
+            if found is None:
+                break  # the next search would draw from the same set
+            if path_length(found) < path_length(path):
                 path = found
         self.found_length, self.shortcuts, self.relaxed = first  # the first search's, as the extras say
         return path
