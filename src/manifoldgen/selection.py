@@ -25,6 +25,7 @@ accurate one with :data:`BLEND_SHARE` of its rows drawn from the covering one (`
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import multiprocessing
@@ -120,7 +121,7 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
                       "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1),
                       **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]}
                          if log.get("diverged_at") else {})})
-    blend = blended(models, table, folders)
+    blend = blended(models, table)
     if blend is not None:  # saved beside the others, so that it can be sampled and benchmarked as they can
         (out / "candidates" / blend.label).mkdir(exist_ok=True)
         blend.save(out / "candidates" / blend.label)
@@ -151,15 +152,14 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     return model, table, raced
 
 
-def blended(models: dict[str, ConditionalSampler], table: list[dict], folders: dict[str, Path],
-            ) -> ConditionalSampler | None:
+def blended(models: dict[str, ConditionalSampler], table: list[dict]) -> ConditionalSampler | None:
     """The most accurate candidate with :data:`BLEND_SHARE` of its rows drawn from the most covering one (its
     ``refine``: the larger of the two), or None where one candidate is both."""
     accurate = max(table, key=lambda row: row["accuracy"])["model"]
     covering = max(table, key=lambda row: row["recall"])["model"]
     if accurate == covering:
         return None
-    blend = load_model(folders[accurate])
+    blend = copy.copy(models[accurate])  # its networks shared, its blend and refine its own
     blend.blend = (models[covering], BLEND_SHARE)
     refines = [m.refine for m in (blend, models[covering]) if m.refine is not None]
     blend.refine = max(refines) if refines else None
