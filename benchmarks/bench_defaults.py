@@ -82,8 +82,8 @@ def run_entry(entry: str, out: Path, runs: int, seed: int, time_limit: float) ->
         pipeline["train"] = (wall, cpu)
         if code:
             raise SystemExit(f"train failed for {entry}; see {log}")
-    kind = open_model(model).label if json.loads((model / "model.json").read_text()).get("mix") != 1 else \
-        "projection only"  # train's race chose plain projection
+    saved = open_model(model)
+    kind = "projection only" if saved.mix == 1 else saved.label  # 1: train's race chose plain projection
     sampler = f"model:{model}"
     wall, cpu, _ = timed(["plan", str(task), "--scene", scene, "--sampler", sampler, "--seed", str(seed),
                           "-o", str(folder / "first-path.npz")], log)
