@@ -195,11 +195,12 @@ def test_shortcut_keeps_the_constraint_and_shortens():
 
 def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_informed_set():
     """``informed``: after the first (shortened) path, searches whose sampler keeps only the rows a shorter path could
-    visit (|x - start| + |x - goal| below the best length so far); the path kept is the shortest of them, valid
-    state by state, and the sampler draws from the whole manifold again after the query. A restricted sampler whose
-    set holds too few of its rows gives up once it has drawn INFORMED_PROBE, in one line."""
+    visit (|x - start| + |x - goal| below the best length so far) and which pool no stepping stones ahead, until one
+    finds none; the path kept is the shortest of them, valid state by state, and the sampler draws from the whole
+    manifold again after the query. A restricted sampler whose set holds too few of its rows gives up once it has
+    drawn INFORMED_PROBE, in one line."""
     from manifoldgen.sampling import INFORMED_PROBE
-    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=1, shortcut=50, informed=2)
+    planner, space, start, goal = _planner("rrt", "auto", corridor_problem, seed=0, shortcut=50, informed=2)
     sampler, given = planner.sampler, []  # per restricted batch: the sum of distances to the ends, minus the length
     real = sampler._informed_rows
 
@@ -211,11 +212,14 @@ def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_infor
         return kept
 
     sampler._informed_rows = spy
+    pools, pool_rows = [], planner.pool_rows  # (restricted?, rows pooled ahead) at each search's start
+    planner.pool_rows = lambda: pools.append((sampler.informed is not None, pool_rows()[0])) or pool_rows()
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
+    assert pools[0] == (False, planner.settings.pool) and pools[1:] and all(p == (True, 0) for p in pools[1:])
     lengths = result.extras["informed"]
-    assert len(lengths) == 3 and None not in lengths  # both searches found a path here (none would end them)
-    assert np.isclose(result.length, min(lengths))
+    assert len(lengths) == 3 and lengths[1] < lengths[0] and lengths[2] is None  # the first found a shorter path
+    assert np.isclose(result.length, lengths[1])
     rows = np.concatenate(given)
     assert len(rows) > 0 and (rows < 0).all()  # rows were drawn, every one inside the set
     assert sampler.informed is None

@@ -52,10 +52,10 @@ class PlannerSettings:
     kept only when shorter and valid by the dense path check, :mod:`manifoldgen.planning.smoothing`;
     0: the path as found, as OMPL's planners give it; ``plan --smooth``: :data:`SMOOTH_SHORTCUTS`); informed:
     searches after the first path, each drawing only rows a shorter path could visit (the informed set of the
-    best length so far) and shortened alike, each within :data:`INFORMED_BUDGET` times the first search's time;
-    the shortest path is kept (0: the first path); reuse: keep the paths found as a roadmap that later queries of
-    this planner (its condition and scene) search first (:mod:`manifoldgen.planning.roadmap`; a route found there
-    is not shortened).
+    best length so far, no pool drawn ahead) and shortened alike, each within :data:`INFORMED_BUDGET` times the
+    first search's time; the shortest path is kept (0: the first path); reuse: keep the paths found as a roadmap
+    that later queries of this planner (its condition and scene) search first
+    (:mod:`manifoldgen.planning.roadmap`; a route found there is not shortened).
     """
 
     range: float = 0.6
@@ -330,9 +330,11 @@ class Planner(ABC):
     def pool_rows(self) -> tuple[int, int]:
         """(pool, pool_batch) in the sampler's rows: the settings' scaled by its
         :func:`~manifoldgen.sampling.cost_scale` (the same decode budget: a whole-body model's rows cost ten
-        times the panda's, and most pooled rows are never used)."""
+        times the panda's, and most pooled rows are never used). An informed search draws no pool ahead: its
+        sampler keeps a small share of the rows it decodes, so a pool filled ahead would cost many times its rows."""
         scale = cost_scale(self.sampler)
-        return round(self.settings.pool * scale), max(1, round(self.settings.pool_batch * scale))
+        pool = 0 if getattr(self.sampler, "informed", None) is not None else self.settings.pool
+        return round(pool * scale), max(1, round(self.settings.pool_batch * scale))
 
     def _stone_radius(self) -> float:
         """How close to a tree's node a pooled sample must lie to be one of its stepping stones (rad)."""
