@@ -152,6 +152,24 @@ def test_the_checker_does_not_vouch_for_a_bench_with_no_solved_run(tmp_path):
     assert "CANNOT RECHECK: no solved run to recheck (0 runs in runs.jsonl, none solved)" in done.stdout
 
 
+def test_a_sigterm_is_never_blamed_on_user_code(tmp_path):
+    """A SIGTERM stops a command with exit 143 wherever it lands: in a user's module (the signal is not its fault)
+    or in a compiled extension's frame (numpy's ``numpy/random/_generator.pyx``, a file that does not exist here,
+    once taken for a user's module: exit 2, "user code ... raised SystemExit")."""
+    (tmp_path / "busy.py").write_text("import os, signal\n\ndef run():\n    os.kill(os.getpid(), signal.SIGTERM)\n"
+                                      "    while True:\n        pass\n")
+    script = ("import sys\nfrom manifoldgen.cli_common import friendly\nimport busy\n"
+              "try:\n    friendly(busy.run)()\nexcept SystemExit as exc:\n    sys.exit(exc.code)\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    assert done.returncode == 128 + signal.SIGTERM and "user code" not in done.stderr, done.stderr
+    from manifoldgen.errors import user_code
+    try:
+        exec(compile("raise SystemExit(143)", "numpy/random/_generator.pyx", "exec"), {})
+    except SystemExit as exc:
+        assert user_code(exc.with_traceback(exc.__traceback__.tb_next)) is None  # its frame alone, not this test's
+
+
 def test_sigterm_stops_a_writer_as_ctrl_c_does_its_lock_released(tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     job = subprocess.Popen([sys.executable, "-c", "from manifoldgen.cli import app; app()", "collect", "pose",

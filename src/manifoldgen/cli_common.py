@@ -101,7 +101,7 @@ def friendly(command):
             raise typer.Exit(130) from None
         except (Exception, SystemExit) as exc:
             blamed = user_code(exc)
-            if blamed is None or isinstance(exc, (typer.Exit, typer.Abort)):
+            if blamed is None or isinstance(exc, (typer.Exit, typer.Abort, Terminated)):
                 raise
             why = str(exc).strip().splitlines()[0][:200] if str(exc).strip() else ""
             say_error(f"user code {blamed} raised {type(exc).__name__}{': ' + why if why else ''}; fix that module "
@@ -112,8 +112,12 @@ def friendly(command):
     return wrapper
 
 
+class Terminated(SystemExit):
+    """The exit a SIGTERM raises (code 128 + the signal), wherever the command was: never a user module's fault."""
+
+
 def _terminated(signum, frame):
-    raise SystemExit(128 + signum)
+    raise Terminated(128 + signum)
 
 
 def _stopped_cleanly():

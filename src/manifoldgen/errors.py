@@ -66,8 +66,9 @@ def not_a_file(path, what: str = "file") -> str:
 
 
 def user_code(exc: BaseException) -> str | None:
-    """``FILE, line N`` of the innermost frame of ``exc`` in a user's module (not this package, not an installed
-    package nor the standard library; a syntax error's own file and line), or None."""
+    """``FILE, line N`` of the innermost frame of ``exc`` in a user's module (a file that exists: not this package,
+    not an installed package nor the standard library, nor a compiled extension's source such as numpy's
+    ``numpy/random/_generator.pyx``; a syntax error's own file and line), or None."""
     import sys
     import sysconfig
     import traceback
@@ -78,7 +79,8 @@ def user_code(exc: BaseException) -> str | None:
     if isinstance(exc, SyntaxError) and exc.filename:
         frames.append((exc.filename, exc.lineno))
     for filename, line in reversed(frames):
-        if not filename.startswith("<") and not any(os.path.realpath(filename).startswith(o) for o in ours):
+        if (not filename.startswith("<") and os.path.isfile(filename)
+                and not any(os.path.realpath(filename).startswith(o) for o in ours)):
             return f"{filename}, line {line}"
     return None
 
