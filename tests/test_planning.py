@@ -213,7 +213,13 @@ def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_infor
 
     sampler._informed_rows = spy
     pools, pool_rows = [], planner.pool_rows  # (restricted?, rows pooled ahead) at each search's start
-    planner.pool_rows = lambda: pools.append((sampler.informed is not None, pool_rows()[0])) or pool_rows()
+
+    def pooled():
+        rows = pool_rows()
+        pools.append((sampler.informed is not None, rows[0]))
+        return rows
+
+    planner.pool_rows = pooled
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
     assert pools[0] == (False, planner.settings.pool) and pools[1:] and all(p == (True, 0) for p in pools[1:])

@@ -333,7 +333,7 @@ class Planner(ABC):
         times the panda's, and most pooled rows are never used). An informed search draws no pool ahead: its
         sampler keeps a small share of the rows it decodes, so a pool filled ahead would cost many times its rows."""
         scale = cost_scale(self.sampler)
-        pool = 0 if getattr(self.sampler, "informed", None) is not None else self.settings.pool
+        pool = 0 if self.sampler.informed is not None else self.settings.pool
         return round(pool * scale), max(1, round(self.settings.pool_batch * scale))
 
     def _stone_radius(self) -> float:
