@@ -7,6 +7,7 @@ import pytest
 
 from manifoldgen import core_extension, core_terms, native
 from manifoldgen.errors import ManifoldgenError
+from manifoldgen.planning import RRTConnectSettings
 from manifoldgen.sampling import FIRST_ROWS
 from manifoldgen.space import REASONS, ConstrainedSpace, densify
 
@@ -209,7 +210,9 @@ def test_sphere_models_are_conservative_and_plan_valid_paths(panda_task, wall):
 
 
 def test_the_spheres_setting_fits_the_robot_and_keeps_the_search(panda_task, wall):
-    """``spheres=True``: the robot's fitted sphere models (manifoldgen.spheres) as the broad phase of every check."""
+    """``spheres=True`` (the default): the robot's sphere models (manifoldgen.spheres) as the broad phase of every
+    check."""
+    assert RRTConnectSettings().spheres
     _, with_spheres = _planner(panda_task, wall, 1, spheres=True)
     _, plain = _planner(panda_task, wall, 1)
     assert with_spheres.core.has_spheres and not plain.core.has_spheres

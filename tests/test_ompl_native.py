@@ -126,11 +126,12 @@ def test_bad_input_is_refused_in_one_line(maze, monkeypatch, tmp_path):
 
 @needs_binary
 def test_the_sphere_broad_phase_changes_no_verdict_of_the_baseline(maze):
-    """With our sphere models (--set spheres=true) the C++ Atlas search is the same, seed for seed, with fewer
-    coal checks: the spheres only spare coal where they touch nothing."""
+    """With our sphere models (the default; ``--set spheres=false`` turns them off) the C++ Atlas search is the
+    same, seed for seed, with fewer coal checks: the spheres only spare coal where they touch nothing."""
     task, scene, space = maze
-    plain = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(scene.start, scene.goal, 20.0)
-    spheres = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4, spheres=True).solve(
+    plain = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4, spheres=False).solve(
+        scene.start, scene.goal, 20.0)
+    spheres = ompl_native.NativeOmplPlanner(space, ompl_space="atlas", seed=4).solve(
         scene.start, scene.goal, 20.0)
     assert plain.solved and spheres.solved
     np.testing.assert_array_equal(spheres.path, plain.path)

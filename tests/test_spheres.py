@@ -2,6 +2,7 @@
 calls free a state coal finds in collision; cache; exact fallbacks for what has no spheres."""
 
 import shutil
+from pathlib import Path
 
 import coal
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 
 from manifoldgen import spheres
 from manifoldgen.collision import CollisionChecker, cache_dir
+from manifoldgen.io import load_npz
 from manifoldgen.shapes import Obstacle, Pose, held_checker
 from manifoldgen.tasks import get_task
 
@@ -176,9 +178,15 @@ def test_unsupported_geometry_gets_no_spheres(panda_task):
     assert model.unfitted == (len(geom.geometryObjects) - 1,) and len(model) == 0
 
 
+def _model_file(robot) -> Path:
+    """The file the robot's model was read from or written to: the user's cache, else the package's."""
+    path = spheres.cache_path(robot, spheres.cache_stamp(robot))
+    return path if path.exists() else spheres.cache.SHIPPED / path.name
+
+
 def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model, monkeypatch, tmp_path):
     stamp = spheres.cache_stamp(panda_task.robot)
-    shared = spheres.cache_path(panda_task.robot, stamp)  # written by the panda_model fixture
+    shared = _model_file(panda_task.robot)  # read or written by the panda_model fixture
     monkeypatch.setenv("MANIFOLDGEN_CACHE", str(tmp_path))  # a copy of it in this test's own cache, to damage
     (tmp_path / "spheres").mkdir()
     shutil.copy(shared, spheres.cache_path(panda_task.robot, stamp))
@@ -193,6 +201,27 @@ def test_model_is_cached_and_a_damaged_cache_is_refused(panda_task, panda_model,
     with pytest.warns(UserWarning, match="do not match their checksum\\); recomputing"):
         stamp = spheres.cache_stamp(panda_task.robot)
         assert spheres.read_cache(files[0], stamp, len(panda_model.solid_volume)) is None
+
+
+def test_a_shipped_model_is_read_where_the_cache_has_none(panda_task, panda_model, private_cache, monkeypatch,
+                                                          tmp_path):
+    """The package's models (spheres.cache.SHIPPED) serve a robot whose files they were made for: an empty cache
+    reads them and fits nothing. Every file the package ships passes the cache's own checks."""
+    stamp = spheres.cache_stamp(panda_task.robot)
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    shutil.copy(_model_file(panda_task.robot), shipped / spheres.cache_path(panda_task.robot, stamp).name)
+    monkeypatch.setattr(spheres.cache, "SHIPPED", shipped)
+    monkeypatch.setattr(spheres.cache, "fit_model", lambda *a, **k: pytest.fail("fitted despite a shipped model"))
+    model = spheres.sphere_model(panda_task.robot)
+    assert np.array_equal(model.radius, panda_model.radius) and not any(private_cache.rglob("*.npz"))
+    monkeypatch.undo()
+    files = sorted(spheres.cache.SHIPPED.glob("*.npz"))
+    assert {f.name.rsplit("-", 1)[0] for f in files} >= {"panda", "pr2", "talos", "centauro", "baxter", "point"}
+    for file in files:
+        meta, arrays = load_npz(file, ())
+        assert spheres.read_cache(file, {key: meta[key] for key in stamp}, len(arrays["solid_volume"])) is not None, \
+            file.name
 
 
 def test_tight_pairs_go_to_coal_and_stay_conservative(panda_task, panda_model, rng, monkeypatch):

@@ -539,8 +539,8 @@ def bench_plan(task: str = typer.Argument(..., help=TASK_HELP),
                pg_rows: int = typer.Option(10_000, help="PG dataset rows at the scene's condition"),
                baseline: str = typer.Option(None, help="Method label for the speed-up column"),
                settings: list[str] = typer.Option(None, "--set", help="Planner setting KEY=VALUE for our planners "
-                                                  "(repeatable; each planner takes those it has; spheres=true "
-                                                  "and shortcut=N also go to the C++ OMPL baseline; ompl_KEY "
+                                                  "(repeatable; each planner takes those it has; spheres "
+                                                  "and shortcut also go to the C++ OMPL baseline; ompl_KEY "
                                                   "to OMPL only, e.g. ompl_range=0.45, ompl_epsilon=0.1)"),
                config: Path = typer.Option(None, help="TOML file of planner settings (--set wins)"),
                snapshots: bool = typer.Option(False, help="Write LABEL-snapshots.png: robot snapshots along each "

@@ -147,11 +147,11 @@ class NativeOmplPlanner:
     resolution: OMPL's manifold step ``delta`` (rad); seed: OMPL's RNG seed (as the Python
     bridge sets it, so both draw the same numbers for a seed); settings: as the Python bridge's; spheres:
     the collision checks (the search's and the final dense check's) use the robot's sphere models as the broad
-    phase, as our planner's do with ``spheres=True`` (same verdicts, cheaper checks).
+    phase, as our planner's do by default (``spheres=True``: same verdicts, cheaper checks).
     """
 
     def __init__(self, space: ConstrainedSpace, *, ompl_space: str = "atlas", resolution: float = 0.05,
-                 seed: int = 0, settings: OmplSettings | None = None, spheres: bool = False):
+                 seed: int = 0, settings: OmplSettings | None = None, spheres: bool = True):
         if ompl_space not in SPACES:
             raise ManifoldgenError(f"unknown native OMPL space '{ompl_space}'; known: {', '.join(SPACES)}")
         if resolution <= 0:

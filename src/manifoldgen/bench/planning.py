@@ -244,11 +244,12 @@ def build(experiment: Experiment, method: Method, seed: int):
     if method.planner.startswith(NATIVE_PREFIX):
         from manifoldgen.ompl_native import NativeOmplPlanner
         from manifoldgen.ompl_settings import OmplSettings
+        from manifoldgen.planning import RRTConnectSettings
         shared = {**task.planner, **experiment.planner_settings}  # checks and shortcuts, and OMPL's ompl_KEY
         planner = NativeOmplPlanner(space, ompl_space=method.planner[len(NATIVE_PREFIX):],
                                     resolution=experiment.resolution, seed=seed,
                                     settings=OmplSettings.from_benchmark(shared),
-                                    spheres=bool(shared.get("spheres", False)))
+                                    spheres=bool(shared.get("spheres", RRTConnectSettings.spheres)))
     elif method.is_ompl:
         from manifoldgen.ompl_bridge import OmplPlanner
         from manifoldgen.ompl_settings import OmplSettings

@@ -1,5 +1,7 @@
 """Sphere models kept on disk: under ``collision.cache_dir()/spheres``, keyed by the robot's geometry model and
-the bytes of its mesh files; a stale or damaged file is refitted."""
+the bytes of its mesh files; a stale or damaged file is refitted. The package ships the models of the robots its
+tasks and held-out tasks name (:data:`SHIPPED`, made by ``scripts/ship_spheres.py``), read where the user's cache
+has none, so that those robots are never fitted on a machine whose robot files are the ones they were made for."""
 
 from __future__ import annotations
 
@@ -21,17 +23,19 @@ from manifoldgen.spheres.fit import (COLUMN_COUNTS, PRISM_SIDES, SHELL_SLACK, VO
 
 
 VERSION = 1
+SHIPPED = Path(__file__).resolve().parent.parent / "data" / "spheres"  # the package's fitted models (read only)
 
 
 # ---------------------------------------------------------------------------------------------- models
 def sphere_model(robot: Robot) -> SphereModel:
-    """The robot's sphere model: read from the cache when it was made for these geometries and mesh
-    files, else fitted (a few seconds per robot) and cached."""
+    """The robot's sphere model: read from the cache, else from the package's (:data:`SHIPPED`), when it was
+    made for these geometries and mesh files; else fitted (4-40 s of CPU per robot) and cached."""
     stamp = cache_stamp(robot)
     path = cache_path(robot, stamp)
-    cached = read_cache(path, stamp, len(robot.collision_model.geometryObjects))
-    if cached is not None:
-        return cached
+    for made in (path, SHIPPED / path.name):
+        cached = read_cache(made, stamp, len(robot.collision_model.geometryObjects))
+        if cached is not None:
+            return cached
     model = fit_model(robot.collision_model)
     arrays = {k: getattr(model, k) for k in ("joint", "center", "radius", "geometry", "solid_volume",
                                              "union_volume")}
