@@ -174,8 +174,9 @@ def test_mesh_obstacle_uses_coal_and_says_so(panda_task, panda_model, rng, tmp_p
 def test_unsupported_geometry_gets_no_spheres(panda_task):
     geom = panda_task.robot.collision_model.copy()
     geom.addGeometryObject(pin.GeometryObject("capsule", 7, pin.SE3.Identity(), coal.Capsule(0.02, 0.1)))
-    model = spheres.fit_model(geom, [len(geom.geometryObjects) - 1])
-    assert model.unfitted == (len(geom.geometryObjects) - 1,) and len(model) == 0
+    steps = []  # a progress bar's steps: one per object, fitted or not
+    model = spheres.fit_model(geom, [len(geom.geometryObjects) - 1], fitted=lambda: steps.append(1))
+    assert model.unfitted == (len(geom.geometryObjects) - 1,) and len(model) == 0 and len(steps) == 1
 
 
 def _model_file(robot) -> Path:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
 import warnings
 from pathlib import Path
 
@@ -17,6 +18,7 @@ import pinocchio as pin
 from manifoldgen.collision import cache_dir
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.io import load_npz, save_npz
+from manifoldgen.progress import progress_bar
 from manifoldgen.robot import Robot
 from manifoldgen.spheres.fit import (COLUMN_COUNTS, PRISM_SIDES, SHELL_SLACK, VOLUME_GRID, VOLUME_SLACK, SphereModel,
                                      fit_model)
@@ -32,11 +34,14 @@ def sphere_model(robot: Robot) -> SphereModel:
     made for these geometries and mesh files; else fitted (4-40 s of CPU per robot) and cached."""
     stamp = cache_stamp(robot)
     path = cache_path(robot, stamp)
+    geometries = len(robot.collision_model.geometryObjects)
     for made in (path, SHIPPED / path.name):
-        cached = read_cache(made, stamp, len(robot.collision_model.geometryObjects))
+        cached = read_cache(made, stamp, geometries)
         if cached is not None:
             return cached
-    model = fit_model(robot.collision_model)
+    with progress_bar(f"sphere models of {robot.name} (once, then cached)", geometries,
+                      enabled=sys.stderr.isatty()) as bar:  # a bar on a terminal only: no log fills with it
+        model = fit_model(robot.collision_model, fitted=bar.advance)
     arrays = {k: getattr(model, k) for k in ("joint", "center", "radius", "geometry", "solid_volume",
                                              "union_volume")}
     arrays["unfitted"] = np.array(model.unfitted, int)

@@ -32,6 +32,7 @@ its pairs are checked exactly by coal: ``SphereModel.unfitted`` and ``reasons`` 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import coal
@@ -246,8 +247,10 @@ def _union_volume(centers: np.ndarray, radii: np.ndarray, h: float) -> float:
     return float(covered.sum()) * h ** 3
 
 
-def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None) -> SphereModel:
-    """Spheres of the given objects (default all) of a pinocchio geometry model, in their joints' frames."""
+def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None,
+              fitted: Callable[[], None] | None = None) -> SphereModel:
+    """Spheres of the given objects (default all) of a pinocchio geometry model, in their joints' frames;
+    ``fitted()`` is called after each object (a progress bar's step)."""
     objects = range(len(geom.geometryObjects)) if objects is None else objects
     joint, center, radius, owner, unfitted, reasons = [], [], [], [], [], []
     solid = np.zeros(len(geom.geometryObjects))
@@ -255,6 +258,8 @@ def fit_model(geom: pin.GeometryModel, objects: list[int] | None = None) -> Sphe
     for i in objects:
         g = geom.geometryObjects[i]
         fit, why = fit_or_reason(g.geometry)
+        if fitted is not None:
+            fitted()
         if fit is None:
             unfitted.append(i)
             reasons.append(why)
