@@ -38,7 +38,6 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 import pinocchio as pin
-from scipy.spatial import ConvexHull, QhullError
 
 
 COLUMN_COUNTS = tuple((ku, kv) for ku in (1, 2, 3, 4, 6, 8) for kv in (1, 2, 3) if kv <= ku)
@@ -138,6 +137,8 @@ def fit_or_reason(geometry: coal.CollisionGeometry) -> tuple[tuple | None, str |
         return None, "its mesh has no triangles"
     if not np.all(np.isfinite(tris)):
         return None, "its mesh has non-finite vertex coordinates"
+    from scipy.spatial import QhullError  # here, not at import: reading a cached model needs no scipy (0.2 s)
+
     try:
         fit = _fit_triangles(tris)
     except (ValueError, QhullError, np.linalg.LinAlgError, MemoryError) as exc:
@@ -194,6 +195,8 @@ def solid_volume(tris: np.ndarray) -> float:
     _, uses = np.unique(edges, axis=0, return_counts=True)
     if np.all(uses == 2):
         return abs(float(np.einsum("ti,ti->", tris[:, 0], np.cross(tris[:, 1], tris[:, 2])))) / 6
+    from scipy.spatial import ConvexHull, QhullError
+
     try:
         return float(ConvexHull(tris.reshape(-1, 3)).volume)
     except QhullError:
