@@ -323,12 +323,13 @@ def test_reach_bounds_the_stepping_stones_in_both_searches(panda_task, wall):
 
 def test_fast_space_projects_and_checks_as_the_python_space_and_never_through_callbacks(panda_task, wall):
     """What collect and the scene targets use: the core's projection and validity where it takes the constraint
-    whole (the same iterations, states and verdicts as the numpy reference), the space itself where a part would
-    run through Python callbacks."""
+    whole (the same iterations, states and verdicts as the numpy reference, its collision checks behind the sphere
+    broad phase), the space itself where a part would run through Python callbacks."""
     from manifoldgen.constraints import PlaneConstraint, project
     space, _ = _planner(panda_task, wall, 0)
     fast = native.fast_space(space)
     assert isinstance(fast, native.NativeSpace) and native.fast_space(space) is fast  # built once per space
+    assert fast._core.has_spheres
     seeds = panda_task.robot.sample_uniform(64, np.random.default_rng(0))
     ours, theirs = fast.project(seeds.copy()), project(space.constraint, seeds.copy(), space.y)
     np.testing.assert_array_equal(ours.converged, theirs.converged)
