@@ -33,11 +33,11 @@ class RRTConnectSettings(PlannerSettings):
     Python constraint compiled (``extras['compiled']``: which) or, where its residual does not trace or
     ``compile`` is off, through callbacks (``extras['compile_fallback']``: why), else Python; the result's
     ``extras['core']`` says which, ``extras['core_fallback']`` why not native), ``python``, or ``native`` (an
-    error when the core cannot run it); ``spheres`` (on by default): the core's collision checks use conservative sphere models of the
-    robot as their broad phase, with the same verdicts (:mod:`manifoldgen.spheres`: shipped for the package's robots,
-    fitted once and cached for others; a geometry without them is checked exactly, ``extras['sphere_fallback']``
-    says which and why); ``reach``: a pooled sample is a
-    stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
+    error when the core cannot run it); ``spheres`` (on by default): the core's collision checks use
+    conservative sphere models of the robot as their broad phase, with the same verdicts
+    (:mod:`manifoldgen.spheres`: shipped for the package's robots, fitted once and cached for others; a geometry
+    without them is checked exactly, ``extras['sphere_fallback']`` says which and why); ``reach``: a pooled
+    sample is a stepping stone of a tree when it lies within ``min(reach, range)`` of one of its nodes (shorter
     straight motions to stones: in the maze fewer of them collide; measured in docs/benchmarks.md, "Fairness");
     ``edges``: how the core's search checks a motion for
     collision: ``coarse:K`` checks its planning-resolution states every K-th (and at the node it ends at) while
