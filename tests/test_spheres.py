@@ -171,6 +171,37 @@ def test_mesh_obstacle_uses_coal_and_says_so(panda_task, panda_model, rng, tmp_p
     assert not np.any(exact & ~fast.in_collision(q))
 
 
+def test_a_refit_gives_the_cached_spheres_bit_for_bit(panda_task, panda_model):
+    """Fitting is deterministic, and a faster fit must not move a sphere: a refit of panda's hand and last link gives
+    the spheres the cache (or the package) holds for them, exactly."""
+    geom = panda_task.robot.collision_model
+    ids = [i for i, g in enumerate(geom.geometryObjects) if g.name.startswith(("panda_hand", "panda_link7"))]
+    refit, kept = spheres.fit_model(geom, ids), np.isin(panda_model.geometry, ids)
+    assert len(ids) == 2 and len(refit) == kept.sum() > 0
+    np.testing.assert_array_equal(refit.center, panda_model.center[kept])
+    np.testing.assert_array_equal(refit.radius, panda_model.radius[kept])
+
+
+def test_a_mesh_in_two_parts_is_fitted_across_the_gap(rng):
+    """Two tetrahedra 1 m apart: the slabs between them hold no triangle, and every vertex and random point of the
+    two solids still lies in a sphere."""
+    corners = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]])
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(8, 8)
+    for shift in (0.0, 1.0):
+        for face in faces:
+            mesh.addTriangle(*(corners[k] + [shift, 0, 0] for k in face))
+    mesh.endModel()
+    fit, why = spheres.fit_or_reason(mesh)
+    assert why is None, why
+    centers, radii = fit[:2]
+    weights = rng.dirichlet(np.ones(4), size=500)
+    points = np.concatenate([corners, corners + [1.0, 0, 0], weights @ corners, weights @ corners + [1.0, 0, 0]])
+    gaps = np.linalg.norm(points[:, None] - centers[None], axis=2) - radii[None]
+    assert np.all(gaps.min(axis=1) <= 0)
+
+
 def test_unsupported_geometry_gets_no_spheres(panda_task):
     geom = panda_task.robot.collision_model.copy()
     geom.addGeometryObject(pin.GeometryObject("capsule", 7, pin.SE3.Identity(), coal.Capsule(0.02, 0.1)))

@@ -173,7 +173,7 @@ def _columns(tris: np.ndarray, u: np.ndarray, v: np.ndarray) -> list[tuple[np.nd
     out = []
     valid = np.ones(tris.shape[:2], bool)
     for ku in sorted({ku for ku, _ in COLUMN_COUNTS}):
-        slabs = [_clip(tris, valid, u, a, b) for a, b in _cuts(tris @ u, ku)]
+        slabs = [_compact(*_clip(tris, valid, u, a, b)) for a, b in _cuts(tris @ u, ku)]
         for kv in sorted({kv for k, kv in COLUMN_COUNTS if k == ku}):
             balls = []
             for pa, va in slabs:
@@ -215,6 +215,9 @@ def _clip(points: np.ndarray, valid: np.ndarray, d: np.ndarray, a: float, b: flo
     ``a <= x . d <= b``: (T', m + m (m - 1), 3) points and mask whose hull per row is the clipped polygon
     (the points inside, and every vertex pair's crossing of either plane). Rows left empty are dropped."""
     s = points @ d
+    near = (np.where(valid, s, np.inf).min(1, initial=np.inf) <= b) & \
+        (np.where(valid, s, -np.inf).max(1, initial=-np.inf) >= a)
+    points, valid, s = points[near], valid[near], s[near]  # the others lie wholly on one side: left empty
     keep = valid & (s >= a) & (s <= b)
     i, j = np.triu_indices(points.shape[1], 1)
     out, mask = [points], [keep]
@@ -227,6 +230,15 @@ def _clip(points: np.ndarray, valid: np.ndarray, d: np.ndarray, a: float, b: flo
     points, keep = np.concatenate(out, 1), np.concatenate(mask, 1)
     rows = keep.any(1)
     return points[rows], keep[rows]
+
+
+def _compact(points: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The polygons ``points (T, m, 3)`` with each row's ``valid (T, m)`` points first, in their order, and the
+    columns no row uses dropped (a triangle clipped to a slab keeps at most 5 of its 9: the next clip then pairs
+    5 points, not 9)."""
+    width = int(valid.sum(1).max()) if len(valid) else 0
+    order = np.argsort(~valid, axis=1, kind="stable")[:, :width]
+    return np.take_along_axis(points, order[..., None], 1), np.take_along_axis(valid, order, 1)
 
 
 def enclosing_ball(points: np.ndarray, steps: int = 24) -> tuple[np.ndarray, float]:
