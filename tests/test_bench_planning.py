@@ -62,8 +62,11 @@ def test_runs_are_recorded_reported_and_resumed(easy_scene, tmp_path):
         assert r["worst_violation"] <= 1.0 and r["time_s"] < r["time_limit"] and not r["late"]
         assert 0 < r["cpu_s"]
         ops = r["ops"]  # counted at the source: every solve evaluates, checks and grows trees
-        assert ops["fk"] > 0  # collisions: coal's checks, or the sphere tests that spared them (ours, by default)
-        assert ops["collision_checks"] + r["extras"].get("sphere_checks", 0) > 0
+        assert ops["fk"] > 0
+        if r["method"] == "pg":  # ours: the sphere broad phase by default, which spares coal in this open scene
+            assert r["extras"]["sphere_checks"] > 0
+        else:
+            assert ops["collision_checks"] > 0
         if r["method"] == "atlas":  # OMPL: a Newton step is one Jacobian; nodes are its planner's vertices
             assert ops["jacobians"] == ops["projection_steps"] > 0 and ops["nodes"] == r["iterations"] >= 2
         assert ops["samples"] == r["samples_drawn"]

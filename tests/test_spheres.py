@@ -243,11 +243,11 @@ def test_a_shipped_model_is_read_where_the_cache_has_none(panda_task, panda_mode
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     shutil.copy(_model_file(panda_task.robot), shipped / spheres.cache_path(panda_task.robot, stamp).name)
-    monkeypatch.setattr(spheres.cache, "SHIPPED", shipped)
-    monkeypatch.setattr(spheres.cache, "fit_model", lambda *a, **k: pytest.fail("fitted despite a shipped model"))
-    model = spheres.sphere_model(panda_task.robot)
+    with monkeypatch.context() as patch:
+        patch.setattr(spheres.cache, "SHIPPED", shipped)
+        patch.setattr(spheres.cache, "fit_model", lambda *a, **k: pytest.fail("fitted despite a shipped model"))
+        model = spheres.sphere_model(panda_task.robot)
     assert np.array_equal(model.radius, panda_model.radius) and not any(private_cache.rglob("*.npz"))
-    monkeypatch.undo()
     files = sorted(spheres.cache.SHIPPED.glob("*.npz"))
     assert {f.name.rsplit("-", 1)[0] for f in files} >= {"panda", "pr2", "talos", "centauro", "baxter", "point"}
     for file in files:
