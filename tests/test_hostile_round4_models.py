@@ -36,6 +36,10 @@ EDITS = {
     "dims-extra": {"edit": lambda d: d["dims"].update(x=1)},
     "norm-typo": {"edit": lambda d: d["normalisation"].update(q_men=[0.0])},
     "decoder-typo": {"edit": lambda d: d["decoder"].update(lyers=2)},
+    "prior-layers-4": {"edit": lambda d: d["decoder"]["prior"].update(layers=4)},
+    "prior-typo": {"edit": lambda d: d["decoder"]["prior"].update(stps=2)},
+    "prior-names-decoder": {"edit": lambda d: d["decoder"]["prior"].update(net="decoder")},
+    "prior-dropped": {"edit": lambda d: d["decoder"].pop("prior")},
     "weights-nan": {"weights": _nan},
     "limits-wide": {"edit": _widen_limits},
     "yrange-wide": {"edit": lambda d: d["normalisation"].update(y_low=[-100.0], y_high=[100.0])},
@@ -77,6 +81,14 @@ CASES = [
     cli("sample-decoder-layers-1", _sample("layers-1"), "the weights hold 'decoder.2.bias' besides the 1 layer(s)"),
     api("open-decoder-noise-5", lambda I, O: open_model(I / "noise-5"),
         "'decoder.0' has weight [8, 4] and bias [8], where [8, 6] and [8] fit"),
+    # the learned prior's entry: layers its weights lack, an unknown key, the decoder's own network
+    cli("plan-prior-layers-4", _plan("prior-layers-4"), "the weights lack 'prior.6.weight', which its 4 layer(s) name"),
+    api("load-prior-typo", lambda I, O: load_model(I / "prior-typo"),
+        "unknown key 'stps' in 'decoder.prior' (did you mean 'steps'?)"),
+    cli("sample-prior-names-decoder", _sample("prior-names-decoder"),
+        "'decoder.prior' must name the prior's velocity field 'net' (not the decoder's)"),
+    cli("plan-prior-dropped", _plan("prior-dropped"),
+        "gives config prior_steps = 4, but its 'decoder' entry names no prior"),
     # unknown keys in model.json's objects
     cli("sample-dims-unknown-key", _sample("dims-extra"), "unknown key 'x' in 'dims'"),
     cli("sample-normalisation-typo", _sample("norm-typo"),
@@ -137,6 +149,8 @@ def test_genuine_models_pass_every_check(inputs, tmp_path, panda_task):
         assert open_model(folder).d == load_model(folder).d == 7
         assert _wall_sampler(load_model(folder))[1].sample_many(2).shape == (2, 7)
     assert read_model_dir(tmp_path / "cfm")[0]["decoder"]["steps"] == 2
+    assert read_model_dir(inputs / "model")[0]["decoder"]["prior"] == {"net": "prior", "steps": 4, "layers": 3}
+    assert "prior" not in read_model_dir(pretrained_model_dir())[0]["decoder"]  # written before the prior existed
     assert read_model_dir(tmp_path / "beyond")[0]["normalisation"]["y_high"] == [0.75]
 
 

@@ -259,13 +259,13 @@ CASES = [
         "now); resume with the same command, or choose another directory"),
     cli("train-resume-other-model", RESUME + " --model cfm --epochs 100000",
         'the checkpoint in {O}/ck was made with another dataset, model, seed or settings (model: "cvae" then, "cfm" '
-        "now; config.steps: null then, 8 now; config.residual_weight: 0.1 then, 0.3 now (and 4 more)); resume with "
+        "now; config.steps: null then, 8 now; config.residual_weight: 0.1 then, 0.3 now (and 6 more)); resume with "
         "the same command, or choose another directory"),
     cli("train-task-sphere", "train {I}/data.npz --task sphere --model cvae --epochs 1 -o {O}/m",
         "7 joints vs 3; locked joint values (and 1 more); use one made for this task (collect / train on this task)"),
     cli("train-hidden-empty", "train {I}/data.npz --model cvae --epochs 1 --set hidden=[] -o {O}/m",
-        "hyper-parameter hidden=[] of model 'cvae' must be a non-empty list of positive integers (default [128, "
-        "128])"),
+        "hyper-parameter hidden=[] of model 'cvae' must be a non-empty list of positive integers (default [256, "
+        "256, 256])"),
     cli("train-patience-zero", "train {I}/data.npz --model cvae --epochs 3 --set patience=0 --set hidden=[16] -o {O}/m",
         "hyper-parameter patience=0 of model 'cvae' must be a positive integer (default 15)"),
     cli("train-threads-text", "train {I}/data.npz --threads two -o {O}/m",

@@ -55,7 +55,7 @@ def test_a_model_directory_samples_in_the_core_as_the_torch_model_does(model_dir
 
     saved, model = open_model(model_dir), load_model(model_dir)
     assert saved.decoder == model.decoder_spec() == {"net": "decoder", "law": "normal", "noise": 3, "steps": 0,
-                                                     "layers": 3}
+                                                     "layers": 3, "prior": {"net": "prior", "steps": 4, "layers": 3}}
     assert np.array_equal(saved.native_decoder().sample(np.array([0.4]), 50, 7),
                           model.native_decoder().sample(np.array([0.4]), 50, 7))
     code = ("import sys; from manifoldgen.cli import app; sys.argv = ['manifoldgen', 'plan', 'pose', "
@@ -166,12 +166,14 @@ def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_
     from manifoldgen.planning.rrt_connect import core_settings
     from manifoldgen.sampling import REFERENCE_ROW_COST
 
-    model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7
+    model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7, after the prior [z, height, t] -> 64 -> 64 -> 3
     space = ConstrainedSpace(panda_task.constraint, [0.4])
     sampler = ModelSampler(space, model, seed=1)
-    assert sampler.row_cost == model.row_cost() == 4 * 32 + 32 * 32 + 32 * 7
+    prior = 2 * 4 * (5 * 64 + 64 * 64 + 64 * 3)  # 4 steps of two passes each (Heun)
+    assert sampler.row_cost == model.row_cost() == 4 * 32 + 32 * 32 + 32 * 7 + prior
+    sampler.row_cost = REFERENCE_ROW_COST
     settings = RRTConnectSettings(pool=2048, pool_batch=256)
-    assert RRTConnect(space, sampler, settings=settings).pool_rows() == (2048, 256)  # cheaper than the reference
+    assert RRTConnect(space, sampler, settings=settings).pool_rows() == (2048, 256)  # as cheap as the reference
     sampler.row_cost = 10 * REFERENCE_ROW_COST
     planner = RRTConnect(space, sampler, settings=settings)
     assert planner.pool_rows() == (205, 26)

@@ -171,15 +171,17 @@ def test_mesh_obstacle_uses_coal_and_says_so(panda_task, panda_model, rng, tmp_p
     assert not np.any(exact & ~fast.in_collision(q))
 
 
-def test_a_refit_gives_the_cached_spheres_bit_for_bit(panda_task, panda_model):
+def test_a_refit_gives_the_cached_spheres(panda_task, panda_model):
     """Fitting is deterministic, and a faster fit must not move a sphere: a refit of panda's hand and last link gives
-    the spheres the cache (or the package) holds for them, exactly."""
+    the spheres the cache (or the package) holds for them, to rounding (the shipped ones were fitted on another
+    machine, whose numpy kernels may round the last bit otherwise: 6e-17 m seen)."""
     geom = panda_task.robot.collision_model
     ids = [i for i, g in enumerate(geom.geometryObjects) if g.name.startswith(("panda_hand", "panda_link7"))]
     refit, kept = spheres.fit_model(geom, ids), np.isin(panda_model.geometry, ids)
     assert len(ids) == 2 and len(refit) == kept.sum() > 0
-    np.testing.assert_array_equal(refit.center, panda_model.center[kept])
-    np.testing.assert_array_equal(refit.radius, panda_model.radius[kept])
+    np.testing.assert_allclose(refit.center, panda_model.center[kept], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(refit.radius, panda_model.radius[kept], rtol=0, atol=1e-12)
+    assert np.array_equal(refit.center, spheres.fit_model(geom, ids).center)  # the same machine: the same bits
 
 
 def test_a_mesh_in_two_parts_is_fitted_across_the_gap(rng):

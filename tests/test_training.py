@@ -14,7 +14,8 @@ from manifoldgen.cli import app
 from manifoldgen.data import collect
 from manifoldgen.dataset import Dataset
 from manifoldgen.errors import ManifoldgenError
-from manifoldgen.models import CVAE, load_model
+from manifoldgen.models import CVAE, ConditionalFlowMatching, load_model
+from manifoldgen.selection import BLEND_SHARE
 from manifoldgen.tasks import task_from_meta
 from manifoldgen.training import check_dataset, manifold_dimension, train
 
@@ -121,7 +122,15 @@ def test_a_latent_below_the_manifold_dimension_is_warned(tiny):
 def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
     sized = CVAE(batch=16, patience=100)
     sized.fit(tiny, epochs=1, seed=0, progress=False)
-    assert sized.config["latent"] == 3 and sized.config["hidden"] == [128, 128]  # panda pose: 7 joints, dimension 3
+    # panda pose: 7 joints, dimension 3; the CVAE's layers at least 256 wide (width_for(7) = 128)
+    assert sized.config["latent"] == 3 and sized.config["hidden"] == [256, 256, 256]
+    assert sized.config["prior_hidden"] == [64, 64]  # the prior's width is its own
+    wide = CVAE()
+    wide.size_for(39, 27)  # a whole-body robot: two layers of the others' width
+    assert wide.config["hidden"] == [384, 384] and wide.config["latent"] == 27
+    flow = ConditionalFlowMatching(batch=16, patience=100)
+    flow.fit(tiny, epochs=1, seed=0, progress=False)
+    assert flow.config["hidden"] == [128, 128]
     kept = CVAE(latent=5, hidden=[16], batch=16, patience=100)
     kept.fit(tiny, epochs=1, seed=0, progress=False)
     assert kept.config["latent"] == 5 and kept.config["hidden"] == [16]
@@ -151,7 +160,7 @@ def test_auto_trains_every_candidate_and_keeps_the_rule_s_choice(tiny, tmp_path)
     assert [row["model"] for row in table][:2] == ["cvae", "cfm"] and sum(row["chosen"] for row in table) == 1
     by_accuracy, by_recall = (max(table[:2], key=lambda row: row[key])["model"] for key in ("accuracy", "recall"))
     blends = [f"{by_accuracy}+{by_recall}"] if by_accuracy != by_recall else []  # the accurate one's rows blended
-    assert [row["model"] for row in table][2:] == blends and all(row["blend"] == 0.3 for row in table[2:])
+    assert [row["model"] for row in table][2:] == blends and all(row["blend"] == BLEND_SHARE for row in table[2:])
     best = max(row["recall"] for row in table)
     chosen = next(row for row in table if row["chosen"])
     assert chosen["recall"] >= best - 0.1

@@ -338,11 +338,19 @@ class Decoder {
  public:
   using MatF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using VecF = Eigen::VectorXf;
-  // weights[i] (out_i, in_i) and biases[i] (out_i,) in torch's layout; in_0 = latent + y_mean.size(),
-  // out_last = q_mean.size(); q_std, lower, upper as q_mean, y_std as y_mean (invalid_argument otherwise);
-  // steps > 0: in_0 = latent + y_mean.size() + 1 and latent = q_mean.size().
+  // Linear layers with SiLU between them: weights[i] (out_i, in_i) and biases[i] (out_i,) in torch's layout.
+  struct Net {
+    std::vector<MatF> weights;
+    std::vector<VecF> biases;
+    MatF forward(const MatF& x) const;  // the network on x (B, in_0): (B, out_last)
+  };
+  // in_0 = latent + y_mean.size(), out_last = q_mean.size(); q_std, lower, upper as q_mean, y_std as y_mean
+  // (invalid_argument otherwise); steps > 0: in_0 = latent + y_mean.size() + 1 and latent = q_mean.size().
+  // prior_steps > 0: the latent rows are first carried by the velocity field prior([z, y, t]) (in_0 = latent +
+  // y_mean.size() + 1, out_last = latent), integrated as the network is when steps > 0.
   Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
-          const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps = 0);
+          const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps = 0,
+          std::vector<MatF> prior_weights = {}, std::vector<VecF> prior_biases = {}, int prior_steps = 0);
   // (count, latent) latent rows from seed (xoshiro256** seeded by splitmix64; Box-Muller for N(0, I)).
   MatF latent_rows(long count, std::uint64_t seed) const;
   // (B, d) configurations decoded from z (B, latent) at condition y (k,).
@@ -350,12 +358,10 @@ class Decoder {
   RowMat sample(const Vec& y, long count, std::uint64_t seed) const { return decode(latent_rows(count, seed), y); }
 
  private:
-  MatF forward(const MatF& x) const;  // the network on x (B, in_0): (B, out_last)
-  std::vector<MatF> weights_;
-  std::vector<VecF> biases_;
+  Net net_, prior_;
   int latent_;
   bool uniform_;
-  int steps_;
+  int steps_, prior_steps_;
   VecF q_mean_, q_std_, y_mean_, y_std_;
   Vec lower_, upper_;
 };

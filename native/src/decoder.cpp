@@ -41,29 +41,61 @@ void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("decoder: " + message);
 }
 
+// Checks that net's layers chain from `inputs` inputs to `outputs` outputs, naming it in the message.
+void check_net(const Decoder::Net& net, long inputs, long outputs, const std::string& name) {
+  require(!net.weights.empty() && net.weights.size() == net.biases.size(),
+          "give the " + name + " one bias per weight matrix, at least one layer");
+  long width = inputs;
+  for (std::size_t i = 0; i < net.weights.size(); ++i) {
+    require(net.weights[i].cols() == width && net.biases[i].size() == net.weights[i].rows(),
+            name + " layer " + std::to_string(i) + " takes " + std::to_string(net.weights[i].cols()) +
+                " inputs, the layer before gives " + std::to_string(width));
+    width = net.weights[i].rows();
+  }
+  require(width == outputs, "the " + name + "'s last layer gives " + std::to_string(width) + " outputs for " +
+                                std::to_string(outputs));
+}
+
+// x (B, m) carried from t = 0 to 1 by dx/dt = velocity([x, yn, t]) as models/base.py integrate does: steps - 1
+// Heun steps, then one Euler step.
+Decoder::MatF integrate(const Decoder::Net& velocity, Decoder::MatF x, const Eigen::RowVectorXf& yn, int steps) {
+  const long B = x.rows(), m = x.cols(), k = yn.size();
+  const float h = 1.0f / static_cast<float>(steps);
+  Decoder::MatF in(B, m + k + 1);
+  in.middleCols(m, k) = yn.replicate(B, 1);
+  for (int i = 0; i + 1 < steps; ++i) {
+    in.leftCols(m) = x;
+    in.col(m + k).setConstant(static_cast<float>(i) * h);
+    const Decoder::MatF v = velocity.forward(in);
+    in.leftCols(m) = x + h * v;
+    in.col(m + k).setConstant(static_cast<float>(i + 1) * h);
+    x += (0.5f * h) * (v + velocity.forward(in));
+  }
+  in.leftCols(m) = x;
+  in.col(m + k).setConstant(1.0f - h);
+  x += h * velocity.forward(in);
+  return x;
+}
+
 }  // namespace
 
 Decoder::Decoder(std::vector<MatF> weights, std::vector<VecF> biases, int latent, bool uniform, const Vec& q_mean,
-                 const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps)
-    : weights_(std::move(weights)), biases_(std::move(biases)), latent_(latent), uniform_(uniform), steps_(steps),
-      q_mean_(q_mean.cast<float>()), q_std_(q_std.cast<float>()), y_mean_(y_mean.cast<float>()),
-      y_std_(y_std.cast<float>()), lower_(lower), upper_(upper) {
-  require(!weights_.empty() && weights_.size() == biases_.size(), "give one bias per weight matrix, at least one layer");
+                 const Vec& q_std, const Vec& y_mean, const Vec& y_std, const Vec& lower, const Vec& upper, int steps,
+                 std::vector<MatF> prior_weights, std::vector<VecF> prior_biases, int prior_steps)
+    : net_{std::move(weights), std::move(biases)}, prior_{std::move(prior_weights), std::move(prior_biases)},
+      latent_(latent), uniform_(uniform), steps_(steps), prior_steps_(prior_steps), q_mean_(q_mean.cast<float>()),
+      q_std_(q_std.cast<float>()), y_mean_(y_mean.cast<float>()), y_std_(y_std.cast<float>()), lower_(lower),
+      upper_(upper) {
   require(latent > 0, "the latent size must be positive");
   require(y_std.size() == y_mean.size() && q_std.size() == q_mean.size() && lower.size() == q_mean.size() &&
               upper.size() == q_mean.size(),
           "normalisation vectors and limits must match the condition and configuration sizes");
-  require(steps >= 0, "the number of integration steps must be >= 0");
+  require(steps >= 0 && prior_steps >= 0, "the number of integration steps must be >= 0");
   require(steps == 0 || latent == q_mean.size(), "a velocity field's latent size is the number of joints");
-  long width = latent + y_mean.size() + (steps > 0 ? 1 : 0);
-  for (std::size_t i = 0; i < weights_.size(); ++i) {
-    require(weights_[i].cols() == width && biases_[i].size() == weights_[i].rows(),
-            "layer " + std::to_string(i) + " takes " + std::to_string(weights_[i].cols()) + " inputs, the layer before gives " +
-                std::to_string(width));
-    width = weights_[i].rows();
-  }
-  require(width == q_mean.size(), "the last layer gives " + std::to_string(width) + " outputs for " +
-                                      std::to_string(q_mean.size()) + " joints");
+  const long k = y_mean.size();
+  check_net(net_, latent + k + (steps > 0 ? 1 : 0), q_mean.size(), "network");
+  if (prior_steps > 0) check_net(prior_, latent + k + 1, latent, "prior");
+  require(prior_steps > 0 || prior_.weights.empty(), "prior layers need prior_steps > 0");
 }
 
 Decoder::MatF Decoder::latent_rows(long count, std::uint64_t seed) const {
@@ -84,16 +116,16 @@ Decoder::MatF Decoder::latent_rows(long count, std::uint64_t seed) const {
   return z;
 }
 
-Decoder::MatF Decoder::forward(const MatF& x) const {
+Decoder::MatF Decoder::Net::forward(const MatF& x) const {
   std::vector<int> widths{static_cast<int>(x.cols())};
   std::vector<const float*> w, b;
-  for (std::size_t i = 0; i < weights_.size(); ++i) {
-    widths.push_back(static_cast<int>(weights_[i].rows()));
-    w.push_back(weights_[i].data());
-    b.push_back(biases_[i].data());
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    widths.push_back(static_cast<int>(weights[i].rows()));
+    w.push_back(weights[i].data());
+    b.push_back(biases[i].data());
   }
   MatF out(x.rows(), widths.back());
-  mg_mlp_forward(static_cast<int>(weights_.size()), widths.data(), w.data(), b.data(), x.rows(), x.data(), out.data());
+  mg_mlp_forward(static_cast<int>(weights.size()), widths.data(), w.data(), b.data(), x.rows(), x.data(), out.data());
   return out;
 }
 
@@ -102,28 +134,15 @@ RowMat Decoder::decode(const MatF& z, const Vec& y) const {
   require(y.size() == y_mean_.size(), "the condition must have " + std::to_string(y_mean_.size()) + " values");
   const long B = z.rows(), k = y_mean_.size();
   const Eigen::RowVectorXf yn = ((y.cast<float>() - y_mean_).array() / y_std_.array()).matrix().transpose();
+  const MatF latent = prior_steps_ > 0 ? integrate(prior_, z, yn, prior_steps_) : z;
   MatF x;
   if (steps_ == 0) {
     MatF in(B, latent_ + k);
-    in.leftCols(latent_) = z;
+    in.leftCols(latent_) = latent;
     in.rightCols(k) = yn.replicate(B, 1);
-    x = forward(in);
-  } else {  // dx/dt = v([x, y, t]) from t = 0 to 1 as models/cfm.py samples: steps - 1 Heun steps, one Euler step
-    const float h = 1.0f / static_cast<float>(steps_);
-    MatF in(B, latent_ + k + 1);
-    in.middleCols(latent_, k) = yn.replicate(B, 1);
-    x = z;
-    for (int i = 0; i + 1 < steps_; ++i) {
-      in.leftCols(latent_) = x;
-      in.col(latent_ + k).setConstant(static_cast<float>(i) * h);
-      const MatF v = forward(in);
-      in.leftCols(latent_) = x + h * v;
-      in.col(latent_ + k).setConstant(static_cast<float>(i + 1) * h);
-      x += (0.5f * h) * (v + forward(in));
-    }
-    in.leftCols(latent_) = x;
-    in.col(latent_ + k).setConstant(1.0f - h);
-    x += h * forward(in);
+    x = net_.forward(in);
+  } else {  // a velocity field: dx/dt = v([x, y, t]) from the latent rows, as models/cfm.py samples
+    x = integrate(net_, latent, yn, steps_);
   }
   const Eigen::RowVectorXf mean = q_mean_.transpose(), std = q_std_.transpose();
   x = (x.array().rowwise() * std.array()).rowwise() + mean.array();

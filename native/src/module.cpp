@@ -379,20 +379,29 @@ NB_MODULE(manifoldgen_core, m) {
           "__init__",
           [](Decoder* self, const std::vector<InF2>& weights, const std::vector<InF1>& biases, int latent, bool uniform,
              const In1& q_mean, const In1& q_std, const In1& y_mean, const In1& y_std, const In1& lower, const In1& upper,
-             int steps) {
-            std::vector<Decoder::MatF> w;
-            std::vector<Decoder::VecF> b;
-            for (const InF2& a : weights)
-              w.emplace_back(Eigen::Map<const Decoder::MatF>(a.data(), static_cast<long>(a.shape(0)), static_cast<long>(a.shape(1))));
-            for (const InF1& a : biases) b.emplace_back(Eigen::Map<const Decoder::VecF>(a.data(), static_cast<long>(a.shape(0))));
-            new (self) Decoder(std::move(w), std::move(b), latent, uniform, vec_of(q_mean), vec_of(q_std), vec_of(y_mean),
-                               vec_of(y_std), vec_of(lower), vec_of(upper), steps);
+             int steps, const std::vector<InF2>& prior_weights, const std::vector<InF1>& prior_biases, int prior_steps) {
+            const auto matrices = [](const std::vector<InF2>& arrays) {
+              std::vector<Decoder::MatF> out;
+              for (const InF2& a : arrays)
+                out.emplace_back(Eigen::Map<const Decoder::MatF>(a.data(), static_cast<long>(a.shape(0)), static_cast<long>(a.shape(1))));
+              return out;
+            };
+            const auto vectors = [](const std::vector<InF1>& arrays) {
+              std::vector<Decoder::VecF> out;
+              for (const InF1& a : arrays) out.emplace_back(Eigen::Map<const Decoder::VecF>(a.data(), static_cast<long>(a.shape(0))));
+              return out;
+            };
+            new (self) Decoder(matrices(weights), vectors(biases), latent, uniform, vec_of(q_mean), vec_of(q_std), vec_of(y_mean),
+                               vec_of(y_std), vec_of(lower), vec_of(upper), steps, matrices(prior_weights),
+                               vectors(prior_biases), prior_steps);
           },
           "weights"_a, "biases"_a, "latent"_a, "uniform"_a, "q_mean"_a, "q_std"_a, "y_mean"_a, "y_std"_a, "lower"_a, "upper"_a,
-          "steps"_a = 0,
+          "steps"_a = 0, "prior_weights"_a = std::vector<InF2>{}, "prior_biases"_a = std::vector<InF1>{}, "prior_steps"_a = 0,
           "A sampling network: float32 weights (out, in) and biases (out,) of Linear layers with SiLU between them, the "
           "latent size, uniform (U(-1, 1) latent rows, else N(0, I)), the model's normalisation and joint limits; "
-          "steps > 0: a velocity field v([x, y, t]) integrated from the latent rows in that many steps (Heun, the last Euler).")
+          "steps > 0: a velocity field v([x, y, t]) integrated from the latent rows in that many steps (Heun, the last Euler); "
+          "prior_steps > 0: the latent rows first carried by the velocity field prior_weights/prior_biases ([z, y, t] -> "
+          "latent) in that many steps.")
       .def(
           "latent_rows", [](const Decoder& d, long count, std::uint64_t seed) { return array_of(d.latent_rows(count, seed)); },
           "count"_a, "seed"_a, "(count, latent) float32 latent rows drawn from seed.")

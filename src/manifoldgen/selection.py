@@ -52,7 +52,7 @@ from manifoldgen.tasks import Task, code_types
 from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
-BLEND_SHARE = 0.3  # the share of rows the most covering candidate gives the most accurate one's blend
+BLEND_SHARE = 0.2  # the share of rows the most covering candidate gives the most accurate one's blend
 SCORED_CONDITIONS = 6  # condition values scored (spread over the held-out ones)
 SAMPLES = 1000  # samples drawn per scored condition value
 K = 5  # neighbours of the k-NN recall

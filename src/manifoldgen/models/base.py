@@ -50,6 +50,26 @@ def mlp(inputs: int, hidden: list[int], outputs: int, activation: type[torch.nn.
     return torch.nn.Sequential(*layers)
 
 
+def integrate(velocity: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, steps: int) -> torch.Tensor:
+    """States (B, m) carried from t = 0 to 1 by ``dx/dt = velocity([x, y, t])`` at conditions y (B, k): ``steps - 1``
+    Heun steps, then one Euler step (as the compiled core integrates, ``manifoldgen_core.Decoder``)."""
+    h = 1.0 / steps
+
+    def v(state: torch.Tensor, t: float) -> torch.Tensor:
+        return velocity(torch.cat([state, y, torch.full((len(state), 1), t)], dim=1))
+
+    for i in range(steps - 1):
+        u = v(x, i * h)
+        x = x + 0.5 * h * (u + v(x + h * u, (i + 1) * h))
+    return x + h * v(x, 1.0 - h)
+
+
+def _plain_mlp(layers: torch.nn.Sequential) -> bool:
+    """Whether ``layers`` are Linear layers with SiLU between them (what the compiled core runs)."""
+    kinds = [type(layer) for layer in layers]
+    return len(kinds) % 2 == 1 and set(kinds[::2]) == {torch.nn.Linear} and not set(kinds[1::2]) - {torch.nn.SiLU}
+
+
 def width_for(joints: int) -> int:
     """Hidden-layer width for ``joints`` coordinates: 64 + 8 per joint, rounded up to a multiple of 64
     (7 joints: 128; 14: 192; 34-39: 384)."""
@@ -71,6 +91,8 @@ class ConditionalSampler(ModelFacts, ABC):
 
     name: ClassVar[str]
     defaults: ClassVar[dict]
+    absent: ClassVar[dict] = {}  # a hyper-parameter's value for model files written before it existed
+    min_width: ClassVar[int] = 0  # its hidden layers are at least this wide (see :meth:`size_for`)
 
     def __init__(self, **hyper):
         unknown = sorted(set(hyper) - set(self.defaults))
@@ -104,6 +126,11 @@ class ConditionalSampler(ModelFacts, ABC):
         ``"uniform"``: U(-1, 1)), for :meth:`native_decoder`; None: :meth:`_generate` is something else."""
         return None
 
+    def _prior_net(self) -> tuple[torch.nn.Sequential, int] | None:
+        """The velocity field that carries the noise before :meth:`_sampling_net` decodes it, and its integration
+        steps (see :func:`integrate`); None: the noise is decoded as drawn."""
+        return None
+
     @abstractmethod
     def _optimizers(self) -> list[Adam]:
         """The optimisers, in a fixed order (their state is checkpointed)."""
@@ -121,12 +148,13 @@ class ConditionalSampler(ModelFacts, ABC):
     # ------------------------------------------------------------------ setup
     def size_for(self, joints: int, dimension: int) -> None:
         """Size what the user did not set from the data: ``latent`` = the manifold's ``dimension``, every hidden
-        layer :func:`width_for` ``joints`` wide (a 7-joint arm keeps 128)."""
+        layer :func:`width_for` ``joints`` wide and at least the model's :attr:`min_width` (a 7-joint arm: 128, the
+        CVAE 256)."""
         if "latent" in self.config and "latent" not in self.given:
             self.config["latent"] = max(1, int(dimension))
         for key in ("hidden", "critic_hidden"):
             if key in self.config and key not in self.given:
-                self.config[key] = [width_for(joints)] * len(self.config[key])
+                self.config[key] = [max(width_for(joints), self.min_width)] * len(self.config[key])
 
     def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
         """Record the dataset meta and normalisation (from training rows ``q (N, d)``, ``y (N, k)``)
@@ -217,19 +245,25 @@ class ConditionalSampler(ModelFacts, ABC):
 
     def decoder_spec(self) -> dict | None:
         """model.json's ``decoder`` entry (see :mod:`manifoldgen.models.files`): the sampling network's name,
-        noise law and width, integration steps and Linear layer count; None where it is not Linear layers
-        with SiLU between them (then only torch samples it)."""
+        noise law and width, integration steps and Linear layer count, and its prior's (name, steps, layers) where
+        the noise passes one; None where either is not Linear layers with SiLU between them (then only torch
+        samples it)."""
         net = self._sampling_net()
         if net is None or not self.nets:
             return None
         layers, law = net
-        kinds = [type(layer) for layer in layers]
-        if len(kinds) % 2 == 0 or set(kinds[::2]) != {torch.nn.Linear} or set(kinds[1::2]) - {torch.nn.SiLU}:
+        prior = self._prior_net()
+        if not _plain_mlp(layers) or (prior is not None and not _plain_mlp(prior[0])):
             return None
-        name = next(key for key, module in self.nets.items() if module is layers)
         steps = self._integration_steps()
-        return {"net": name, "law": law, "noise": self.d if steps else int(self.config["latent"]), "steps": steps,
-                "layers": len(kinds[::2])}
+        spec = {"net": self._net_name(layers), "law": law, "noise": self.d if steps else int(self.config["latent"]),
+                "steps": steps, "layers": len(layers[::2])}
+        if prior is not None:
+            spec["prior"] = {"net": self._net_name(prior[0]), "steps": prior[1], "layers": len(prior[0][::2])}
+        return spec
+
+    def _net_name(self, module: torch.nn.Module) -> str:
+        return next(key for key, net in self.nets.items() if net is module)
 
     def native_decoder(self):
         """The sampling network copied into the compiled core (``manifoldgen_core.Decoder``: ``sample(y (k,),
@@ -296,7 +330,7 @@ class ConditionalSampler(ModelFacts, ABC):
     def from_files(cls, path: str | Path, doc: dict, tensors: dict[str, np.ndarray]) -> ConditionalSampler:
         """Build from a validated model.json document and its weights."""
         try:
-            model = cls(**doc["config"])
+            model = cls(**{**cls.absent, **doc["config"]})
         except (ManifoldgenError, TypeError) as exc:
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid config ({exc}); "
                                    "the file was edited or is damaged: retrain or restore it") from exc
@@ -325,6 +359,7 @@ def dataset_task(dataset: Dataset, task: Task | None = None) -> Task:
 
 MAX_LR = 10.0  # a learning rate above it only diverges
 MAX_WEIGHT = 1e6  # a loss weight (beta, residual weights, fractions) above it overflows the float32 losses
+MAY_BE_ZERO = ("prior_steps",)  # whole-number hyper-parameters where 0 turns a part off (the CVAE's learned prior)
 
 
 def _check_hyper(model: str, key: str, value, default) -> None:
@@ -334,7 +369,9 @@ def _check_hyper(model: str, key: str, value, default) -> None:
                                                        for v in value)
         need = "a non-empty list of positive integers"
     elif isinstance(default, int) and not isinstance(default, bool):
-        ok, need = isinstance(value, int) and not isinstance(value, bool) and value >= 1, "a positive integer"
+        low = 0 if key in MAY_BE_ZERO else 1
+        ok = isinstance(value, int) and not isinstance(value, bool) and value >= low
+        need = "a whole number >= 0" if low == 0 else "a positive integer"
     elif isinstance(default, float):
         number = isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
         if key == "lr":

@@ -1,7 +1,8 @@
 """A model directory read without torch: ``model.json`` (validated, checksummed) and ``model.safetensors``.
 
 ``model.json`` describes the network that samples (``decoder``: the weights' name prefix, the noise law and
-width, the integration steps of a velocity field, ``layers`` Linear layers with SiLU between them), so the
+width, the integration steps of a velocity field, ``layers`` Linear layers with SiLU between them, and where the
+noise first passes a learned prior, ``prior``: that velocity field's name, steps and layers), so the
 compiled core runs it from the file alone (:meth:`SavedModel.native_decoder`): planning with a trained model
 never loads torch. Where the core is absent or the file names no ``decoder``, :meth:`SavedModel.sample` loads
 the torch model on first use.
@@ -27,6 +28,7 @@ MODEL_FORMAT_VERSION = 2  # 2: model.json carries "sha256" over all of its field
 WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
 DECODER_RANGES = {"noise": (1, 4096), "steps": (0, 1000), "layers": (1, 64)}  # a decoder entry's whole numbers
+PRIOR_RANGES = {"steps": (1, 1000), "layers": (1, 64)}  # its prior entry's
 DOC_KEYS = ("format_version", "model", "config", "dims", "normalisation", "meta", "refine", "mix", "decoder",
             "blend", "weights_sha256", "sha256")
 BLEND_DIR = "blend"  # a blended model's partner: a whole model directory inside its own
@@ -74,7 +76,7 @@ def read_model_dir(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
     return doc, arrays
 
 
-MODEL_NETS = {"cvae": ("decoder", "encoder"), "cfm": ("velocity",), "cgan": ("critic", "generator"),
+MODEL_NETS = {"cvae": ("decoder", "encoder", "prior"), "cfm": ("velocity",), "cgan": ("critic", "generator"),
               "wgan": ("critic", "generator"), "flow": ("flow",)}  # the networks each built-in model saves
 
 
@@ -89,11 +91,9 @@ def _check_networks(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> No
                                "is not a signature): restore or retrain the model")
 
 
-def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -> str | None:
-    """How the sampling network's weights differ from what ``decoder`` (a validated model.json entry) says: a named
-    weight missing or of the wrong shape, a weight it does not name, widths that do not chain from its inputs
-    (noise and condition; state, condition and time for a velocity field) to ``d`` outputs; None where they fit."""
-    net, layers = decoder["net"], decoder["layers"]
+def _net_misfit(net: str, layers: int, inputs: int, outputs: int, weights: dict[str, np.ndarray]) -> str | None:
+    """How the weights of network ``net`` differ from ``layers`` Linear layers chaining ``inputs`` to ``outputs``
+    values: a named weight missing or of the wrong shape, or a weight it does not name; None where they fit."""
     named = [f"{net}.{2 * i}.{part}" for i in range(layers) for part in ("weight", "bias")]
     missing = next((name for name in named if name not in weights), None)
     if missing is not None:
@@ -101,17 +101,29 @@ def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -
     extra = next((name for name in sorted(weights) if name.startswith(f"{net}.") and name not in named), None)
     if extra is not None:
         return f"the weights hold '{extra}' besides the {layers} layer(s) it names"
+    width = inputs
+    for i in range(layers):
+        weight, bias = weights[f"{net}.{2 * i}.weight"], weights[f"{net}.{2 * i}.bias"]
+        out = outputs if i == layers - 1 else (weight.shape[0] if weight.ndim == 2 else -1)
+        if weight.shape != (out, width) or bias.shape != (out,):
+            return (f"'{net}.{2 * i}' has weight {list(weight.shape)} and bias {list(bias.shape)}, where "
+                    f"{[out, width]} and {[out]} fit")
+        width = out
+    return None
+
+
+def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -> str | None:
+    """How the sampling network's weights differ from what ``decoder`` (a validated model.json entry) says: a named
+    weight missing or of the wrong shape, a weight it does not name, widths that do not chain from its inputs
+    (noise and condition; state, condition and time for a velocity field) to ``d`` outputs, or a prior's from
+    noise, condition and time to noise; None where they fit."""
     if decoder["steps"] and decoder["noise"] != dims["d"]:
         return f"a velocity field's noise is a state of {dims['d']} values, not {decoder['noise']}"
     width = dims["d"] + dims["k"] + 1 if decoder["steps"] else decoder["noise"] + dims["k"]
-    for i in range(layers):
-        weight, bias = weights[f"{net}.{2 * i}.weight"], weights[f"{net}.{2 * i}.bias"]
-        outputs = dims["d"] if i == layers - 1 else (weight.shape[0] if weight.ndim == 2 else -1)
-        if weight.shape != (outputs, width) or bias.shape != (outputs,):
-            return (f"'{net}.{2 * i}' has weight {list(weight.shape)} and bias {list(bias.shape)}, where "
-                    f"{[outputs, width]} and {[outputs]} fit")
-        width = outputs
-    return None
+    prior = decoder.get("prior")
+    return (_net_misfit(decoder["net"], decoder["layers"], width, dims["d"], weights)
+            or (prior and _net_misfit(prior["net"], prior["layers"], decoder["noise"] + dims["k"] + 1,
+                                      decoder["noise"], weights)) or None)
 
 
 def _check_decoder_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
@@ -126,7 +138,7 @@ def _check_decoder_fits_weights(path: Path, doc: dict, weights: dict[str, np.nda
 
 def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
     """Refuse a ``config`` whose sampling network's sizes (``hidden`` widths, ``latent``) differ from the weights the
-    ``decoder`` entry names: the file was edited and resealed (its checksum is not a signature), and what it says
+    ``decoder`` entry names, or whose ``prior_steps`` differ from its prior's: the file was edited and resealed (its checksum is not a signature), and what it says
     about the model would mislead whoever reads it."""
     decoder, config = doc.get("decoder"), doc["config"]
     if not decoder:
@@ -140,6 +152,11 @@ def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndar
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} gives config {key} = {said}, but its '{decoder['net']}' "
                                    f"weights have {held}: the file was edited (its checksum is not a signature); "
                                    "restore or retrain the model")
+    said, held = config.get("prior_steps"), decoder["prior"]["steps"] if "prior" in decoder else 0
+    if said is not None and said != held:  # torch would sample through one prior and the core through another
+        raise ManifoldgenError(f"{path}/{CONFIG_FILE} gives config prior_steps = {said}, but its 'decoder' entry "
+                               f"{f'integrates its prior in {held} steps' if held else 'names no prior'}: the file was "
+                               "edited (its checksum is not a signature); restore or retrain the model")
 
 
 def _hyper_value(value) -> bool:
@@ -200,7 +217,7 @@ def _validate_doc(path: Path, doc: object) -> None:
                   f"its {BLEND_DIR}/{CONFIG_FILE}, nothing else")
     decoder = doc.get("decoder")
     if isinstance(decoder, dict):
-        _refuse_unknown_keys(decoder, ("net", "law", *DECODER_RANGES), " in 'decoder'", bad)
+        _refuse_unknown_keys(decoder, ("net", "law", *DECODER_RANGES, "prior"), " in 'decoder'", bad)
     if decoder is not None and not (
             isinstance(decoder, dict) and isinstance(decoder.get("net"), str) and decoder.get("law") in LAWS
             and all(isinstance(decoder.get(key), int) and not isinstance(decoder.get(key), bool)
@@ -208,6 +225,16 @@ def _validate_doc(path: Path, doc: object) -> None:
         raise bad("'decoder' must name the sampling network 'net', its noise 'law' (normal or uniform), "
                   "'noise' width, integration 'steps' and number of Linear 'layers' (whole numbers in "
                   + ", ".join(f"{key} [{low}, {high}]" for key, (low, high) in DECODER_RANGES.items()) + ")")
+    prior = decoder.get("prior") if decoder else None
+    if isinstance(prior, dict):
+        _refuse_unknown_keys(prior, ("net", *PRIOR_RANGES), " in 'decoder.prior'", bad)
+    if prior is not None and not (
+            isinstance(prior, dict) and isinstance(prior.get("net"), str) and prior["net"] != decoder["net"]
+            and all(isinstance(prior.get(key), int) and not isinstance(prior.get(key), bool)
+                    and low <= prior[key] <= high for key, (low, high) in PRIOR_RANGES.items())):
+        raise bad("'decoder.prior' must name the prior's velocity field 'net' (not the decoder's), its integration "
+                  "'steps' and number of Linear 'layers' (whole numbers in "
+                  + ", ".join(f"{key} [{low}, {high}]" for key, (low, high) in PRIOR_RANGES.items()) + ")")
 
 
 def _refuse_unknown_keys(entry: dict, keys: tuple[str, ...], where: str, bad) -> None:
@@ -318,9 +345,13 @@ def blend_row_cost(own: int | None, blend: tuple[object, float] | None) -> int |
 def decoder_row_cost(decoder: dict, weights: dict) -> int:
     """Multiply-adds to sample one row with the sampling network ``decoder`` (a model.json ``decoder`` entry) and
     its ``weights`` by name (as :func:`core_decoder` takes them): its Linear weights, twice per integration step
-    (Heun) for a velocity field."""
-    macs = sum(int(np.prod(tuple(weights[f"{decoder['net']}.{2 * i}.weight"].shape))) for i in range(decoder["layers"]))
-    return macs * max(1, 2 * int(decoder["steps"]))
+    (Heun) for a velocity field; and its prior's likewise."""
+    def macs(net: str, layers: int) -> int:
+        return sum(int(np.prod(tuple(weights[f"{net}.{2 * i}.weight"].shape))) for i in range(layers))
+
+    prior = decoder.get("prior")
+    return (macs(decoder["net"], decoder["layers"]) * max(1, 2 * int(decoder["steps"]))
+            + (macs(prior["net"], prior["layers"]) * 2 * int(prior["steps"]) if prior else 0))
 
 
 def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: dict):
@@ -331,13 +362,19 @@ def core_decoder(decoder: dict, weights: dict[str, np.ndarray], d: int, norm: di
     core = core_module()
     if core is None:
         return None
-    names = [f"{decoder['net']}.{2 * i}" for i in range(decoder["layers"])]
-    w = [np.ascontiguousarray(weights[f"{name}.weight"], dtype=np.float32) for name in names]
-    b = [np.ascontiguousarray(weights[f"{name}.bias"], dtype=np.float32) for name in names]
+    def layers(net: str, count: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        names = [f"{net}.{2 * i}" for i in range(count)]
+        return ([np.ascontiguousarray(weights[f"{name}.weight"], dtype=np.float32) for name in names],
+                [np.ascontiguousarray(weights[f"{name}.bias"], dtype=np.float32) for name in names])
+
+    prior = decoder.get("prior")
+    pw, pb = layers(prior["net"], prior["layers"]) if prior else ([], [])
     try:
-        return core.Decoder(w, b, d if decoder["steps"] else decoder["noise"], decoder["law"] == "uniform",
+        return core.Decoder(*layers(decoder["net"], decoder["layers"]), d if decoder["steps"] else decoder["noise"],
+                            decoder["law"] == "uniform",
                             *(np.asarray(norm[key], float) for key in ("q_mean", "q_std", "y_mean", "y_std",
-                                                                       "lower", "upper")), steps=decoder["steps"])
+                                                                       "lower", "upper")), steps=decoder["steps"],
+                            prior_weights=pw, prior_biases=pb, prior_steps=prior["steps"] if prior else 0)
     except (ValueError, TypeError, RuntimeError) as exc:  # the entry's sizes or steps do not fit the weights
         why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
         raise ManifoldgenError(f"the model's 'decoder' entry does not fit its weights ({why}); the files come from "
