@@ -166,7 +166,7 @@ def test_a_dearer_model_draws_fewer_pool_rows_in_both_searches(model_dir, panda_
     from manifoldgen.planning.rrt_connect import core_settings
     from manifoldgen.sampling import REFERENCE_ROW_COST
 
-    model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7, after the prior [z, height, t] -> 64 -> 64 -> 3
+    model = load_model(model_dir)  # [latent 3, height] -> 32 -> 32 -> 7, after the prior [z, y, t] -> 64 -> 64 -> 3
     space = ConstrainedSpace(panda_task.constraint, [0.4])
     sampler = ModelSampler(space, model, seed=1)
     prior = 2 * 4 * (5 * 64 + 64 * 64 + 64 * 3)  # 4 steps of two passes each (Heun)

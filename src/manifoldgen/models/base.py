@@ -50,18 +50,32 @@ def mlp(inputs: int, hidden: list[int], outputs: int, activation: type[torch.nn.
     return torch.nn.Sequential(*layers)
 
 
+def heun_steps(velocity: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, steps: int) -> torch.Tensor:
+    """States (B, m) carried from t = 0 to t = 1 - 1/steps by ``dx/dt = velocity([x, y, t])`` at conditions
+    y (B, k): ``steps - 1`` Heun steps (the part of :func:`integrate` before its last step)."""
+    h = 1.0 / steps
+    for i in range(steps - 1):
+        u = velocity_at(velocity, x, y, i * h)
+        x = x + 0.5 * h * (u + velocity_at(velocity, x + h * u, y, (i + 1) * h))
+    return x
+
+
+def last_step(velocity: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, steps: int) -> torch.Tensor:
+    """The final Euler step of :func:`integrate`, from t = 1 - 1/steps to 1: states (B, m)."""
+    h = 1.0 / steps
+    return x + h * velocity_at(velocity, x, y, 1.0 - h)
+
+
 def integrate(velocity: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, steps: int) -> torch.Tensor:
     """States (B, m) carried from t = 0 to 1 by ``dx/dt = velocity([x, y, t])`` at conditions y (B, k): ``steps - 1``
     Heun steps, then one Euler step (as the compiled core integrates, ``manifoldgen_core.Decoder``)."""
-    h = 1.0 / steps
+    return last_step(velocity, heun_steps(velocity, x, y, steps), y, steps)
 
-    def v(state: torch.Tensor, t: float) -> torch.Tensor:
-        return velocity(torch.cat([state, y, torch.full((len(state), 1), t)], dim=1))
 
-    for i in range(steps - 1):
-        u = v(x, i * h)
-        x = x + 0.5 * h * (u + v(x + h * u, (i + 1) * h))
-    return x + h * v(x, 1.0 - h)
+def velocity_at(velocity: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, t: torch.Tensor | float) -> torch.Tensor:
+    """velocity([x, y, t]) (B, m) for states x (B, m), conditions y (B, k), times t ((B, 1) or one for all)."""
+    t = t if torch.is_tensor(t) else torch.full((len(x), 1), t)
+    return velocity(torch.cat([x, y, t], dim=1))
 
 
 def _plain_mlp(layers: torch.nn.Sequential) -> bool:
@@ -92,7 +106,6 @@ class ConditionalSampler(ModelFacts, ABC):
     name: ClassVar[str]
     defaults: ClassVar[dict]
     absent: ClassVar[dict] = {}  # a hyper-parameter's value for model files written before it existed
-    min_width: ClassVar[int] = 0  # its hidden layers are at least this wide (see :meth:`size_for`)
 
     def __init__(self, **hyper):
         unknown = sorted(set(hyper) - set(self.defaults))
@@ -148,13 +161,12 @@ class ConditionalSampler(ModelFacts, ABC):
     # ------------------------------------------------------------------ setup
     def size_for(self, joints: int, dimension: int) -> None:
         """Size what the user did not set from the data: ``latent`` = the manifold's ``dimension``, every hidden
-        layer :func:`width_for` ``joints`` wide and at least the model's :attr:`min_width` (a 7-joint arm: 128, the
-        CVAE 256)."""
+        layer :func:`width_for` ``joints`` wide (a 7-joint arm keeps 128)."""
         if "latent" in self.config and "latent" not in self.given:
             self.config["latent"] = max(1, int(dimension))
         for key in ("hidden", "critic_hidden"):
             if key in self.config and key not in self.given:
-                self.config[key] = [max(width_for(joints), self.min_width)] * len(self.config[key])
+                self.config[key] = [width_for(joints)] * len(self.config[key])
 
     def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
         """Record the dataset meta and normalisation (from training rows ``q (N, d)``, ``y (N, k)``)

@@ -18,7 +18,7 @@ import torch
 
 from manifoldgen.errors import ManifoldgenError
 from manifoldgen.models.adam import Adam
-from manifoldgen.models.base import SingleLossSampler, mlp
+from manifoldgen.models.base import SingleLossSampler, heun_steps, last_step, mlp, velocity_at
 
 
 class ConditionalFlowMatching(SingleLossSampler):
@@ -38,24 +38,14 @@ class ConditionalFlowMatching(SingleLossSampler):
     def _build(self) -> None:
         self.nets["velocity"] = mlp(self.d + self.k + 1, self.config["hidden"], self.d)
 
-    def _velocity(self, x: torch.Tensor, t: torch.Tensor | float, y: torch.Tensor) -> torch.Tensor:
-        """v (B, d) at states x (B, d), times t ((B, 1) or one for all), conditions y (B, k)."""
-        t = t if torch.is_tensor(t) else torch.full((len(x), 1), t)
-        return self.nets["velocity"](torch.cat([x, y, t], dim=1))
-
     def _before_last(self, y: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
         """States (B, d) at t = 1 - 1/steps: noise (B, d) carried by ``steps - 1`` Heun steps."""
-        h = 1.0 / self.config["steps"]
-        x = torch.randn(len(y), self.d, generator=generator)
-        for i in range(self.config["steps"] - 1):
-            v = self._velocity(x, i * h, y)
-            x = x + 0.5 * h * (v + self._velocity(x + h * v, (i + 1) * h, y))
-        return x
+        return heun_steps(self.nets["velocity"], torch.randn(len(y), self.d, generator=generator), y,
+                          self.config["steps"])
 
     def _last(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """The final Euler step from t = 1 - 1/steps to 1 (B, d)."""
-        h = 1.0 / self.config["steps"]
-        return x + h * self._velocity(x, 1.0 - h, y)
+        return last_step(self.nets["velocity"], x, y, self.config["steps"])
 
     def _generate(self, y, generator):
         return self._last(self._before_last(y, generator), y)
@@ -72,7 +62,8 @@ class ConditionalFlowMatching(SingleLossSampler):
     def _losses(self, q, y, y_free, generator) -> dict[str, torch.Tensor]:
         x0 = torch.randn(q.shape, generator=generator)
         t = torch.rand(len(q), 1, generator=generator)
-        match = (self._velocity((1.0 - t) * x0 + t * q, t, y) - (q - x0)).pow(2).sum(dim=1).mean()
+        velocity = velocity_at(self.nets["velocity"], (1.0 - t) * x0 + t * q, y, t)
+        match = (velocity - (q - x0)).pow(2).sum(dim=1).mean()
         residual = torch.zeros(())
         if self.residual_fn is not None and self.config["residual_weight"] > 0:
             y_pen = y_free[: max(1, round(self.config["penalty_fraction"] * len(y_free)))]

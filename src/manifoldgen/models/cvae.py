@@ -10,15 +10,14 @@ field ``v(z_t, y, t)`` (``prior_hidden``) carries N(0, I) noise to the encoder's
 flow matching beside the ELBO (on detached posterior samples, so it leaves the encoder and decoder as they are)
 and integrated as :mod:`manifoldgen.models.cfm` integrates its rows. The encoder spreads the data wider than
 N(0, I) in places and leaves holes in others; N(0, I) noise through the decoder then misses parts of the manifold
-(panda pose: see below). ``prior_steps = 0`` samples N(0, I), as the paper.
+(panda pose: recall 0.43 without the prior, 0.66 with it, at the same accuracy). ``prior_steps = 0`` samples
+N(0, I), as the paper.
 The residual penalty stays on decoded N(0, I) noise and on the reconstructions, which lie where the prior samples.
 
-The decoder must land within tolerance where a velocity field need not, so on a robot whose layers would be at
-most :attr:`min_width` wide it has three hidden layers that wide; a larger robot keeps two layers of the others'
-width (three of 384 took g1's training from 130 to 199 s, past the three minutes a whole-body task's pipeline has).
-Panda pose, 10,000 rows, one run each, scored against fresh projection samples: 2 x 128 sampling N(0, I) put 77 %
-of its raw samples within tolerance at k-NN recall 0.43; 3 x 256, 84 % at 0.56; 3 x 256 with the prior, 77 % at
-0.66.
+The decoder must land within tolerance where a velocity field need not, so where :func:`width_for` gives at
+most :data:`DEEP_WIDTH` it has three hidden layers that wide; a larger robot keeps two of the others' width (three
+of 384 made g1's `train` too slow for a whole-body pipeline's three minutes). The figures, panda pose, with their
+commands: docs/benchmarks.md, "Learned samplers".
 """
 
 from __future__ import annotations
@@ -26,11 +25,12 @@ from __future__ import annotations
 import torch
 
 from manifoldgen.models.adam import Adam
-from manifoldgen.models.base import SingleLossSampler, integrate, mlp, width_for
+from manifoldgen.models.base import SingleLossSampler, integrate, mlp, velocity_at, width_for
 
 # the posterior's log-variance is kept here: beyond it exp() overflows float32 (an infinite KL and reconstruction,
 # seen on centauro's 39 coordinates at the defaults) or the variance is below any joint's resolution
 LOGVAR_RANGE = (-30.0, 20.0)
+DEEP_WIDTH = 256  # the hidden width of a robot small enough for three layers (see the module's docstring)
 
 
 class CVAE(SingleLossSampler):
@@ -40,7 +40,6 @@ class CVAE(SingleLossSampler):
     defaults = {"latent": 3, "hidden": [256, 256, 256], "beta": 0.1, "lr": 1e-3, "batch": 256,
                 "epochs": 60, "patience": 15, "residual_weight": 0.1, "recon_residual_weight": 0.1,
                 "prior_steps": 4, "prior_hidden": [64, 64]}
-    min_width = 256
     absent = {"prior_steps": 0}  # what a model file written before the learned prior existed sampled
 
     def _build(self) -> None:
@@ -51,11 +50,12 @@ class CVAE(SingleLossSampler):
             self.nets["prior"] = mlp(c["latent"] + self.k + 1, c["prior_hidden"], c["latent"])
 
     def size_for(self, joints: int, dimension: int) -> None:
-        """As every model (:meth:`ConditionalSampler.size_for`), then two hidden layers, not three, where
-        :func:`width_for` ``joints`` is above :attr:`min_width` (see the module's docstring)."""
+        """As every model (:meth:`ConditionalSampler.size_for`), then the hidden layers not given: three of
+        :data:`DEEP_WIDTH` where :func:`width_for` ``joints`` is at most that, else two of :func:`width_for`."""
         super().size_for(joints, dimension)
-        if "hidden" not in self.given and width_for(joints) > self.min_width:
-            self.config["hidden"] = self.config["hidden"][:2]
+        if "hidden" not in self.given:
+            width = width_for(joints)
+            self.config["hidden"] = [DEEP_WIDTH] * 3 if width <= DEEP_WIDTH else [width] * 2
 
     def _decode(self, z: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         return self.nets["decoder"](torch.cat([z, y], dim=1))
@@ -98,7 +98,7 @@ class CVAE(SingleLossSampler):
         if "prior" in self.nets:  # flow matching from N(0, I) to the posterior samples, which it does not move
             target, z0 = z.detach(), torch.randn(z.shape, generator=generator)
             t = torch.rand(len(z), 1, generator=generator)
-            velocity = self.nets["prior"](torch.cat([(1.0 - t) * z0 + t * target, y, t], dim=1))
+            velocity = velocity_at(self.nets["prior"], (1.0 - t) * z0 + t * target, y, t)
             losses["prior"] = (velocity - (target - z0)).pow(2).sum(dim=1).mean()
             total = total + losses["prior"]
         return {"loss": total, **losses}

@@ -120,10 +120,11 @@ def _decoder_misfit(decoder: dict, dims: dict, weights: dict[str, np.ndarray]) -
     if decoder["steps"] and decoder["noise"] != dims["d"]:
         return f"a velocity field's noise is a state of {dims['d']} values, not {decoder['noise']}"
     width = dims["d"] + dims["k"] + 1 if decoder["steps"] else decoder["noise"] + dims["k"]
-    prior = decoder.get("prior")
-    return (_net_misfit(decoder["net"], decoder["layers"], width, dims["d"], weights)
-            or (prior and _net_misfit(prior["net"], prior["layers"], decoder["noise"] + dims["k"] + 1,
-                                      decoder["noise"], weights)) or None)
+    misfit, prior = _net_misfit(decoder["net"], decoder["layers"], width, dims["d"], weights), decoder.get("prior")
+    if misfit is None and prior is not None:
+        inputs = decoder["noise"] + dims["k"] + 1
+        misfit = _net_misfit(prior["net"], prior["layers"], inputs, decoder["noise"], weights)
+    return misfit
 
 
 def _check_decoder_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
@@ -138,8 +139,8 @@ def _check_decoder_fits_weights(path: Path, doc: dict, weights: dict[str, np.nda
 
 def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndarray]) -> None:
     """Refuse a ``config`` whose sampling network's sizes (``hidden`` widths, ``latent``) differ from the weights the
-    ``decoder`` entry names, or whose ``prior_steps`` differ from its prior's: the file was edited and resealed (its checksum is not a signature), and what it says
-    about the model would mislead whoever reads it."""
+    ``decoder`` entry names, or whose ``prior_steps`` differ from its prior's: the file was edited and resealed (its
+    checksum is not a signature), and what it says about the model would mislead whoever reads it."""
     decoder, config = doc.get("decoder"), doc["config"]
     if not decoder:
         return

@@ -31,7 +31,8 @@ SHIPPED = Path(__file__).resolve().parent.parent / "data" / "spheres"  # the pac
 # ---------------------------------------------------------------------------------------------- models
 def sphere_model(robot: Robot) -> SphereModel:
     """The robot's sphere model: read from the cache, else from the package's (:data:`SHIPPED`), when it was
-    made for these geometries and mesh files; else fitted (panda 3.6 s of CPU, centauro 17.3 s: docs/benchmarks.md) and cached."""
+    made for these geometries and mesh files; else fitted (panda 3.6 s of CPU, centauro 17.3 s: docs/benchmarks.md)
+    and cached."""
     stamp = cache_stamp(robot)
     path = cache_path(robot, stamp)
     geometries = len(robot.collision_model.geometryObjects)
