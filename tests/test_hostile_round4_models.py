@@ -40,6 +40,7 @@ EDITS = {
     "prior-typo": {"edit": lambda d: d["decoder"]["prior"].update(stps=2)},
     "prior-names-decoder": {"edit": lambda d: d["decoder"]["prior"].update(net="decoder")},
     "prior-dropped": {"edit": lambda d: d["decoder"].pop("prior")},
+    "schedule-linear": {"edit": lambda d: d["config"].update(lr_schedule="linear")},
     "weights-nan": {"weights": _nan},
     "limits-wide": {"edit": _widen_limits},
     "yrange-wide": {"edit": lambda d: d["normalisation"].update(y_low=[-100.0], y_high=[100.0])},
@@ -89,6 +90,9 @@ CASES = [
         "'decoder.prior' must name the prior's velocity field 'net' (not the decoder's)"),
     cli("plan-prior-dropped", _plan("prior-dropped"),
         "gives config prior_steps = 4, but its 'decoder' entry names no prior"),
+    # a hyper-parameter that is a name, with a name no model knows
+    cli("sample-schedule-linear", _sample("schedule-linear"), "config \"lr_schedule\" is \"linear\", not one of "
+        "constant, cosine"),
     # unknown keys in model.json's objects
     cli("sample-dims-unknown-key", _sample("dims-extra"), "unknown key 'x' in 'dims'"),
     cli("sample-normalisation-typo", _sample("norm-typo"),

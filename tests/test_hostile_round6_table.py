@@ -109,7 +109,7 @@ CASES = [
         "hyper-parameter hidden=[-5] of model 'cvae' must be a non-empty list of positive integers"),
     cli("train-config-nested-table",
         "train {I}/data.npz --model cvae --epochs 1 --set hidden=[8] --config {I}/cfg-nested.toml -o {O}/m",
-        "unknown cvae model setting 'cvae'; known: batch, beta, epochs, hidden, latent, lr"),
+        "unknown cvae model setting 'cvae'; known: batch, beta, encoder_hidden, epochs, hidden, latent, lr, lr_schedule"),
     cli("train-output-folder-of-dataset", "train {O}/data.npz --model cvae --epochs 1 --set hidden=[8] -o {O}",
         "holds data.npz but no model.json nor checkpoint.safetensors, so it is not a model directory; train into a "
         "new or empty folder (-o)"),
@@ -436,7 +436,7 @@ CASES = [
     api("api-train-epochs-zero", lambda I, O: mg.train(f"{I}/data.npz", "cvae", epochs=0, hidden=[8]),
         "train: epochs must be a positive number (None: the model's own), got 0"),
     api("api-train-hyper-misspelt", lambda I, O: mg.train(f"{I}/data.npz", "cvae", epochs=1, hiden=[8]),
-        "unknown hyper-parameter(s) ['hiden'] for model 'cvae'; known: batch, beta, epochs, hidden"),
+        "unknown hyper-parameter(s) ['hiden'] for model 'cvae'; known: batch, beta, encoder_hidden, epochs, hidden"),
     api("api-sampler-batch-zero", lambda I, O: mg.sampler("pose", "wall", "project", batch=0),
         "sampler: batch must be from 1 to 100,000, got 0"),
     api("api-sampler-batch-ten-million", lambda I, O: mg.sampler("pose", "wall", "project", batch=10**7),

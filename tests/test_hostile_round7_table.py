@@ -259,7 +259,7 @@ CASES = [
         "now); resume with the same command, or choose another directory"),
     cli("train-resume-other-model", RESUME + " --model cfm --epochs 100000",
         'the checkpoint in {O}/ck was made with another dataset, model, seed or settings (model: "cvae" then, "cfm" '
-        "now; config.steps: null then, 8 now; config.residual_weight: 0.1 then, 0.3 now (and 6 more)); resume with "
+        "now; config.steps: null then, 8 now; config.residual_weight: 0.1 then, 0.3 now (and 8 more)); resume with "
         "the same command, or choose another directory"),
     cli("train-task-sphere", "train {I}/data.npz --task sphere --model cvae --epochs 1 -o {O}/m",
         "7 joints vs 3; locked joint values (and 1 more); use one made for this task (collect / train on this task)"),

@@ -95,7 +95,7 @@ def test_the_cvae_prior_learns_the_posterior(tiny):
     from manifoldgen.models import CVAE
     from manifoldgen.models.base import mlp, velocity_at
 
-    model = CVAE(**TINY)
+    model = CVAE(**TINY, encoder_hidden=[32, 32])
     model.fit(tiny, epochs=40, seed=1, progress=False)
     g = torch.Generator().manual_seed(0)
     with torch.no_grad():
@@ -234,6 +234,10 @@ def test_model_dir_errors(trained, tmp_path):
 def test_pretrained_model_ships_and_samples(task):
     model = load_model(pretrained_model_dir())
     assert model.name == "cvae" and model.meta["robot"] == "panda"
+    written = json.loads((pretrained_model_dir() / "model.json").read_text())["config"]
+    assert {"encoder_hidden", "prior_steps"}.isdisjoint(written)  # a file from before both: loaded as it was trained
+    assert model.config["encoder_hidden"] == model.config["hidden"] and model.config["prior_steps"] == 0
+    assert model.nets["encoder"][0].out_features == model.config["hidden"][0] and "prior" not in model.nets
     q = model.sample([0.45], 2000, torch.Generator().manual_seed(0))
     rate = task.constraint.satisfied(q, [0.45]).mean()
     assert rate > 0.5

@@ -95,6 +95,28 @@ def test_interrupted_run_resumes_to_the_same_model(tiny, tmp_path, monkeypatch):
               out=tmp_path / "cut", resume=True)
 
 
+def test_the_learning_rate_follows_the_model_s_schedule(tiny, monkeypatch):
+    """``cosine`` decays the rate along half a cosine, step by step over all epochs; the default, ``constant``,
+    keeps it; an unknown schedule is refused, naming the known ones."""
+    seen = []
+    original = CVAE._train_step
+
+    def recording(self, q, y, y_free, optimizers, generator):
+        seen.append(optimizers[0].lr)
+        return original(self, q, y, y_free, optimizers, generator)
+
+    monkeypatch.setattr(CVAE, "_train_step", recording)
+    CVAE(**TINY, lr=0.002, lr_schedule="cosine").fit(tiny, epochs=3, seed=0, progress=False)
+    steps = len(seen)
+    np.testing.assert_allclose(seen, [0.001 * (1 + np.cos(np.pi * i / steps)) for i in range(steps)], rtol=1e-12)
+    assert seen[0] == 0.002 and 0 < seen[-1] < 0.002 * 0.01
+    seen.clear()
+    CVAE(**TINY, lr=0.002).fit(tiny, epochs=2, seed=0, progress=False)
+    assert set(seen) == {0.002}
+    with pytest.raises(ManifoldgenError, match="lr_schedule='linear' of model 'cvae' must be constant or cosine"):
+        CVAE(lr_schedule="linear")
+
+
 def test_train_command(tiny, tmp_path):
     data = tmp_path / "tiny.npz"
     tiny.save(data)
@@ -125,9 +147,13 @@ def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
     # panda pose: 7 joints, dimension 3; the CVAE's layers at least 256 wide (width_for(7) = 128)
     assert sized.config["latent"] == 3 and sized.config["hidden"] == [256, 256, 256]
     assert sized.config["prior_hidden"] == [64, 64]  # the prior's width is its own
+    assert sized.config["encoder_hidden"] == [64, 64] and sized.nets["encoder"][0].out_features == 64
     wide = CVAE()
-    wide.size_for(39, 27)  # a whole-body robot: two layers of the others' width
-    assert wide.config["hidden"] == [384, 384] and wide.config["latent"] == 27
+    wide.size_for(39, 27)  # a whole-body robot: two layers of the others' width, the encoder's too
+    assert wide.config["hidden"] == [384, 384] == wide.config["encoder_hidden"] and wide.config["latent"] == 27
+    narrow = CVAE(encoder_hidden=[32])
+    narrow.size_for(39, 27)
+    assert narrow.config["encoder_hidden"] == [32]  # given: kept
     flow = ConditionalFlowMatching(batch=16, patience=100)
     flow.fit(tiny, epochs=1, seed=0, progress=False)
     assert flow.config["hidden"] == [128, 128]

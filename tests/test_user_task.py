@@ -99,3 +99,28 @@ def test_the_user_files_need_the_task_file(trained, monkeypatch):
     trusted = runner.invoke(app, ["sample", str(trained / "m"), "--trust-code", "--condition", "0.4", "-n", "20",
                                   "-o", str(trained / "s3.npz")])
     assert trusted.exit_code == 0, trusted.output
+
+
+def test_the_candidates_of_a_user_task_train_side_by_side_as_in_one_process(trained):
+    """Two child processes import the user's module from the file this one did: the same candidates, bit for
+    bit, as one process training them in turn at the children's torch threads (an earlier test's `sample` set
+    two)."""
+    import torch
+
+    from manifoldgen.runtime import TORCH_THREADS, set_threads
+
+    from manifoldgen.models import load_model
+    from manifoldgen.selection import select_model
+    from manifoldgen.tasks import code_files, load_task_file
+
+    data, task = Dataset.load(trained / "d.npz"), load_task_file(TASK)
+    assert code_files(task.spec()) == {"tool_down": str(EXAMPLE / "tool_down.py")}  # so the children import it
+    set_threads(TORCH_THREADS)
+    tables = [select_model(data, trained / f"auto{workers}", seed=3, epochs=1, progress=False, workers=workers,
+                           task=task, race_scenes=False)[1] for workers in (1, 2)]
+    assert [[{k: v for k, v in row.items() if k != "seconds"} for row in table] for table in tables][0] == \
+        [{k: v for k, v in row.items() if k != "seconds"} for row in tables[1]]
+    for name in ("cvae", "cfm"):
+        one, two = (load_model(trained / f"auto{workers}" / "candidates" / name) for workers in (1, 2))
+        for key, value in one.state_tensors().items():
+            torch.testing.assert_close(two.state_tensors()[key], value, rtol=0, atol=0)

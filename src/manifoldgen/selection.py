@@ -48,7 +48,7 @@ from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_tas
 from manifoldgen.models.files import BLEND_DIR
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.scene import Scene
-from manifoldgen.tasks import Task, code_types
+from manifoldgen.tasks import Task, code_files, task_in_child
 from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
@@ -72,10 +72,11 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
                  ) -> tuple[ConditionalSampler, list[dict], list[dict]]:
     """Train every candidate, score it on the held-out rows, race it on the task's scenes (:func:`race`), write
     the chosen one to ``out``; returns it, the table (one dict per candidate: ``model``, ``accuracy``,
-    ``recall``, ``epochs``, ``seconds``, ``chosen``) and the race's (see :func:`race`, plus ``chosen``). A candidate already trained in ``out/candidates`` is reused; one interrupted resumes with
-    ``resume``. ``workers``: processes training side by side (default: one per CPU and candidate for datasets
-    of :data:`PARALLEL_ROWS` rows or more, else 1; 1 where the task runs user code, which a child cannot load);
-    ``race_scenes`` False: the rule alone chooses."""
+    ``recall``, ``epochs``, ``seconds``, ``chosen``) and the race's (see :func:`race`, plus ``chosen``). A
+    candidate already trained in ``out/candidates`` is reused; one interrupted resumes with ``resume``.
+    ``workers``: processes training side by side (default: one per CPU and candidate for datasets of
+    :data:`PARALLEL_ROWS` rows or more, else 1; a child imports a user constraint's module from the file this
+    process imported it from); ``race_scenes`` False: the rule alone chooses."""
     if task is None:
         task = dataset_task(dataset)
         check_dataset(dataset, task)
@@ -104,10 +105,13 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
     if workers is None:
         workers = (os.cpu_count() or 1) if len(dataset) >= PARALLEL_ROWS else 1
     workers = min(len(jobs), workers)
-    if workers > 1 and not code_types(task.spec()):  # a child rebuilds the task from the dataset's meta: no user code
+    spec = task.spec()
+    files = code_files(spec)  # a child imports the task's user modules from the files this process imported
+    if workers > 1 and all(files.values()):
+        child = (spec, files) if files else None  # None: a child rebuilds the task from the dataset's meta
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
         try:
-            list(pool.map(_train_candidate, jobs))
+            list(pool.map(_train_candidate, jobs, [child] * len(jobs)))
         finally:  # scoring goes on while the children exit (unloading torch takes a second or two)
             pool.shutdown(wait=False, cancel_futures=True)
     else:
@@ -257,14 +261,17 @@ def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None)
                                "directory (-o), or delete it to train anew")
 
 
-def _train_candidate(job: tuple, *, task: Task | None = None, progress: bool = False) -> None:
-    """Train one candidate ``(name, dataset, epochs, seed, folder, resume)`` into its folder (in a child process,
-    ``task`` None: rebuilt from the dataset's meta)."""
+def _train_candidate(job: tuple, child: tuple | None = None, *, task: Task | None = None,
+                     progress: bool = False) -> None:
+    """Train one candidate ``(name, dataset, epochs, seed, folder, resume)`` into its folder for ``task``; in a
+    child process ``task`` is None: rebuilt by :func:`task_in_child` from ``child`` ``(spec, files)``, else from
+    the dataset's meta."""
     from manifoldgen.runtime import set_threads
 
     name, dataset, epochs, seed, folder, resume = job
     if task is None:
         set_threads()
+        task = task_in_child(*child) if child else None
     get_model_class(name)().fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress, resume=resume,
                                 task=task)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -224,6 +225,13 @@ def _check_latent(model: Trainable, dimension: int) -> None:
                       f"dimensional sheet of it; train with --set latent={dimension}", stacklevel=3)
 
 
+def learning_rate_share(schedule: str, step: int, steps: int) -> float:
+    """The share of its ``lr`` a model trains with at ``step`` of ``steps``: 1 throughout (``constant``), or from 1
+    down to 0 along half a cosine (``cosine``: large steps early, small ones to settle); a model's
+    ``lr_schedule``, one of :data:`~manifoldgen.models.files.NAMED_HYPER`."""
+    return 1.0 if schedule == "constant" else 0.5 * (1.0 + math.cos(math.pi * step / steps))
+
+
 @locks_output("out")  # one training per model directory
 def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | None = None, seed: int = 0,
           progress: bool = True, out: str | Path | None = None, resume: bool = False,
@@ -271,6 +279,8 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
     q_val, y_val = model.normalise_q(q_all[val_idx]), model.normalise_y(y_all[val_idx])
     y_low, y_high = y_train.min(0).values, y_train.max(0).values
     optimizers = model._optimizers()
+    base_rates = [optimizer.lr for optimizer in optimizers]  # a resumed optimiser's state holds a decayed one
+    schedule = model.config.get("lr_schedule", "constant")
     log = TrainingLog(model.name, seed, epochs)
     best_state, bad = model.state_tensors(), 0
     identity = {"model": model.name, "config": model.config, "seed": seed, "epochs": epochs,
@@ -295,6 +305,9 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
                 for s in range(steps):
                     idx = order[s * batch:(s + 1) * batch]
                     y_free = y_low + (y_high - y_low) * torch.rand(len(idx), model.k, generator=gen)
+                    share = learning_rate_share(schedule, epoch * steps + s, epochs * steps)
+                    for optimizer, rate in zip(optimizers, base_rates):
+                        optimizer.lr = rate * share
                     losses = model._train_step(q_train[idx], y_train[idx], y_free, optimizers, gen)
                     for key, value in losses.items():
                         sums[key] = sums.get(key, 0.0) + value

@@ -23,9 +23,9 @@ import torch
 
 from manifoldgen.errors import ManifoldgenError, file_reader
 from manifoldgen.models.adam import Adam
-from manifoldgen.models.files import (BLEND_DIR, CONFIG_FILE, MODEL_FORMAT_VERSION, WEIGHTS_FILE, ModelFacts,
-                                      blend_decoder, blend_row_cost, check_mix_refine, core_decoder, decoder_row_cost,
-                                      document_checksum, read_model_dir)
+from manifoldgen.models.files import (BLEND_DIR, CONFIG_FILE, MODEL_FORMAT_VERSION, NAMED_HYPER, WEIGHTS_FILE,
+                                      ModelFacts, blend_decoder, blend_row_cost, check_mix_refine, core_decoder,
+                                      decoder_row_cost, document_checksum, read_model_dir)
 from manifoldgen.io import atomic_write_bytes, atomic_write_text
 from manifoldgen.tasks import Task, task_from_meta
 from manifoldgen.training import TrainingLog, check_rows, train
@@ -105,7 +105,6 @@ class ConditionalSampler(ModelFacts, ABC):
 
     name: ClassVar[str]
     defaults: ClassVar[dict]
-    absent: ClassVar[dict] = {}  # a hyper-parameter's value for model files written before it existed
 
     def __init__(self, **hyper):
         unknown = sorted(set(hyper) - set(self.defaults))
@@ -157,6 +156,12 @@ class ConditionalSampler(ModelFacts, ABC):
     @abstractmethod
     def _validation_loss(self, q: torch.Tensor, y: torch.Tensor, generator: torch.Generator) -> float:
         """A scalar to early-stop on (lower is better), on the normalised validation split."""
+
+    @classmethod
+    def written_before(cls, config: dict) -> dict:
+        """The whole ``config`` of a model file written before some hyper-parameters existed: each missing one at
+        what that file was trained with (none here; a model that added one says)."""
+        return config
 
     # ------------------------------------------------------------------ setup
     def size_for(self, joints: int, dimension: int) -> None:
@@ -342,7 +347,7 @@ class ConditionalSampler(ModelFacts, ABC):
     def from_files(cls, path: str | Path, doc: dict, tensors: dict[str, np.ndarray]) -> ConditionalSampler:
         """Build from a validated model.json document and its weights."""
         try:
-            model = cls(**{**cls.absent, **doc["config"]})
+            model = cls(**cls.written_before(doc["config"]))
         except (ManifoldgenError, TypeError) as exc:
             raise ManifoldgenError(f"{path}/{CONFIG_FILE} has an invalid config ({exc}); "
                                    "the file was edited or is damaged: retrain or restore it") from exc
@@ -392,6 +397,8 @@ def _check_hyper(model: str, key: str, value, default) -> None:
             ok, need = number and 0 <= value < 1, "a number in [0, 1)"
         else:  # a loss weight: larger ones overflow the float32 losses
             ok, need = number and 0 <= value <= MAX_WEIGHT, f"a number from 0 to {MAX_WEIGHT:g}"
+    elif key in NAMED_HYPER:
+        ok, need = value in NAMED_HYPER[key], " or ".join(NAMED_HYPER[key])
     else:
         return
     if not ok:

@@ -29,6 +29,7 @@ WEIGHTS_FILE, CONFIG_FILE = "model.safetensors", "model.json"
 LAWS = ("normal", "uniform")  # the noise a sampling network maps: N(0, I) or U(-1, 1)
 DECODER_RANGES = {"noise": (1, 4096), "steps": (0, 1000), "layers": (1, 64)}  # a decoder entry's whole numbers
 PRIOR_RANGES = {"steps": (1, 1000), "layers": (1, 64)}  # its prior entry's
+NAMED_HYPER = {"lr_schedule": ("constant", "cosine")}  # hyper-parameters that are names, and the names known
 DOC_KEYS = ("format_version", "model", "config", "dims", "normalisation", "meta", "refine", "mix", "decoder",
             "blend", "weights_sha256", "sha256")
 BLEND_DIR = "blend"  # a blended model's partner: a whole model directory inside its own
@@ -160,9 +161,11 @@ def _check_config_fits_weights(path: Path, doc: dict, weights: dict[str, np.ndar
                                "edited (its checksum is not a signature); restore or retrain the model")
 
 
-def _hyper_value(value) -> bool:
-    """Whether ``value`` can be a hyper-parameter in a model.json: a finite number, or a list of positive whole
-    numbers (layer widths)."""
+def _hyper_value(key: str, value) -> bool:
+    """Whether ``value`` can be hyper-parameter ``key`` in a model.json: a finite number, a list of positive whole
+    numbers (layer widths), or for a key of :data:`NAMED_HYPER` one of its names."""
+    if key in NAMED_HYPER:
+        return value in NAMED_HYPER[key]
     if isinstance(value, list):
         return all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in value)
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
@@ -186,8 +189,10 @@ def _validate_doc(path: Path, doc: object) -> None:
                       ("normalisation", dict), ("meta", dict), ("weights_sha256", str)):
         if not isinstance(doc.get(key), kind):
             raise bad(f"field '{key}' is missing or not a {kind.__name__}")
-    odd = next((key for key, value in doc["config"].items() if not _hyper_value(value)), None)
-    if odd is not None:  # every model's hyper-parameters are numbers or lists of layer widths
+    odd = next((key for key, value in doc["config"].items() if not _hyper_value(key, value)), None)
+    if odd in NAMED_HYPER:
+        raise bad(f"config {short(odd)} is {short(doc['config'][odd])}, not one of {', '.join(NAMED_HYPER[odd])}")
+    if odd is not None:  # every other hyper-parameter is a number or a list of layer widths
         raise bad(f"config {short(odd)} is {short(doc['config'][odd])}, not a finite number or a list of widths")
     _refuse_unknown_keys(doc["dims"], ("d", "k"), " in 'dims'", bad)
     d, k = doc["dims"].get("d"), doc["dims"].get("k")

@@ -138,6 +138,29 @@ def task_from_spec(spec: dict, robot_hint: str | None = None, *, trust_code: boo
     return task
 
 
+def code_files(spec: dict) -> dict[str, str]:
+    """Module -> the file this process imported it from, for each ``module:Class`` type in ``spec`` (a task
+    built from ``spec`` here imported them all)."""
+    modules = sorted({t.partition(":")[0] for t in code_types(spec)})
+    return {module: getattr(sys.modules.get(module), "__file__", None) for module in modules}
+
+
+def task_in_child(spec: dict, files: dict[str, str]) -> Task:
+    """In another process, the task that ``spec`` built here: its user modules imported from the same ``files``
+    (:func:`code_files`, each a file), which the user already let this process run; a module found elsewhere is
+    refused."""
+    import importlib
+
+    for module, file in files.items():
+        path = Path(file)
+        with _importable_from(path.parents[module.count(".") + (path.stem == "__init__")]):
+            found = getattr(importlib.import_module(module), "__file__", None)
+        if found != file:
+            raise ManifoldgenError(f"module {module} imports {found} in a child process, not {file}: an installed "
+                                   "module of that name comes first; rename your module")
+    return task_from_spec(spec, trust_code=True)
+
+
 def task_from_meta(meta: dict, robot_hint: str | None = None, *, task: Task | None = None,
                    trust_code: bool = False, what: str = "the file") -> Task:
     """The task a dataset, model or path file (``what``, for messages) was made for: ``task`` (a task the
