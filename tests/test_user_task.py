@@ -107,20 +107,30 @@ def test_the_candidates_of_a_user_task_train_side_by_side_as_in_one_process(trai
     two)."""
     import torch
 
-    from manifoldgen.runtime import TORCH_THREADS, set_threads
-
     from manifoldgen.models import load_model
+    from manifoldgen.runtime import TORCH_THREADS, set_threads
     from manifoldgen.selection import select_model
     from manifoldgen.tasks import code_files, load_task_file
 
     data, task = Dataset.load(trained / "d.npz"), load_task_file(TASK)
     assert code_files(task.spec()) == {"tool_down": str(EXAMPLE / "tool_down.py")}  # so the children import it
     set_threads(TORCH_THREADS)
-    tables = [select_model(data, trained / f"auto{workers}", seed=3, epochs=1, progress=False, workers=workers,
-                           task=task, race_scenes=False)[1] for workers in (1, 2)]
-    assert [[{k: v for k, v in row.items() if k != "seconds"} for row in table] for table in tables][0] == \
-        [{k: v for k, v in row.items() if k != "seconds"} for row in tables[1]]
+    one, two = ([{k: v for k, v in row.items() if k != "seconds"}
+                 for row in select_model(data, trained / f"auto{workers}", seed=3, epochs=1, progress=False,
+                                         workers=workers, task=task, race_scenes=False)[1]] for workers in (1, 2))
+    assert one == two
     for name in ("cvae", "cfm"):
         one, two = (load_model(trained / f"auto{workers}" / "candidates" / name) for workers in (1, 2))
         for key, value in one.state_tensors().items():
             torch.testing.assert_close(two.state_tensors()[key], value, rtol=0, atol=0)
+
+
+def test_a_child_refuses_a_user_module_found_in_another_file(trained, tmp_path):
+    """A child that would import the user's module from a file other than the parent's refuses, in one line."""
+    from manifoldgen.errors import ManifoldgenError
+    from manifoldgen.tasks import load_task_file, task_in_child
+
+    spec = load_task_file(TASK).spec()
+    with pytest.raises(ManifoldgenError, match=f"module tool_down imports {EXAMPLE / 'tool_down.py'} in a child "
+                                               f"process, not {tmp_path / 'tool_down.py'}"):
+        task_in_child(spec, {"tool_down": str(tmp_path / "tool_down.py")})
