@@ -196,7 +196,7 @@ def test_shortcut_keeps_the_constraint_and_shortens():
 def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_informed_set():
     """``informed``: after the first (shortened) path, searches whose sampler keeps only the rows a shorter path could
     visit (|x - start| + |x - goal| below the best length so far) and which pool no stepping stones ahead, until one
-    finds none; the path kept is the shortest of them, valid state by state, and the sampler draws from the whole
+    finds none (each within a wall-time budget, so whether the last finds one depends on the machine); the path kept is the shortest of them, valid state by state, and the sampler draws from the whole
     manifold again after the query. A restricted sampler whose set holds too few of its rows gives up once it has
     drawn INFORMED_PROBE, in one line."""
     from manifoldgen.sampling import INFORMED_PROBE
@@ -223,9 +223,10 @@ def test_informed_searches_keep_the_shortest_path_and_draw_only_inside_the_infor
     result = planner.solve(start, goal, 20.0)
     _check(result, space, start, goal)
     assert pools[0] == (False, planner.settings.pool) and pools[1:] and all(p == (True, 0) for p in pools[1:])
-    lengths = result.extras["informed"]
-    assert len(lengths) == 3 and lengths[1] < lengths[0] and lengths[2] is None  # the first found a shorter path
-    assert np.isclose(result.length, lengths[1])
+    lengths = result.extras["informed"]  # the first path's, then each search's (None: none found in its budget)
+    assert len(lengths) == 3 and lengths[1] is not None and lengths[1] < lengths[0]  # the first found a shorter path
+    # the second may or may not find one within its wall-time budget: either way the shortest path is kept
+    assert np.isclose(result.length, min(length for length in lengths if length is not None))
     rows = np.concatenate(given)
     assert len(rows) > 0 and (rows < 0).all()  # rows were drawn, every one inside the set
     assert sampler.informed is None
