@@ -222,22 +222,27 @@ def test_candidates_trained_in_parallel_are_the_sequential_ones(tiny, tmp_path):
 
 
 @pytest.mark.slow
-def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_path):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_auto_races_the_candidates_on_the_task_scenes_and_keeps_the_winner(tmp_path, workers):
+    """In one process, or with the second candidate trained, scored and raced in a child that races projection
+    too: every entry raced on every scene, the winner kept, every candidate's loss curves drawn."""
     from manifoldgen.selection import PROJECTION, RACE_SEEDS, select_model
     from manifoldgen.tasks import get_task
 
     task = get_task("sphere")
     data = collect(task, 400, seed=3, progress=False)
-    model, table, raced = select_model(data, tmp_path / "m", seed=1, epochs=2, progress=False, workers=1, task=task)
+    model, table, raced = select_model(data, tmp_path / "m", seed=1, epochs=2, progress=False, workers=workers,
+                                       task=task)
     blends = [row["model"] for row in table if "blend" in row]  # the most accurate with the most covering's rows
     assert blends in ([], ["cvae+cfm"], ["cfm+cvae"])
     assert [row["label"] for row in raced] == ["cvae", "cfm", *blends, PROJECTION]
-    assert all(row["runs"] == RACE_SEEDS * len(task.scenes) for row in raced)
+    assert all(row["runs"] == RACE_SEEDS * len(task.scenes) and row["cpu"] > 0 for row in raced)
     winner = max(raced, key=lambda r: (r["solved"], -r["cpu"]))
     assert winner["chosen"] and sum(row["chosen"] for row in raced) == 1
     saved = load_model(tmp_path / "m")
     assert saved.label == winner["model"] and saved.mix == winner["mix"]
     assert json.loads((tmp_path / "m" / "selection.json").read_text())["race"] == raced
+    assert all((tmp_path / "m" / "candidates" / name / "loss.png").stat().st_size > 0 for name in ("cvae", "cfm"))
 
 
 def test_a_step_with_a_non_finite_loss_is_skipped_and_a_divergence_keeps_the_best_epoch(tiny, monkeypatch):

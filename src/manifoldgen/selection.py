@@ -7,8 +7,10 @@ for all) each is scored at every condition value there: ``accuracy``, the share 
 tolerance, and ``recall``, the share of held-out rows that some sample comes near (k-NN recall,
 :func:`manifoldgen.metrics.prdc`). The rule's model is the most accurate of those whose recall is within
 :data:`RECALL_SLACK` of the best recall (a model that misses an IK branch fails queries there; a less accurate
-one only refines more). The candidates train side by side, one process each (as many as there are CPUs), each
-as it would alone: the same bytes as a sequential run.
+one only refines more). The candidates train side by side (as many processes as there are CPUs: this one trains
+the first, child processes the others), each as it would alone: the same bytes as a sequential run. Each
+process scores and races the candidate it trained as soon as it is trained, and a child races the projection
+sampler, so that a candidate that trains faster is priced while the slowest still trains.
 
 Held-out rows do not price what planning pays: a flow-matching model covers more but decodes a row in tens to
 hundreds of microseconds, and on a codimension-one manifold projected uniform rows are as good and cost nothing.
@@ -49,7 +51,8 @@ from manifoldgen.models.files import BLEND_DIR
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.scene import Scene
 from manifoldgen.tasks import Task, code_files, task_in_child
-from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split
+from manifoldgen.models.loss_curve import plot_training
+from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split, train
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
 BLEND_SHARE = 0.2  # the share of rows the most covering candidate gives the most accurate one's blend
@@ -100,42 +103,45 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
             if not (folder / CONFIG_FILE).exists() or (folder / CHECKPOINT).exists()]
     for name in set(folders) - set(todo):
         _check_reused(folders[name], dataset, seed, epochs)
-    jobs = [(name, dataset, epochs, seed, folders[name], resume and (folders[name] / CHECKPOINT).exists())
-            for name in todo]
+    held = (dataset.q[held_out], dataset.y[held_out])
+    scenes = race_documents(task, recorded) if race_scenes else []
+    jobs = [(name, dataset, epochs, seed, folders[name], name in todo,
+             resume and (folders[name] / CHECKPOINT).exists()) for name in CANDIDATES]
     if workers is None:
         workers = (os.cpu_count() or 1) if len(dataset) >= PARALLEL_ROWS else 1
-    workers = min(len(jobs), workers)
     spec = task.spec()
     files = code_files(spec)  # a child imports the task's user modules from the files this process imported
-    if workers > 1 and all(files.values()):
-        child = (spec, files) if files else None  # None: a child rebuilds the task from the dataset's meta
-        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    if min(len(todo), workers) > 1 and all(files.values()):
+        child = (spec, files, torch.get_num_threads())
+        pool = ProcessPoolExecutor(min(len(jobs), workers) - 1, mp_context=multiprocessing.get_context("spawn"))
         try:
-            list(pool.map(_train_candidate, jobs, [child] * len(jobs)))
+            others = [pool.submit(_candidate, job, held, scenes, child) for job in jobs[1:]]
+            projection = pool.submit(_race_in_child, child, scenes) if scenes else None
+            done = [_candidate(jobs[0], held, scenes, task=task, progress=progress, plots=pool)]
+            done += [future.result() for future in others]
+            projection = projection.result() if projection else None
+            for future in done[0]["plots"]:
+                future.result()
         finally:  # scoring goes on while the children exit (unloading torch takes a second or two)
             pool.shutdown(wait=False, cancel_futures=True)
     else:
-        for job in jobs:
-            _train_candidate(job, task=task, progress=progress)
-    table, models = [], {}
-    for name, folder in folders.items():
-        models[name] = load_model(folder)
-        log = _training_log(folder)
-        table.append({"model": name, **score(models[name], task, dataset.q[held_out], dataset.y[held_out], seed),
-                      "epochs": len(log["history"]), "seconds": round(float(log["seconds"]), 1),
-                      **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]}
-                         if log.get("diverged_at") else {})})
+        done = [_candidate(job, held, scenes, task=task, progress=progress) for job in jobs]
+        projection = race({PROJECTION: None}, task, scenes, progress=progress)[PROJECTION] if scenes else None
+    table = [result["row"] for result in done]
+    raced = {result["row"]["model"]: result["race"] for result in done if result["race"]}
+    models = {name: load_model(folder) for name, folder in folders.items()}
     blend = blended(models, table)
     if blend is not None:  # saved beside the others, so that it can be sampled and benchmarked as they can
         (out / "candidates" / blend.label).mkdir(exist_ok=True)
         blend.save(out / "candidates" / blend.label)
         models[blend.label] = blend
-        table.append({"model": blend.label, **score(blend, task, dataset.q[held_out], dataset.y[held_out], seed),
-                      "blend": BLEND_SHARE})
+        table.append({"model": blend.label, **score(blend, task, *held, seed), "blend": BLEND_SHARE})
+        if scenes:
+            raced |= race({blend.label: blend}, task, scenes, progress=progress)
     best_recall = max(row["recall"] for row in table)
     ruled = max((row for row in table if row["recall"] >= best_recall - RECALL_SLACK), key=lambda r: r["accuracy"])
-    raced = race(models, ruled["model"], task, recorded, progress=progress) \
-        if race_scenes else []
+    raced = [{"label": name, "model": name, "mix": 0.0, **raced[name]} for name in models] + \
+        [{"label": PROJECTION, "model": ruled["model"], "mix": 1.0, **projection}] if scenes else []
     winner = max(raced, key=lambda r: (r["solved"], -r["cpu"])) if raced else None
     name = winner["model"] if winner else ruled["model"]
     for row in table:
@@ -170,45 +176,47 @@ def blended(models: dict[str, ConditionalSampler], table: list[dict]) -> Conditi
     return blend
 
 
-def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded: list[dict] = (), *,
-         progress: bool = False) -> list[dict]:
-    """Plan up to :data:`RACE_SCENES` of ``task``'s scenes (its scene files, else the scene documents ``recorded``
-    in the dataset's meta: :func:`manifoldgen.scene.solved_document`) :data:`RACE_SEEDS` times each (RRT-Connect,
-    its task settings, :data:`RACE_TIME` seconds) with each model's sampler and with the projection sampler
-    (:data:`PROJECTION`, kept as the ``ruled`` model at mix 1: :func:`manifoldgen.sampling.model_sampler`); one
-    row per entry: ``label``, ``model``, ``mix``,
-    ``solved``, ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones counted at the time limit). No
-    scenes: []."""
+def race_documents(task: Task, recorded: list[dict] = ()) -> list[dict]:
+    """The scenes the race plans, as solved scene documents (:func:`manifoldgen.scene.solved_document`): up to
+    :data:`RACE_SCENES` of ``task``'s scene files (one that cannot be set up is left out: collect already warned),
+    else of the scene documents ``recorded`` in the dataset's meta (a task rebuilt from a file's meta)."""
+    from manifoldgen.scene import get_scene, solved_document
+
+    if not task.scenes:
+        return list(recorded)[:RACE_SCENES]
+    documents = []
+    for name in list(task.scenes)[:RACE_SCENES]:
+        try:
+            documents.append(solved_document(get_scene(task, name), name))
+        except ManifoldgenError:
+            continue
+    return documents
+
+
+def race(models: dict[str, ConditionalSampler | None], task: Task, scenes: list[dict], *,
+         progress: bool = False) -> dict[str, dict]:
+    """Plan each scene document of ``scenes`` (:func:`race_documents`) :data:`RACE_SEEDS` times (RRT-Connect, its
+    task settings, :data:`RACE_TIME` seconds) with each model's sampler (None: the projection sampler,
+    :data:`PROJECTION`); per label: ``solved``, ``runs`` and ``cpu`` (median CPU seconds of a run, unsolved ones
+    counted at the time limit)."""
     from manifoldgen.progress import progress_bar
     from manifoldgen.query import get_planner, task_settings
     from manifoldgen.sampling import ModelSampler, ProjectionSampler
-    from manifoldgen.scene import get_scene
     from manifoldgen.space import ConstrainedSpace
 
-    entries = [(name, name, 0.0) for name in models] + [(PROJECTION, ruled, 1.0)]
-    scenes = []
-    for name in list(task.scenes)[:RACE_SCENES]:
-        try:
-            scenes.append(get_scene(task, name))
-        except ManifoldgenError:  # collect already warned that this scene cannot be set up
-            continue
-    if not task.scenes:  # a task rebuilt from a file's meta: the scenes its dataset was collected for
-        scenes = [Scene.from_json(json.dumps(doc), f"the dataset's scene {doc.get('name')}")
-                  for doc in list(recorded)[:RACE_SCENES]]
-    if not scenes:
-        return []
-    runs = {label: [] for label, _, _ in entries}
+    runs = {label: [] for label in models}
     planner_type = get_planner("rrtconnect")
     settings = planner_type.settings_type(**task_settings(task, "rrtconnect"))
-    with progress_bar("racing samplers on the task's scenes", len(entries) * len(scenes) * RACE_SEEDS,
+    with progress_bar(f"racing {', '.join(models)} on the task's scenes", len(models) * len(scenes) * RACE_SEEDS,
                       progress) as bar:
-        for scene in scenes:
+        for doc in scenes:
+            scene = Scene.from_json(json.dumps(doc), f"scene {doc.get('name')}")
             space = ConstrainedSpace(task.constraint, task.condition.check(scene.condition)[0],
                                      scene.checker(task.robot))
-            for label, name, mix in entries:
+            for label, model in models.items():
                 for seed in range(RACE_SEED, RACE_SEED + RACE_SEEDS):
-                    sampler = (ProjectionSampler(space, seed=seed) if mix else
-                               ModelSampler(space, models[name], seed=seed))
+                    sampler = (ProjectionSampler(space, seed=seed) if model is None else
+                               ModelSampler(space, model, seed=seed))
                     planner = planner_type(space, sampler, seed=seed, settings=settings)
                     begin = time.process_time()
                     result = planner.solve(scene.start, scene.goal, RACE_TIME)
@@ -216,9 +224,8 @@ def race(models: dict[str, ConditionalSampler], ruled: str, task: Task, recorded
                     solved = result.solved and space.validate_path(result.path).valid
                     runs[label].append((solved, cpu if solved else max(cpu, RACE_TIME)))
                     bar.advance()
-    return [{"label": label, "model": name, "mix": mix, "solved": sum(ok for ok, _ in runs[label]),
-             "runs": len(runs[label]), "cpu": round(statistics.median(cpu for _, cpu in runs[label]), 4)}
-            for label, name, mix in entries]
+    return {label: {"solved": sum(ok for ok, _ in rows), "runs": len(rows),
+                    "cpu": round(statistics.median(cpu for _, cpu in rows), 4)} for label, rows in runs.items()}
 
 
 def check_recorded_scenes(dataset: Dataset) -> list[dict]:
@@ -261,19 +268,48 @@ def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None)
                                "directory (-o), or delete it to train anew")
 
 
-def _train_candidate(job: tuple, child: tuple | None = None, *, task: Task | None = None,
-                     progress: bool = False) -> None:
-    """Train one candidate ``(name, dataset, epochs, seed, folder, resume)`` into its folder for ``task``; in a
-    child process ``task`` is None: rebuilt by :func:`task_in_child` from ``child`` ``(spec, files)``, else from
-    the dataset's meta."""
+def _candidate(job: tuple, held: tuple[np.ndarray, np.ndarray], scenes: list[dict], child: tuple | None = None, *,
+               task: Task | None = None, progress: bool = False, plots: ProcessPoolExecutor | None = None) -> dict:
+    """One candidate ``(name, dataset, epochs, seed, folder, train, resume)``: trained into its folder for
+    ``task`` unless ``train`` is False (a finished one, reused), then scored on the held-out rows ``held``
+    ``(q (N, n), y (N, k))`` and raced on ``scenes``; its loss curves (``loss.png``) are drawn here, or by the
+    ``plots`` pool while this process scores and races. In a child process ``task`` is None: rebuilt by
+    :func:`task_in_child` from ``child`` ``(spec, files, torch threads)``. Returns its table ``row``, its
+    ``race`` result ({} without scenes) and the ``plots`` futures."""
+    name, dataset, epochs, seed, folder, trains, resume = job
+    if task is None:
+        task = _child_task(child)
+    model = get_model_class(name)()
+    futures = []
+    if trains:
+        log = train(model, dataset, task=task, epochs=epochs, seed=seed, progress=progress, out=folder,
+                    resume=resume)
+        if plots is None:
+            plot_training(log, folder / "loss.png")
+        else:
+            futures.append(plots.submit(plot_training, log, folder / "loss.png"))
+    model = load_model(folder)
+    log = _training_log(folder)
+    row = {"model": name, **score(model, task, *held, seed), "epochs": len(log["history"]),
+           "seconds": round(float(log["seconds"]), 1),
+           **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]} if log.get("diverged_at") else {})}
+    raced = race({name: model}, task, scenes, progress=progress)[name] if scenes else {}
+    return {"row": row, "race": raced, "plots": futures}
+
+
+def _race_in_child(child: tuple, scenes: list[dict]) -> dict:
+    """The projection sampler's race (:func:`race`) in a child process, for the task ``child`` describes."""
+    return race({PROJECTION: None}, _child_task(child), scenes)[PROJECTION]
+
+
+def _child_task(child: tuple) -> Task:
+    """In a child process: torch at the parent's thread count, and the task ``child`` ``(spec, files, threads)``
+    describes (:func:`task_in_child`)."""
     from manifoldgen.runtime import set_threads
 
-    name, dataset, epochs, seed, folder, resume = job
-    if task is None:
-        set_threads()
-        task = task_in_child(*child) if child else None
-    get_model_class(name)().fit(dataset, epochs=epochs, seed=seed, out=folder, progress=progress, resume=resume,
-                                task=task)
+    spec, files, threads = child
+    set_threads(threads)
+    return task_in_child(spec, files)
 
 
 def score(model: ConditionalSampler, task: Task, q: np.ndarray, y: np.ndarray, seed: int) -> dict:

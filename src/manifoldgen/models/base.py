@@ -423,7 +423,8 @@ class SingleLossSampler(ConditionalSampler):
         finite = bool(torch.isfinite(losses["loss"]))
         if finite:
             losses["loss"].backward()
-            finite = all(bool(torch.isfinite(p.grad).all()) for p in self.nets.parameters() if p.grad is not None)
+            grads = [p.grad.reshape(-1) for p in self.nets.parameters() if p.grad is not None]
+            finite = bool(torch.isfinite(torch.cat(grads)).all()) if grads else True
         if finite:
             optimizers[0].step()
         return {**{key: float(v.detach()) for key, v in losses.items()}, "skipped": float(not finite)}
