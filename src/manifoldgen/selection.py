@@ -117,12 +117,14 @@ def select_model(dataset: Dataset, out: str | Path, *, seed: int = 0, epochs: in
         try:
             others = [pool.submit(_candidate, job, held, scenes, child) for job in jobs[1:]]
             projection = pool.submit(_race_in_child, child, scenes) if scenes else None
-            done = [_candidate(jobs[0], held, scenes, task=task, progress=progress, plots=pool)]
-            done += [future.result() for future in others]
+            log = _trained(jobs[0], task, progress)
+            plot = pool.submit(plot_training, log, jobs[0][4] / "loss.png") if log else None
+            pool.shutdown(wait=False)  # no more work: the children exit once theirs is done, while this goes on
+            done = [_priced(jobs[0], held, scenes, task, progress)] + [future.result() for future in others]
             projection = projection.result() if projection else None
-            for future in done[0]["plots"]:
-                future.result()
-        finally:  # scoring goes on while the children exit (unloading torch takes a second or two)
+            if plot:
+                plot.result()
+        finally:
             pool.shutdown(wait=False, cancel_futures=True)
     else:
         done = [_candidate(job, held, scenes, task=task, progress=progress) for job in jobs]
@@ -269,32 +271,41 @@ def _check_reused(folder: Path, dataset: Dataset, seed: int, epochs: int | None)
 
 
 def _candidate(job: tuple, held: tuple[np.ndarray, np.ndarray], scenes: list[dict], child: tuple | None = None, *,
-               task: Task | None = None, progress: bool = False, plots: ProcessPoolExecutor | None = None) -> dict:
+               task: Task | None = None, progress: bool = False) -> dict:
     """One candidate ``(name, dataset, epochs, seed, folder, train, resume)``: trained into its folder for
-    ``task`` unless ``train`` is False (a finished one, reused), then scored on the held-out rows ``held``
-    ``(q (N, n), y (N, k))`` and raced on ``scenes``; its loss curves (``loss.png``) are drawn here, or by the
-    ``plots`` pool while this process scores and races. In a child process ``task`` is None: rebuilt by
-    :func:`task_in_child` from ``child`` ``(spec, files, torch threads)``. Returns its table ``row``, its
-    ``race`` result ({} without scenes) and the ``plots`` futures."""
-    name, dataset, epochs, seed, folder, trains, resume = job
+    ``task`` unless ``train`` is False (a finished one, reused) and its loss curves drawn (``loss.png``), then
+    scored on the held-out rows ``held`` ``(q (N, n), y (N, k))`` and raced on ``scenes`` (:func:`_priced`). In
+    a child process ``task`` is None: rebuilt by :func:`task_in_child` from ``child`` ``(spec, files, torch
+    threads)``."""
     if task is None:
         task = _child_task(child)
-    model = get_model_class(name)()
-    futures = []
-    if trains:
-        log = train(model, dataset, task=task, epochs=epochs, seed=seed, progress=progress, out=folder,
-                    resume=resume)
-        if plots is None:
-            plot_training(log, folder / "loss.png")
-        else:
-            futures.append(plots.submit(plot_training, log, folder / "loss.png"))
+    log = _trained(job, task, progress)
+    if log:
+        plot_training(log, job[4] / "loss.png")
+    return _priced(job, held, scenes, task, progress)
+
+
+def _trained(job: tuple, task: Task, progress: bool):
+    """The training log of the candidate ``job`` (see :func:`_candidate`) trained now, or None where it is
+    reused."""
+    name, dataset, epochs, seed, folder, trains, resume = job
+    if not trains:
+        return None
+    return train(get_model_class(name)(), dataset, task=task, epochs=epochs, seed=seed, progress=progress,
+                 out=folder, resume=resume)
+
+
+def _priced(job: tuple, held: tuple[np.ndarray, np.ndarray], scenes: list[dict], task: Task,
+            progress: bool) -> dict:
+    """The trained candidate ``job`` (see :func:`_candidate`) scored on ``held`` and raced on ``scenes``: its
+    table ``row`` and its ``race`` result ({} without scenes)."""
+    name, _, _, seed, folder = job[:5]
     model = load_model(folder)
     log = _training_log(folder)
     row = {"model": name, **score(model, task, *held, seed), "epochs": len(log["history"]),
            "seconds": round(float(log["seconds"]), 1),
            **({"diverged_at": log["diverged_at"], "best_epoch": log["best_epoch"]} if log.get("diverged_at") else {})}
-    raced = race({name: model}, task, scenes, progress=progress)[name] if scenes else {}
-    return {"row": row, "race": raced, "plots": futures}
+    return {"row": row, "race": race({name: model}, task, scenes, progress=progress)[name] if scenes else {}}
 
 
 def _race_in_child(child: tuple, scenes: list[dict]) -> dict:
@@ -303,12 +314,13 @@ def _race_in_child(child: tuple, scenes: list[dict]) -> dict:
 
 
 def _child_task(child: tuple) -> Task:
-    """In a child process: torch at the parent's thread count, and the task ``child`` ``(spec, files, threads)``
-    describes (:func:`task_in_child`)."""
-    from manifoldgen.runtime import set_threads
+    """In a child process: torch at the parent's thread count, a quick exit, and the task ``child``
+    ``(spec, files, threads)`` describes (:func:`task_in_child`)."""
+    from manifoldgen.runtime import exit_without_collection, set_threads
 
     spec, files, threads = child
     set_threads(threads)
+    exit_without_collection()
     return task_in_child(spec, files)
 
 

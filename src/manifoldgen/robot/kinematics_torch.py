@@ -76,8 +76,9 @@ class TorchKinematics:
             T = chain[0].expand(len(q), 4, 4)
         else:
             M = _step_transforms(*chain, q)
-            while M.shape[1] > 1:
-                M = M[:, 0::2] @ M[:, 1::2]
+            while M.shape[1] > 1:  # pairs unbound, not strided slices (whose backward fills zero tensors)
+                first, second = M.unflatten(1, (-1, 2)).unbind(2)
+                M = first @ second
             T = M[:, 0]
         return T[:, :3, 3], T[:, :3, :3]
 
@@ -91,9 +92,14 @@ class TorchKinematics:
                                   torch.as_tensor(tree.fixed, dtype=q.dtype))
         constants, columns, revolute, prismatic, levels, weights, fixed = self._tensors[key]
         M = _step_transforms(constants, columns, revolute, prismatic, q)
-        world = [M[:, :levels[0][0].start]] if levels else [M]  # depth 0 is in the world already
-        for steps, parents in levels:
-            done = torch.cat(world, dim=1) if len(world) > 1 else world[0]
-            world.append(done[:, parents] @ M[:, steps])
+        if levels:  # one split, not a slice per depth (whose backward pass fills a zero tensor as large as M)
+            depths = torch.split(M, [levels[0][0].start] + [steps.stop - steps.start for steps, _ in levels], dim=1)
+        world = [depths[0]] if levels else [M]  # depth 0 is in the world already
+        above = 0  # where the depth above starts: a step's parent is one of its steps
+        for (steps, parents), moved in zip(levels, depths[1:] if levels else ()):
+            local = slice(parents.start - above, parents.stop - above) if isinstance(parents, slice) \
+                else parents - above
+            world.append(world[-1][:, local] @ moved)
+            above = steps.start
         world = torch.cat(world, dim=1) if len(world) > 1 else world[0]
         return (world.reshape(len(q), -1) @ weights + fixed) / self.robot.mass
