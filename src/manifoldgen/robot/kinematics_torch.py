@@ -19,10 +19,18 @@ import torch
 
 def _step_transforms(constants: torch.Tensor, columns: np.ndarray, revolute: torch.Tensor, prismatic: bool,
                      q: torch.Tensor) -> torch.Tensor:
-    """(B, S, 4, 4) transforms ``A + u B + v C`` of the steps with ``constants`` (3, S, 4, 4) at ``q`` (B, n)."""
-    angle = q[:, columns]
-    u = torch.where(revolute, torch.sin(angle), angle) if prismatic else torch.sin(angle)
-    return constants[0] + u[..., None, None] * constants[1] + (1 - torch.cos(angle))[..., None, None] * constants[2]
+    """(S, 4, 4, B) transforms ``A + u B + v C`` of the steps with ``constants`` (3, S, 4, 4, 1) at ``q`` (B, n),
+    the batch last."""
+    angle = q[:, columns].T.contiguous()
+    u = torch.where(revolute[:, None], torch.sin(angle), angle) if prismatic else torch.sin(angle)
+    return constants[0] + u[:, None, None] * constants[1] + (1 - torch.cos(angle))[:, None, None] * constants[2]
+
+
+def _times(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(k, 4, 4, B) products ``a @ b`` of the transforms ``a``, ``b`` (k, 4, 4, B), batch last: a broadcast product
+    and a sum, each over contiguous rows of B values (twice as fast, backward included, as torch's batched matrix
+    product of 4 x 4 matrices)."""
+    return (a[:, :, :, None] * b[:, None]).sum(2)
 
 
 class TorchKinematics:
@@ -58,7 +66,7 @@ class TorchKinematics:
             if isinstance(chain, np.ndarray):  # nothing in the planning group moves the frame
                 self._tensors[key] = (torch.as_tensor(chain, dtype=dtype),)
             else:
-                self._tensors[key] = (torch.as_tensor(chain.constants, dtype=dtype), chain.columns,
+                self._tensors[key] = (torch.as_tensor(chain.constants, dtype=dtype)[..., None], chain.columns,
                                       torch.as_tensor(chain.revolute), chain.prismatic)
         return self._tensors[key]
 
@@ -72,34 +80,32 @@ class TorchKinematics:
 
     def _frame_pose(self, q: torch.Tensor, frame: str) -> tuple[torch.Tensor, torch.Tensor]:
         chain = self._chain(frame, q.dtype)
-        if len(chain) == 1:
+        if len(chain) == 1:  # nothing in the planning group moves the frame
             T = chain[0].expand(len(q), 4, 4)
-        else:
-            M = _step_transforms(*chain, q)
-            while M.shape[1] > 1:  # pairs unbound, not strided slices (whose backward fills zero tensors)
-                first, second = M.unflatten(1, (-1, 2)).unbind(2)
-                M = first @ second
-            T = M[:, 0]
-        return T[:, :3, 3], T[:, :3, :3]
+            return T[:, :3, 3], T[:, :3, :3]
+        M = _step_transforms(*chain, q)
+        while len(M) > 1:  # pairs unbound, not strided slices (whose backward fills zero tensors)
+            M = _times(*M.unflatten(0, (-1, 2)).unbind(1))
+        return M[0, :3, 3].T, M[0, :3, :3].permute(2, 0, 1)
 
     def _com(self, q: torch.Tensor) -> torch.Tensor:
         key = ("com", q.dtype)
         if key not in self._tensors:
             tree = self.robot._tree
-            self._tensors[key] = (torch.as_tensor(tree.constants, dtype=q.dtype), tree.columns,
+            self._tensors[key] = (torch.as_tensor(tree.constants, dtype=q.dtype)[..., None], tree.columns,
                                   torch.as_tensor(tree.revolute), not tree.revolute.all(), tree.levels,
                                   torch.as_tensor(tree.weights, dtype=q.dtype),
                                   torch.as_tensor(tree.fixed, dtype=q.dtype))
         constants, columns, revolute, prismatic, levels, weights, fixed = self._tensors[key]
         M = _step_transforms(constants, columns, revolute, prismatic, q)
         if levels:  # one split, not a slice per depth (whose backward pass fills a zero tensor as large as M)
-            depths = torch.split(M, [levels[0][0].start] + [steps.stop - steps.start for steps, _ in levels], dim=1)
+            depths = torch.split(M, [levels[0][0].start] + [steps.stop - steps.start for steps, _ in levels])
         world = [depths[0]] if levels else [M]  # depth 0 is in the world already
         above = 0  # where the depth above starts: a step's parent is one of its steps
         for (steps, parents), moved in zip(levels, depths[1:] if levels else ()):
             local = slice(parents.start - above, parents.stop - above) if isinstance(parents, slice) \
                 else parents - above
-            world.append(world[-1][:, local] @ moved)
+            world.append(_times(world[-1][local], moved))
             above = steps.start
-        world = torch.cat(world, dim=1) if len(world) > 1 else world[0]
-        return (world.reshape(len(q), -1) @ weights + fixed) / self.robot.mass
+        world = torch.cat(world) if len(world) > 1 else world[0]
+        return (world.reshape(-1, len(q)).T @ weights + fixed) / self.robot.mass
