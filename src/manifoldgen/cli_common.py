@@ -12,10 +12,9 @@ import sys
 import threading
 import warnings
 
-from manifoldgen.runtime import check_seed, exit_without_collection, limit_threads
+from manifoldgen.runtime import check_seed, limit_threads
 
 limit_threads()  # before numpy and torch start their pools: on a busy machine, spinning threads slowed collect 18x
-exit_without_collection()
 
 import typer  # noqa: E402
 from rich.console import Console  # noqa: E402

@@ -18,17 +18,6 @@ def limit_threads() -> None:
         os.environ.setdefault(variable, str(TORCH_THREADS))
 
 
-def exit_without_collection() -> None:
-    """At this process's exit, skip the interpreter's last garbage collections over every object still alive
-    (:func:`gc.freeze` from an ``atexit`` hook): with torch loaded they cost about 0.7 s of each command and
-    each training child. Objects are still freed by reference counting; nothing is left to write by then
-    (every file is written whole before a command returns)."""
-    import atexit
-    import gc
-
-    atexit.register(gc.freeze)
-
-
 MAX_THREADS = 256  # torch CPU threads a command may ask for
 
 

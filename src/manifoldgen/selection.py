@@ -314,13 +314,12 @@ def _race_in_child(child: tuple, scenes: list[dict]) -> dict:
 
 
 def _child_task(child: tuple) -> Task:
-    """In a child process: torch at the parent's thread count, a quick exit, and the task ``child``
-    ``(spec, files, threads)`` describes (:func:`task_in_child`)."""
-    from manifoldgen.runtime import exit_without_collection, set_threads
+    """In a child process: torch at the parent's thread count, and the task ``child`` ``(spec, files, threads)``
+    describes (:func:`task_in_child`)."""
+    from manifoldgen.runtime import set_threads
 
     spec, files, threads = child
     set_threads(threads)
-    exit_without_collection()
     return task_in_child(spec, files)
 
 
