@@ -102,9 +102,9 @@ def test_the_user_files_need_the_task_file(trained, monkeypatch):
 
 
 def test_the_candidates_of_a_user_task_train_side_by_side_as_in_one_process(trained):
-    """Two child processes import the user's module from the file this one did: the same candidates, bit for
-    bit, as one process training them in turn at the children's torch threads (an earlier test's `sample` set
-    two)."""
+    """A child process imports the user's module from the file this one did and trains the second candidate at
+    this process's torch threads while this one trains the first: the same candidates, bit for bit, as one
+    process training them in turn."""
     import torch
 
     from manifoldgen.models import load_model
@@ -113,7 +113,7 @@ def test_the_candidates_of_a_user_task_train_side_by_side_as_in_one_process(trai
     from manifoldgen.tasks import code_files, load_task_file
 
     data, task = Dataset.load(trained / "d.npz"), load_task_file(TASK)
-    assert code_files(task.spec()) == {"tool_down": str(EXAMPLE / "tool_down.py")}  # so the children import it
+    assert code_files(task.spec()) == {"tool_down": str(EXAMPLE / "tool_down.py")}  # so a child imports it
     set_threads(TORCH_THREADS)
     one, two = ([{k: v for k, v in row.items() if k != "seconds"}
                  for row in select_model(data, trained / f"auto{workers}", seed=3, epochs=1, progress=False,

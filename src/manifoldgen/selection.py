@@ -48,11 +48,12 @@ from manifoldgen.metrics import joint_features, prdc
 from manifoldgen.models import get_model_class, load_model
 from manifoldgen.models.base import CONFIG_FILE, ConditionalSampler, dataset_task
 from manifoldgen.models.files import BLEND_DIR
+from manifoldgen.models.loss_curve import plot_training
 from manifoldgen.runtime import CANDIDATES
 from manifoldgen.scene import Scene
 from manifoldgen.tasks import Task, code_files, task_in_child
-from manifoldgen.models.loss_curve import plot_training
-from manifoldgen.training import CHECKPOINT, VALIDATION, check_dataset, check_unused, fingerprint, split, train
+from manifoldgen.training import (CHECKPOINT, VALIDATION, TrainingLog, check_dataset, check_unused, fingerprint, split,
+                                  train)
 
 RECALL_SLACK = 0.1  # candidates within this recall of the best compete on accuracy
 BLEND_SHARE = 0.2  # the share of rows the most covering candidate gives the most accurate one's blend
@@ -285,7 +286,7 @@ def _candidate(job: tuple, held: tuple[np.ndarray, np.ndarray], scenes: list[dic
     return _priced(job, held, scenes, task, progress)
 
 
-def _trained(job: tuple, task: Task, progress: bool):
+def _trained(job: tuple, task: Task, progress: bool) -> TrainingLog | None:
     """The training log of the candidate ``job`` (see :func:`_candidate`) trained now, or None where it is
     reused."""
     name, dataset, epochs, seed, folder, trains, resume = job
