@@ -5,9 +5,10 @@
 
 For each batch size B, random configurations inside the limits (seed 0), calls repeated until 0.3 s of CPU:
 prints CPU and wall microseconds per call and CPU microseconds per row, then the CPU time of the whole run and
-the load average (the machine may be shared). Run it against another checkout's ``src`` (``PYTHONPATH``) for a
-before/after curve. ``--pinocchio`` also times the alternative of a pinocchio call per row on a cached model and
-data (``Robot.to_pinocchio``, then ``forwardKinematics`` + ``updateFramePlacement``, or ``centerOfMass``).
+the load average (the machine may be shared). For a before/after curve, run it at each commit (an editable
+install's import hook comes before ``PYTHONPATH``: another checkout's ``src`` there is not what gets imported).
+``--pinocchio`` also times the alternative of a pinocchio call per row on a cached model and data
+(``Robot.to_pinocchio``, then ``forwardKinematics`` + ``updateFramePlacement``, or ``centerOfMass``).
 """
 
 import argparse
