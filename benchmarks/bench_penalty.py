@@ -16,21 +16,12 @@ import argparse
 import hashlib
 import os
 import time
-from pathlib import Path
 
 import torch
+from bench_defaults import task_path  # the same lookup of a task file's name
 
 from manifoldgen.runtime import set_threads
 from manifoldgen.tasks import load_task_file
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def task_path(name: str) -> Path:
-    for folder in (Path.cwd(), ROOT / "benchmarks" / "heldout", ROOT / "src" / "manifoldgen" / "tasks"):
-        if (folder / name).is_file():
-            return folder / name
-    raise SystemExit(f"no task file {name} here, in benchmarks/heldout/ or in src/manifoldgen/tasks/")
 
 
 def main() -> None:
