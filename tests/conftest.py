@@ -1,5 +1,9 @@
 """Shared fixtures: robots and tasks are loaded once per session; the user's cache is shared; torch uses one thread
-(its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy)."""
+(its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy). Every test leaves
+the process as it found it (:func:`_isolated`), so a test's result does not depend on which tests ran before it in
+the same process (``pytest -n 2`` deals the files out to two processes in an order of its own)."""
+
+import sys
 
 from manifoldgen.runtime import set_threads
 
@@ -7,6 +11,22 @@ set_threads(1)  # before any test module imports torch
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _isolated(tmp_path_factory):
+    """After each test: torch back at one thread (a command run in-process, such as ``sample``, sets its own
+    count, and a thread count changes float sums in the last bits), and the user modules the test imported from
+    the tests' temporary folders forgotten (a later task file's module of that name comes from its own folder)."""
+    before = set(sys.modules)
+    yield
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.get_num_threads() != 1:
+        set_threads(1)
+    temporary = str(tmp_path_factory.getbasetemp())
+    for name in set(sys.modules) - before:
+        if (getattr(sys.modules[name], "__file__", None) or "").startswith(temporary):
+            del sys.modules[name]
 
 
 @pytest.fixture

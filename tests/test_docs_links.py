@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]
 SETUP = ["bash scripts/setup.sh && .venv/bin/manifoldgen demo     # the main job",
-         "bash scripts/setup.sh && .venv/bin/python -m pytest --full     # the tests (what .ci/run calls)"]
+         "bash scripts/setup.sh && .venv/bin/python -m pytest --full -n 2     # the tests (what .ci/run calls)"]
 
 FENCE = re.compile(r"^[ \t]*(```|~~~)[^\n]*\n.*?^[ \t]*\1[ \t]*$", re.S | re.M)
 CODE_SPAN = re.compile(r"(`+)(.+?)\1", re.S)
