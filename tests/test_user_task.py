@@ -134,3 +134,20 @@ def test_a_child_refuses_a_user_module_found_in_another_file(trained, tmp_path):
     with pytest.raises(ManifoldgenError, match=f"module tool_down imports {EXAMPLE / 'tool_down.py'} in a child "
                                                f"process, not {tmp_path / 'tool_down.py'}"):
         task_in_child(spec, {"tool_down": str(tmp_path / "tool_down.py")})
+
+
+def test_loading_a_user_task_imports_no_torch():
+    """A user constraint without a Jacobian of its own (torch autograd by default) loads, its home projected onto
+    the manifold by central differences, without importing torch (2-3 s a command): ``plan`` and ``collect`` need
+    none of it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from manifoldgen.tasks import load_task_file; "
+            f"task = load_task_file({TASK!r}); "
+            "print(float(abs(task.constraint.residual(task.home[None], task.home_condition[None])).max()), "
+            "'torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    residual, torch_loaded = done.stdout.split()
+    assert float(residual) <= 1e-6 and torch_loaded == "False", done.stdout

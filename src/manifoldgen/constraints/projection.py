@@ -10,6 +10,7 @@ unconverged rows are updated.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,11 +32,14 @@ TOL, MAX_ITERS, DAMPING, MAX_STEP = 1e-6, 50, 1e-6, 0.5  # project's defaults (t
 
 
 def project(constraint: Constraint, q: np.ndarray, y: np.ndarray, *, tol: float = TOL,
-            max_iters: int = MAX_ITERS, damping: float = DAMPING, max_step: float = MAX_STEP) -> Projection:
+            max_iters: int = MAX_ITERS, damping: float = DAMPING, max_step: float = MAX_STEP,
+            jacobian: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None) -> Projection:
     """Project configurations ``q (B, n)`` onto the manifold of ``y`` ((k,) or (B, k)).
 
-    Converged rows satisfy max_i |F_i| <= tol. Rows stop early once converged.
+    Converged rows satisfy max_i |F_i| <= tol. Rows stop early once converged. ``jacobian(q, y)`` gives F (B, m)
+    and dF/dq (B, m, n) (default: the constraint's own).
     """
+    jacobian = constraint.jacobian if jacobian is None else jacobian
     robot = constraint.robot
     q, y = constraint.batch(q, y)
     q = np.clip(q, robot.lower, robot.upper)
@@ -45,7 +49,7 @@ def project(constraint: Constraint, q: np.ndarray, y: np.ndarray, *, tol: float 
     residual = np.full(B, np.inf)
     active = np.arange(B)
     for it in range(max_iters + 1):
-        F, J = constraint.jacobian(q[active], y[active])
+        F, J = jacobian(q[active], y[active])
         err = np.max(np.abs(F), axis=1)
         residual[active] = err
         done = err <= tol
