@@ -167,3 +167,24 @@ def test_registries_read_entry_points_and_module_class_names(monkeypatch):
     assert CONSTRAINTS.get("manifoldgen.constraints.plane:PlaneConstraint").__name__ == "PlaneConstraint"
     with pytest.raises(ManifoldgenError, match="unknown constraint 'coupld'; did you mean coupled"):
         CONSTRAINTS.get("coupld")
+
+
+def test_a_module_imported_from_another_folder_is_refused_not_reused(tmp_path):
+    """Two task files whose folders each hold a module of one name: in one process the second is refused in one line
+    (Python would reuse the first's module), naming both files."""
+    import sys
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "user_task"
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "shadowed_tool.py").write_text((example / "tool_down.py").read_text())
+        (tmp_path / folder / "task.toml").write_text((example / "tool-down-xarm7.toml").read_text().replace(
+            "tool_down:ToolDownAtX", "shadowed_tool:ToolDownAtX").split("[scenes]")[0])
+    first = load_task_file(tmp_path / "a" / "task.toml")
+    assert sys.modules[type(first.constraint).__module__].__file__ == str(tmp_path / "a" / "shadowed_tool.py")
+    with pytest.raises(ManifoldgenError, match=f"module shadowed_tool is already imported in this process from "
+                                               f"{tmp_path / 'a' / 'shadowed_tool.py'}, not from the task file's folder "
+                                               f"\\({tmp_path / 'b' / 'shadowed_tool.py'}\\)"):
+        load_task_file(tmp_path / "b" / "task.toml")
+    assert load_task_file(tmp_path / "a" / "task.toml").name == "tool-down"  # its own folder's module: accepted

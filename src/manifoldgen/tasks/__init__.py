@@ -333,6 +333,8 @@ def load_task_file(path: str | Path) -> Task:
     parts = []
     for i, table in enumerate(tables):
         try:
+            for module in code_types(table):
+                _not_shadowed(module.partition(":")[0], base)
             with _importable_from(base) if code_types(table) else contextlib.nullcontext():
                 parts.append(build_constraint(robot_obj, table))
         except ManifoldgenError as exc:
@@ -402,6 +404,18 @@ def _held(task: Task, table) -> dict:
         raise ManifoldgenError(f"the held {held.shape.type} '{name}' collides with the robot at home ({links}); "
                                "move or shrink it, or add the links that hold it to touch_links")
     return held.to_dict()
+
+
+def _not_shadowed(module: str, folder: Path) -> None:
+    """Refuse a task file whose folder holds ``module`` (its top-level package) when this process already imported
+    a module of that name from another file: Python would reuse that one, not the task's."""
+    top = module.partition(".")[0]
+    loaded = getattr(sys.modules.get(top), "__file__", None)
+    own = next((f for f in (folder / f"{top}.py", folder / top / "__init__.py") if f.is_file()), None)
+    if loaded and own and Path(loaded).resolve() != own.resolve():
+        raise ManifoldgenError(f"module {top} is already imported in this process from {loaded}, not from the task "
+                               f"file's folder ({own}); rename one of the two modules, or load this task in a new "
+                               "process")
 
 
 @contextlib.contextmanager
