@@ -1,6 +1,8 @@
 """Task files: built-in tasks are files, tasks rebuild from file meta alone, bad task files are one clear line."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -172,9 +174,6 @@ def test_registries_read_entry_points_and_module_class_names(monkeypatch):
 def test_a_module_imported_from_another_folder_is_refused_not_reused(tmp_path):
     """Two task files whose folders each hold a module of one name: in one process the second is refused in one line
     (Python would reuse the first's module), naming both files."""
-    import sys
-    from pathlib import Path
-
     example = Path(__file__).resolve().parents[1] / "examples" / "user_task"
     for folder in ("a", "b"):
         (tmp_path / folder).mkdir()

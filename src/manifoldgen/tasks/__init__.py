@@ -20,7 +20,7 @@ import re
 import sys
 import tomllib
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -213,7 +213,8 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         what = (f"has shape {residual.shape}, not ({len(seeds)}, {m}) (one value per tolerance)"
                 if residual.shape != (len(seeds), m) else "holds NaN or infinite values")
         raise ManifoldgenError(f"task '{name}': the residual of constraint {kind} {what}; fix its residual()")
-    if _own_jacobian(constraint):
+    own = _own_jacobian(constraint)
+    if own:
         jacobian = np.asarray(constraint.jacobian(seeds[:1], y)[1], float)
         if jacobian.shape != (1, m, robot.n):
             raise ManifoldgenError(f"task '{name}': the jacobian of constraint {kind} has shape {jacobian.shape} for "
@@ -223,8 +224,7 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         what = (f"has shape {inequality.shape}, not ({len(seeds)}, p) (p inequalities per configuration, 0 for none)"
                 if inequality.ndim != 2 or len(inequality) != len(seeds) else "holds NaN or infinite values")
         raise ManifoldgenError(f"task '{name}': the inequality of constraint {kind} {what}; fix its inequality()")
-    res = project(constraint, seeds, y, jacobian=None if _own_jacobian(constraint)
-                  else lambda q, y: central_difference(constraint.residual, q, y))
+    res = project(constraint, seeds, y, jacobian=None if own else partial(central_difference, constraint.residual))
     if not res.converged.any():
         where = "home" if home is not None else f"{HOME_SEEDS} uniform configurations"
         raise ManifoldgenError(f"task '{name}': projecting {where} onto the constraint at condition {y.tolist()} "
