@@ -1,7 +1,8 @@
 """Shared fixtures: robots and tasks are loaded once per session; the user's cache is shared; torch uses one thread
-(its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy). Every test leaves
-the process as it found it (:func:`_isolated`), so a test's result does not depend on which tests ran before it in
-the same process (``pytest -n 2`` deals the files out to two processes in an order of its own)."""
+(its spinning worker threads cost 15x the CPU of the tiny models here when the cores are busy). After each test the
+process state that tests are known to change is restored (:func:`_isolated`), so a test's result does not depend on
+which tests ran before it in the same process (``pytest -n 2`` deals the files out to two processes in an order of
+its own)."""
 
 import sys
 
