@@ -5,6 +5,8 @@ task uses); every result is rechecked here with pinocchio from the files alone, 
 name the user's module:Class, so the commands that read them are given the task file (--task).
 """
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -140,9 +142,6 @@ def test_loading_a_user_task_imports_no_torch():
     """A user constraint without a Jacobian of its own (torch autograd by default) loads, its home projected onto
     the manifold by central differences, without importing torch (2-3 s a command): ``plan`` and ``collect`` need
     none of it."""
-    import subprocess
-    import sys
-
     code = ("import sys; from manifoldgen.tasks import load_task_file; "
             f"task = load_task_file({TASK!r}); "
             "print(float(abs(task.constraint.residual(task.home[None], task.home_condition[None])).max()), "

@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from manifoldgen.constraints import Constraint
+from manifoldgen.constraints import Constraint, own_jacobian
 
 
 # The Jacobian of a Python part without an analytic one: central differences of its numpy residual for small
@@ -63,7 +63,7 @@ class ConstraintCallback:
 
     def _jacobian(self, i: int, q: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         part = self.parts[i][0]
-        if type(part).jacobian is not Constraint.jacobian or (2 * q.shape[1] + 1) * len(q) > FD_ROWS:
+        if own_jacobian(part) or (2 * q.shape[1] + 1) * len(q) > FD_ROWS:
             return part.jacobian(q, y)
         if i not in self._differences:
             self._differences[i] = self._agrees(part, q[:8], y[:8])

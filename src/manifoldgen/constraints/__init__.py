@@ -6,7 +6,7 @@
 
 from manifoldgen.constraints.balance import BalanceConstraint
 from manifoldgen.constraints.base import (CONSTRAINTS, Condition, Constraint, ConstraintSet, array_namespace, as_like,
-                                          build_constraint)
+                                          build_constraint, own_jacobian)
 from manifoldgen.constraints.closed_chain import ClosedChainConstraint
 from manifoldgen.constraints.joint_linear import JointLinearConstraint
 from manifoldgen.constraints.orientation import OrientationConstraint
@@ -18,4 +18,5 @@ from manifoldgen.constraints.sphere import SphereConstraint
 
 __all__ = ["CONSTRAINTS", "BalanceConstraint", "ClosedChainConstraint", "Condition", "Constraint", "ConstraintSet",
            "JointLinearConstraint", "OrientationConstraint", "PlaneConstraint", "PoseConstraint", "Projection",
-           "RotationConstraint", "SphereConstraint", "array_namespace", "as_like", "build_constraint", "project"]
+           "RotationConstraint", "SphereConstraint", "array_namespace", "as_like", "build_constraint", "own_jacobian",
+           "project"]

@@ -356,3 +356,10 @@ class ConstraintSet(Constraint):
         q, y = self.batch(q, y)
         xp = array_namespace(q)
         return xp.concat([c.inequality(q, y[:, s]) for c, s in zip(self.parts, self._slices)], axis=1)
+
+
+def own_jacobian(constraint: Constraint) -> bool:
+    """Whether ``constraint`` (each part of a set) computes its Jacobian itself, not by the default torch autograd
+    (whose import costs 2-3 s, and whose per-operation overhead dominates on small batches)."""
+    parts = constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
+    return all(type(part).jacobian is not Constraint.jacobian for part in parts)

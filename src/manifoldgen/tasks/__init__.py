@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from manifoldgen.constraint_callbacks import central_difference
-from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, project
+from manifoldgen.constraints import Condition, Constraint, ConstraintSet, build_constraint, own_jacobian, project
 from manifoldgen.errors import ManifoldgenError, file_reader, not_a_file, short, unknown_name
 from manifoldgen.io import read_toml_file
 from manifoldgen.planning import PLANNERS, planner_settings
@@ -213,12 +213,13 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         what = (f"has shape {residual.shape}, not ({len(seeds)}, {m}) (one value per tolerance)"
                 if residual.shape != (len(seeds), m) else "holds NaN or infinite values")
         raise ManifoldgenError(f"task '{name}': the residual of constraint {kind} {what}; fix its residual()")
-    own = _own_jacobian(constraint)
+    own = own_jacobian(constraint)  # else central differences of the numpy residual steer the home's projection
     if own:
         jacobian = np.asarray(constraint.jacobian(seeds[:1], y)[1], float)
         if jacobian.shape != (1, m, robot.n):
             raise ManifoldgenError(f"task '{name}': the jacobian of constraint {kind} has shape {jacobian.shape} for "
-                                   f"one configuration, not (1, {m}, {robot.n}) (residuals x joints); fix its jacobian()")
+                                   f"one configuration, not (1, {m}, {robot.n}) (residuals x joints); fix its "
+                                   "jacobian()")
     inequality = np.asarray(constraint.inequality(seeds, y), float)
     if inequality.ndim != 2 or len(inequality) != len(seeds) or not np.isfinite(inequality).all():
         what = (f"has shape {inequality.shape}, not ({len(seeds)}, p) (p inequalities per configuration, 0 for none)"
@@ -230,14 +231,6 @@ def _finish(name: str, robot: Robot, constraint: Constraint, home, home_conditio
         raise ManifoldgenError(f"task '{name}': projecting {where} onto the constraint at condition {y.tolist()} "
                                "failed; give a home configuration closer to the manifold, or check the constraint")
     return Task(name, robot, constraint, res.q[int(np.argmax(res.converged))], y, notes, scenes)
-
-
-def _own_jacobian(constraint: Constraint) -> bool:
-    """Whether ``constraint`` (each part of a set) has a Jacobian of its own; the others' default is torch autograd,
-    whose import (2-3 s) a task's home projection spares by central differences of the numpy residual (its steps
-    only steer the projection: convergence is judged on the residual)."""
-    parts = constraint.parts if isinstance(constraint, ConstraintSet) else [constraint]
-    return all(type(part).jacobian is not Constraint.jacobian for part in parts)
 
 
 def _home_condition(condition: Condition, value) -> np.ndarray:
