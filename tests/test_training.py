@@ -149,10 +149,10 @@ def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
     assert sized.config["prior_hidden"] == [64, 64]  # the prior's width is its own
     assert sized.config["encoder_hidden"] == [64, 64] and sized.nets["encoder"][0].out_features == 64
     wide = CVAE()
-    wide.size_for(39, 27)  # a whole-body robot: two layers of the others' width, the encoder's too
+    wide.size_for(39, 27, 9000)  # a whole-body robot: two layers of the others' width, the encoder's too
     assert wide.config["hidden"] == [384, 384] == wide.config["encoder_hidden"] and wide.config["latent"] == 27
     narrow = CVAE(encoder_hidden=[32])
-    narrow.size_for(39, 27)
+    narrow.size_for(39, 27, 9000)
     assert narrow.config["encoder_hidden"] == [32]  # given: kept
     flow = ConditionalFlowMatching(batch=16, patience=100)
     flow.fit(tiny, epochs=1, seed=0, progress=False)
@@ -160,6 +160,20 @@ def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
     kept = CVAE(latent=5, hidden=[16], batch=16, patience=100)
     kept.fit(tiny, epochs=1, seed=0, progress=False)
     assert kept.config["latent"] == 5 and kept.config["hidden"] == [16]
+
+
+def test_the_cvae_decays_its_rate_on_enough_rows_unless_told_otherwise(tiny):
+    from manifoldgen.models.cvae import DECAY_BATCHES, DECAYED_EPOCHS
+
+    enough, few = DECAY_BATCHES * 256, DECAY_BATCHES * 256 - 1  # at the default batch of 256 rows
+    for model, rows, expected in ((CVAE(), enough, (DECAYED_EPOCHS, "cosine")), (CVAE(), few, (60, "constant")),
+                                  (CVAE(epochs=60), enough, (60, "cosine")),  # the epochs given, the rate decays
+                                  (CVAE(lr_schedule="constant"), enough, (60, "constant")),
+                                  (CVAE(batch=512), enough, (60, "constant"))):
+        model.size_for(7, 3, rows)
+        assert (model.config["epochs"], model.config["lr_schedule"]) == expected, (model.given, rows)
+    log = CVAE(**{**TINY, "batch": 3}).fit(tiny, seed=0, progress=False)  # 108 training rows: 36 batches
+    assert log.epochs == DECAYED_EPOCHS == 40 and len(log.history) <= 40
 
 
 def test_a_model_records_the_refinement_its_samples_need(tiny, tmp_path):

@@ -61,7 +61,7 @@ class Trainable(Protocol):
     refine: int | None
     residual_fn: Callable | None
 
-    def size_for(self, joints: int, dimension: int) -> None: ...
+    def size_for(self, joints: int, dimension: int, rows: int) -> None: ...
     def setup(self, meta: dict, q: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None: ...
     def normalise_q(self, q: torch.Tensor) -> torch.Tensor: ...
     def normalise_y(self, y: torch.Tensor) -> torch.Tensor: ...
@@ -240,8 +240,7 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
     task the dataset was made for (the caller's to find, see :func:`manifoldgen.models.base.dataset_task`;
     checked here with :func:`check_dataset`)."""
     check_dataset(dataset, task)
-    epochs = int(model.config["epochs"] if epochs is None else epochs)
-    if epochs <= 0:
+    if epochs is not None and int(epochs) <= 0:
         raise ManifoldgenError(f"--epochs must be positive, got {epochs}")
     seed = check_seed(seed)
     out = Path(out) if out is not None else None
@@ -267,7 +266,8 @@ def train(model: Trainable, dataset: Dataset, *, task: TaskLike, epochs: int | N
     gen = torch.Generator().manual_seed(seed)
     val_idx, train_idx = split(len(q_all), validation, gen)
     dimension = manifold_dimension(task, dataset.q[:DIMENSION_ROWS], dataset.y[:DIMENSION_ROWS])
-    model.size_for(task.robot.n, dimension)  # the same data gives a resumed run the same sizes
+    model.size_for(task.robot.n, dimension, len(train_idx))  # the same data gives a resumed run the same sizes
+    epochs = int(model.config["epochs"] if epochs is None else epochs)
     _check_size(model, task.robot.n + task.condition.k)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)

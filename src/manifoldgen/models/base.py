@@ -164,9 +164,9 @@ class ConditionalSampler(ModelFacts, ABC):
         return config
 
     # ------------------------------------------------------------------ setup
-    def size_for(self, joints: int, dimension: int) -> None:
+    def size_for(self, joints: int, dimension: int, rows: int) -> None:
         """Size what the user did not set from the data: ``latent`` = the manifold's ``dimension``, every hidden
-        layer :func:`width_for` ``joints`` wide (a 7-joint arm keeps 128)."""
+        layer :func:`width_for` ``joints`` wide (a 7-joint arm keeps 128); ``rows``: the training rows."""
         if "latent" in self.config and "latent" not in self.given:
             self.config["latent"] = max(1, int(dimension))
         for key in ("hidden", "critic_hidden"):
