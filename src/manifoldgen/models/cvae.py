@@ -21,8 +21,8 @@ in the latent space: on those smaller robots two layers of 64 (``encoder_hidden`
 accuracy and recall up or down by at most 0.12; on whole-body robots so narrow an encoder stopped training early
 with recall near 0, so there it keeps the decoder's layers. On a dataset of at least :data:`DECAY_BATCHES`
 batches (every default collection) the rate decays along a cosine over 40 epochs (:data:`DECAYED_EPOCHS`) instead of
-staying constant for 60: a third less training and more raw samples within tolerance on the arms, at the same
-recall, though the PR2's closed chain loses half its CVAE's recall (flow matching plans there). On fewer rows
+staying constant for 60: a third less training and more raw samples within tolerance on the arms, recall within
+0.05, though the PR2's closed chain loses half its CVAE's recall (flow matching plans there). On fewer rows
 a decaying rate left the constraint residual undertrained (1,000 rows: 17 % raw within tolerance against
 92 %), so they keep 60 epochs at a constant rate. The figures, with their commands: docs/benchmarks.md,
 "Learned samplers".
