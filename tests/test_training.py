@@ -96,8 +96,8 @@ def test_interrupted_run_resumes_to_the_same_model(tiny, tmp_path, monkeypatch):
 
 
 def test_the_learning_rate_follows_the_model_s_schedule(tiny, monkeypatch):
-    """``cosine`` decays the rate along half a cosine, step by step over all epochs; the default, ``constant``,
-    keeps it; an unknown schedule is refused, naming the known ones."""
+    """``cosine`` decays the rate along half a cosine, step by step over all epochs; ``constant`` (the default on
+    few rows, as these) keeps it; an unknown schedule is refused, naming the known ones."""
     seen = []
     original = CVAE._train_step
 
@@ -162,7 +162,7 @@ def test_sizes_not_given_follow_the_data_and_given_ones_are_kept(tiny):
     assert kept.config["latent"] == 5 and kept.config["hidden"] == [16]
 
 
-def test_the_cvae_decays_its_rate_on_enough_rows_unless_told_otherwise(tiny):
+def test_the_cvae_decays_its_rate_on_enough_rows_unless_told_otherwise(tiny, monkeypatch):
     from manifoldgen.models.cvae import DECAY_BATCHES, DECAYED_EPOCHS
 
     enough, few = DECAY_BATCHES * 256, DECAY_BATCHES * 256 - 1  # at the default batch of 256 rows
@@ -172,8 +172,17 @@ def test_the_cvae_decays_its_rate_on_enough_rows_unless_told_otherwise(tiny):
                                   (CVAE(batch=512), enough, (60, "constant"))):
         model.size_for(7, 3, rows)
         assert (model.config["epochs"], model.config["lr_schedule"]) == expected, (model.given, rows)
+    rates = []
+    original = CVAE._train_step
+
+    def recording(self, q, y, y_free, optimizers, generator):
+        rates.append(optimizers[0].lr)
+        return original(self, q, y, y_free, optimizers, generator)
+
+    monkeypatch.setattr(CVAE, "_train_step", recording)
     log = CVAE(**{**TINY, "batch": 3}).fit(tiny, seed=0, progress=False)  # 108 training rows: 36 batches
     assert log.epochs == DECAYED_EPOCHS == 40 and len(log.history) <= 40
+    assert rates[0] == CVAE.defaults["lr"] and rates[-1] < rates[len(rates) // 2] < rates[0]  # trained decaying
 
 
 def test_a_model_records_the_refinement_its_samples_need(tiny, tmp_path):
